@@ -1,0 +1,170 @@
+"""The SensoryModel contract: x = g(z) with its Jacobian, VJP and precision, batched over trials.
+
+Every model (analytic FK, GPR, MDN, pixel decoder, multimodal member) subclasses `BaseSensoryModel`, which
+validates inputs at the edge, keeps the output dtype equal to the input dtype, and saves/loads the model
+as `meta.json` (kind, body, config) + `state.pt` (tensors only, loaded with `weights_only=True`: no code
+runs when a saved model is read). Subclasses implement the underscore hooks only.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import pkgutil
+from pathlib import Path
+from typing import ClassVar, Protocol, runtime_checkable
+
+import torch
+
+from bodyschema.errors import NotFittedError, must_be
+from bodyschema.models.scaling import BodySpec
+
+FLOAT_DTYPES = (torch.float32, torch.float64)
+FORMAT_VERSION = 1
+MODEL_KINDS: dict[str, type["BaseSensoryModel"]] = {}
+
+
+@runtime_checkable
+class SensoryModel(Protocol):
+    latent_dim: int                  # Dz: number of joints, z in rad
+    modality: str                    # "ee_xyz" | "ee_pixel" | "joints" | "image" | "touch" | ...
+    output_shape: tuple[int, ...]    # per-sample shape of x
+    body: BodySpec                   # robot, joint names and the latent scaling
+
+    def predict(self, z: torch.Tensor) -> torch.Tensor: ...             # (B, Dz) → (B, *out)
+    def jacobian(self, z: torch.Tensor) -> torch.Tensor: ...            # (B, Dz) → (B, prod(out), Dz)
+    def vjp(self, z: torch.Tensor, v: torch.Tensor) -> torch.Tensor: ...  # (B, Dz), (B, *out) → (B, Dz)
+    def precision(self, z: torch.Tensor) -> torch.Tensor: ...           # (B, Dz) → (B, *out), Π_x diagonal
+    def save(self, path: str | Path) -> None: ...
+
+
+def register_kind(cls):
+    """Class decorator: make a model kind loadable by `load_model` from its saved `meta.json`."""
+    MODEL_KINDS[cls.kind] = cls
+    return cls
+
+
+class BaseSensoryModel:
+    kind: ClassVar[str] = "base"
+
+    def __init__(self, body: BodySpec, modality: str, output_shape: tuple[int, ...]):
+        self.body = body
+        self.latent_dim = body.latent_dim
+        self.modality = modality
+        self.output_shape = tuple(int(s) for s in output_shape)
+
+    # ---- public API: validate at the edge, then call the hooks --------------------------------------
+    def predict(self, z: torch.Tensor) -> torch.Tensor:
+        z = self._check_z(z)
+        return self._predict(z).to(z.dtype)
+
+    def jacobian(self, z: torch.Tensor) -> torch.Tensor:
+        z = self._check_z(z)
+        return self._jacobian(z).to(z.dtype)
+
+    def vjp(self, z: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+        z = self._check_z(z)
+        v = self._check_v(v, z)
+        return self._vjp(z, v).to(z.dtype)
+
+    def precision(self, z: torch.Tensor) -> torch.Tensor:
+        z = self._check_z(z)
+        return self._precision(z).to(z.dtype)
+
+    @property
+    def is_fitted(self) -> bool:
+        return True
+
+    # ---- hooks --------------------------------------------------------------------------------------
+    def _predict(self, z: torch.Tensor) -> torch.Tensor:
+        raise NotImplementedError
+
+    def _jacobian(self, z: torch.Tensor) -> torch.Tensor:
+        raise NotImplementedError
+
+    def _vjp(self, z: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+        # Jᵀv; models with large outputs (images) override this to avoid building J.
+        return torch.einsum("bod,bo->bd", self._jacobian(z), v.reshape(v.shape[0], -1).to(z.dtype))
+
+    def _precision(self, z: torch.Tensor) -> torch.Tensor:
+        raise NotImplementedError
+
+    def _config(self) -> dict:
+        """JSON-serializable hyper-parameters needed to rebuild the model."""
+        return {}
+
+    def _state(self) -> dict[str, torch.Tensor]:
+        """Learned tensors."""
+        return {}
+
+    @classmethod
+    def _from_saved(cls, body: BodySpec, modality: str, output_shape: tuple[int, ...], config: dict,
+                    state: dict[str, torch.Tensor]) -> "BaseSensoryModel":
+        raise NotImplementedError
+
+    # ---- persistence --------------------------------------------------------------------------------
+    def save(self, path: str | Path) -> None:
+        """Write `path/meta.json` and `path/state.pt` (a directory, created if missing)."""
+        self._require_fitted()
+        path = Path(path)
+        path.mkdir(parents=True, exist_ok=True)
+        meta = {"format_version": FORMAT_VERSION, "kind": self.kind, "modality": self.modality,
+                "output_shape": list(self.output_shape), "body": self.body.to_dict(), "config": self._config()}
+        torch.save({k: v.detach().cpu() for k, v in self._state().items()}, path / "state.pt")
+        (path / "meta.json").write_text(json.dumps(meta, indent=2))
+
+    @classmethod
+    def load(cls, path: str | Path) -> "BaseSensoryModel":
+        return load_model(path)
+
+    # ---- validation ---------------------------------------------------------------------------------
+    def _require_fitted(self) -> None:
+        if not self.is_fitted:
+            raise NotFittedError(f"This {type(self).__name__} is not fitted yet. Call `fit` before using it.")
+
+    def _check_z(self, z) -> torch.Tensor:
+        self._require_fitted()
+        if not isinstance(z, torch.Tensor):
+            raise TypeError(must_be("z", "a torch.Tensor of joint angles in rad", type(z).__name__,
+                                    "Convert with torch.as_tensor(z, dtype=torch.float64)."))
+        if z.dtype not in FLOAT_DTYPES:
+            raise TypeError(must_be("z.dtype", "torch.float32 or torch.float64", z.dtype))
+        if z.ndim != 2 or z.shape[1] != self.latent_dim:
+            raise ValueError(must_be("z", f"of shape (B, {self.latent_dim}) for joints {list(self.body.joint_names)}",
+                                     tuple(z.shape), "Add a batch axis with z[None] for a single pose."))
+        if not torch.isfinite(z).all():
+            raise ValueError(must_be("z", "finite", "NaN or inf values", "Check the belief or the observation."))
+        return z
+
+    def _check_v(self, v, z: torch.Tensor) -> torch.Tensor:
+        if not isinstance(v, torch.Tensor) or tuple(v.shape) != (z.shape[0], *self.output_shape):
+            got = tuple(v.shape) if isinstance(v, torch.Tensor) else type(v).__name__
+            raise ValueError(must_be("v", f"a tensor of shape ({z.shape[0]}, {', '.join(map(str, self.output_shape))})",
+                                     got))
+        return v.to(z.dtype)
+
+
+def load_model(path: str | Path) -> BaseSensoryModel:
+    """Load any saved model kind from a directory written by `save`."""
+    path = Path(path)
+    meta_file = path / "meta.json"
+    if not meta_file.is_file():
+        raise FileNotFoundError(must_be("path", "a directory holding meta.json and state.pt", str(path),
+                                        "Pass the directory given to model.save()."))
+    meta = json.loads(meta_file.read_text())
+    if meta.get("format_version") != FORMAT_VERSION:
+        raise ValueError(must_be("format_version", str(FORMAT_VERSION), meta.get("format_version")))
+    _import_all_kinds()
+    if meta["kind"] not in MODEL_KINDS:
+        raise ValueError(must_be("model kind", f"one of {sorted(MODEL_KINDS)}", meta["kind"]))
+    state = torch.load(path / "state.pt", weights_only=True)
+    return MODEL_KINDS[meta["kind"]]._from_saved(BodySpec.from_dict(meta["body"]), meta["modality"],
+                                                 tuple(meta["output_shape"]), meta["config"], state)
+
+
+def _import_all_kinds() -> None:
+    # Each model module registers its kind when imported; import them all so any saved kind loads.
+    import bodyschema.models as package
+
+    for module in pkgutil.iter_modules(package.__path__):
+        importlib.import_module(f"{package.__name__}.{module.name}")
