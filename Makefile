@@ -1,0 +1,37 @@
+# The two commands a newcomer runs on a fresh machine:  `make demo`  and  `make test`.
+# Both create .venv, install the package (and the Debian libraries headless MuJoCo rendering needs), then run.
+
+PYTHON   ?= python3
+VENV     := .venv
+BIN      := $(VENV)/bin
+EXTRAS   ?= test
+export MUJOCO_GL ?= egl
+export PYOPENGL_PLATFORM ?= egl
+
+.PHONY: demo test test-all bench system-deps clean
+
+demo: $(VENV)/.installed system-deps
+	$(BIN)/bodyschema demo
+
+test: $(VENV)/.installed system-deps
+	$(BIN)/python -m pytest -q
+
+test-all: $(VENV)/.installed system-deps   ## including tests marked slow
+	$(BIN)/python -m pytest -q -m ""
+
+bench: $(VENV)/.installed system-deps
+	for script in bench/*.py; do echo "== $$script"; $(BIN)/python $$script || exit 1; done
+
+system-deps:
+	@bash .ci/system_deps.sh
+
+$(VENV)/.installed: pyproject.toml
+	test -d $(VENV) || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	# torch first and pinned: the local CPU wheel; an unpinned torch pulls a multi-GB CUDA build.
+	$(BIN)/python -m pip install --quiet torch==2.13.0
+	$(BIN)/python -m pip install --quiet -e ".[$(EXTRAS)]"
+	touch $@
+
+clean:
+	rm -rf $(VENV) build *.egg-info outputs mlruns mlflow.db
