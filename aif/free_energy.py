@@ -1,0 +1,131 @@
+"""Sensory terms of the Laplace free energy for any set of SensoryModels over the same latent z.
+
+    F_x = Σ_m ½ ε_mᵀ Π_m ε_m − ½ ln|Π_m|,   ε_m = x_m − g_m(μ)        (Friston 2010, Laplace free energy;
+                                                                      Pixel-AIF, Sancaktar et al. 2020, eq. 4)
+    ∂F_x/∂μ = −Σ_m J_mᵀ Π_m ε_m                                        (J_m = ∂g_m/∂μ)
+    H_x     =  Σ_m J_mᵀ Π_m J_m                                        (Gauss–Newton curvature)
+Constants (2π) are dropped. Π_m is diagonal; entries with Π = 0 (a broken sensor) leave F, its gradient and
+its log-determinant. Low-dimensional outputs use `model.jacobian` once for both gradient and curvature;
+large outputs (images) take the gradient through `model.vjp` and build the curvature, when the integrator
+needs it, from `model.jacobian` over chunks of the batch so that memory stays bounded.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import torch
+
+from bodyschema.errors import must_be
+from bodyschema.models.contract import SensoryModel
+from bodyschema.models.scaling import BodySpec
+
+JACOBIAN_MAX_OUTPUTS = 64        # above this many outputs a model's gradient goes through vjp
+CHUNK_ELEMENTS = 2_000_000       # cap on B_chunk·O·Dz when a large Jacobian is built for the curvature
+
+
+@dataclass
+class SensoryTerms:
+    free_energy: torch.Tensor              # (B,)
+    grad: torch.Tensor                     # (B, Dz) ∂F_x/∂μ
+    hessian: torch.Tensor | None           # (B, Dz, Dz) Gauss–Newton, when asked for
+    weighted: dict[str, torch.Tensor]      # modality → (B,) ½ εᵀΠε
+    mse: dict[str, torch.Tensor]           # modality → (B,) mean ε² (unweighted, in the modality's units²)
+
+
+def check_models(models: Sequence[SensoryModel]) -> BodySpec:
+    """All models must describe the same robot and joints, with distinct modalities; returns their body."""
+    if len(models) == 0:
+        raise ValueError(must_be("models", "a non-empty sequence of SensoryModels", list(models)))
+    for i, m in enumerate(models):
+        if not isinstance(m, SensoryModel):
+            raise TypeError(must_be(f"models[{i}]", "a SensoryModel (see bodyschema.models.contract)",
+                                    type(m).__name__))
+    body = models[0].body
+    for i, m in enumerate(models[1:], start=1):
+        body.check_compatible(m.body, what=f"models[{i}] ({m.modality})")
+    modalities = [m.modality for m in models]
+    if len(set(modalities)) != len(modalities):
+        raise ValueError(must_be("model modalities", "distinct (one model per modality)", modalities,
+                                 "Fuse models of different modalities; compare same-modality models in separate runs."))
+    return body
+
+
+def check_observations(models: Sequence[SensoryModel], observations: Mapping[str, torch.Tensor], batch: int,
+                       optional: set[str] = frozenset()) -> None:
+    """Every modality needs an observation of shape (B, *output_shape); modalities in `optional` may be absent."""
+    if not isinstance(observations, Mapping):
+        raise TypeError(must_be("observations", "a dict modality → tensor", type(observations).__name__))
+    expected = {m.modality: m for m in models}
+    unknown = sorted(set(observations) - set(expected))
+    if unknown:
+        raise ValueError(must_be("observations keys", f"modalities of the models {sorted(expected)}", unknown,
+                                 "Drop the extra observations or add a model for them."))
+    for name, m in expected.items():
+        if name not in observations:
+            if name in optional:
+                continue
+            raise ValueError(must_be(f"observations[{name!r}]", "present", "missing",
+                                     f"Pass a tensor of shape (B, {', '.join(map(str, m.output_shape))})."))
+        x = observations[name]
+        want = (batch, *m.output_shape)
+        if not isinstance(x, torch.Tensor) or tuple(x.shape) != want:
+            got = tuple(x.shape) if isinstance(x, torch.Tensor) else type(x).__name__
+            raise ValueError(must_be(f"observations[{name!r}]", f"a tensor of shape {want}", got,
+                                     "One observation per trial, in the model's output units."))
+        if not torch.is_floating_point(x) or not torch.isfinite(x).all():
+            raise ValueError(must_be(f"observations[{name!r}]", "a finite floating-point tensor",
+                                     f"dtype {x.dtype}", "Convert images to float in the model's intensity range."))
+
+
+def sensory_terms(models: Sequence[SensoryModel], observations: Mapping[str, torch.Tensor],
+                  precisions: Mapping[str, torch.Tensor | None], mu: torch.Tensor, need_hessian: bool,
+                  jacobian_max_outputs: int = JACOBIAN_MAX_OUTPUTS) -> SensoryTerms:
+    """F_x, its gradient and (optionally) its Gauss–Newton curvature at beliefs mu (B, Dz).
+
+    `precisions[modality]` is a (B, *out) tensor, or None to ask the model (`model.precision(mu)`).
+    Modalities absent from `observations` are skipped (callers drop modalities of zero precision).
+    """
+    b, dz = mu.shape
+    free = torch.zeros(b, dtype=mu.dtype)
+    grad = torch.zeros(b, dz, dtype=mu.dtype)
+    hess = torch.zeros(b, dz, dz, dtype=mu.dtype) if need_hessian else None
+    weighted, mse = {}, {}
+    for m in models:
+        if m.modality not in observations:
+            continue
+        x = observations[m.modality].to(mu.dtype)                          # (B, *out)
+        pi = precisions.get(m.modality)
+        pi = m.precision(mu) if pi is None else pi.to(mu.dtype)            # (B, *out)
+        n_out = x[0].numel()
+        small = n_out <= jacobian_max_outputs
+        jac = m.jacobian(mu) if small else None                           # (B, O, Dz)
+        eps = (x - m.predict(mu)).reshape(b, n_out)                        # (B, O) ε = x − g(μ)
+        pi = pi.reshape(b, n_out)
+        pe = pi * eps                                                      # (B, O) Π ε
+        if small:
+            grad -= torch.einsum("bod,bo->bd", jac, pe)                    # −Jᵀ Π ε
+        else:
+            grad -= m.vjp(mu, pe.reshape(x.shape))
+        term = 0.5 * (pe * eps).sum(-1)
+        logdet = torch.where(pi > 0, pi.clamp_min(1e-300).log(), torch.zeros_like(pi)).sum(-1)
+        free += term - 0.5 * logdet
+        weighted[m.modality] = term
+        mse[m.modality] = eps.pow(2).mean(-1)
+        if need_hessian:
+            hess += _gauss_newton(m, mu, pi, jac)
+    return SensoryTerms(free, grad, hess, weighted, mse)
+
+
+def _gauss_newton(model: SensoryModel, mu: torch.Tensor, pi: torch.Tensor, jac: torch.Tensor | None) -> torch.Tensor:
+    """Jᵀ Π J per trial. pi (B, O); jac (B, O, Dz) or None to build it chunk by chunk. → (B, Dz, Dz)"""
+    if jac is not None:
+        return torch.einsum("bod,bo,boe->bde", jac, pi, jac)
+    b, n_out = pi.shape
+    step = max(1, CHUNK_ELEMENTS // (n_out * mu.shape[1]))
+    parts = []
+    for s in range(0, b, step):
+        j = model.jacobian(mu[s:s + step])                                 # (b_chunk, O, Dz)
+        parts.append(torch.einsum("bod,bo,boe->bde", j, pi[s:s + step], j))
+    return torch.cat(parts)

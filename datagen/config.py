@@ -1,0 +1,139 @@
+"""`DatagenConfig`: everything that defines a motor-babbling dataset, validated where it enters.
+
+The fields that change the data (robot, n, sampler, seed, ranges, ...) form the dataset's identity
+(`identity()`), stored in the Zarr attrs and compared on resume; the fields that only change *how* the data is
+made (workers, backend, out, overwrite) are left out, so 1 or 8 workers, loky or ray, give the same store.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+from bodyschema.errors import must_be
+
+ROBOTS = ("planar2", "nao_arm", "panda")  # must equal bodyschema.datagen.robot.ROBOT_NAMES (tested)
+SAMPLERS = ("uniform", "gaussian", "babble")
+BACKENDS = ("loky", "ray")
+KINEMATIC_SAMPLERS = ("uniform", "gaussian")
+IMAGE_SIDE_RANGE = (8, 1024)  # px; below 8 nothing is visible, above 1024 one sample is > 3 MB
+EXECUTION_FIELDS = ("workers", "backend", "out", "overwrite")  # how, not what: excluded from identity()
+
+
+@dataclass(frozen=True)
+class DatagenConfig:
+    """One dataset: which robot, how many samples, how they are drawn, and where they go."""
+
+    robot: Literal["planar2", "nao_arm", "panda"] = "planar2"  # planar2: the 2-DoF toy, seconds to generate
+    n: int = 10_000  # samples; 10k fits a GPR on ee_xyz and an MDN on pixels within minutes
+    sampler: Literal["uniform", "gaussian", "babble"] = "uniform"  # uniform covers the joint box evenly
+    image_size: tuple[int, int] | None = None  # (H, W) px; None: the robot's default camera size
+    rgb: bool = False  # grayscale is what the pixel decoder of the seed paper learns from
+    images: bool = True  # False: kinematics only (q, ee_xyz, ee_pixel, jacobian), ~10x faster
+    workers: int = 1  # processes; the data do not depend on it
+    backend: Literal["loky", "ray"] = "loky"  # loky: local cores, no server; ray: a cluster (RAY_ADDRESS)
+    seed: int = 0  # shard i draws from SeedSequence([seed, i]); same seed -> byte-identical arrays
+    out: Path | None = None  # the .zarr store; None: data/<robot>_<sampler>_<n>.zarr
+    overwrite: bool = False  # an existing store with another config is refused unless this is set
+    ranges: tuple[tuple[float, float], ...] | None = None  # rad (lo, hi) per joint; None: robot's sampling ranges
+    gravity: float | None = None  # m/s^2 magnitude, pointing down; None: 9.81 (0 or 3.7 for adaptation studies)
+    shard_size: int = 512  # samples per shard = Zarr chunk length; resume and progress granularity
+    hold_s: tuple[float, float] = (0.2, 1.0)  # babble: each random target is held this long (s), uniform
+    record_hz: float = 20.0  # babble: sampling rate of the recorded trajectory (Hz), ~ a camera frame rate
+    episode_s: float = 10.0  # babble: each episode restarts from a random pose at rest after this long (s)
+
+    def __post_init__(self) -> None:
+        def fix(name: str, value: Any) -> None:
+            object.__setattr__(self, name, value)
+
+        problems: list[str] = []
+        if self.robot not in ROBOTS:
+            problems.append(must_be("robot", f"one of {ROBOTS}", self.robot))
+        if self.sampler not in SAMPLERS:
+            problems.append(must_be("sampler", f"one of {SAMPLERS}", self.sampler))
+        if self.backend not in BACKENDS:
+            problems.append(must_be("backend", f"one of {BACKENDS}", self.backend))
+        for name, low in (("n", 1), ("workers", 1), ("shard_size", 1), ("seed", 0)):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < low:
+                problems.append(must_be(name, f"an integer >= {low}", value))
+        if self.image_size is not None:
+            lo, hi = IMAGE_SIDE_RANGE
+            size = self.image_size
+            if (not isinstance(size, (tuple, list)) or len(size) != 2
+                    or not all(isinstance(s, int) and not isinstance(s, bool) and lo <= s <= hi for s in size)):
+                problems.append(must_be("image_size", f"(H, W) with integers in [{lo}, {hi}] px, or None", size))
+            else:
+                fix("image_size", tuple(size))
+        if self.ranges is not None:
+            try:
+                ranges = tuple((float(a), float(b)) for a, b in self.ranges)
+            except (TypeError, ValueError):
+                ranges = None
+            if not ranges or not all(math.isfinite(a) and math.isfinite(b) and a < b for a, b in ranges):
+                problems.append(must_be("ranges", "a non-empty sequence of finite (lo, hi) rad with lo < hi, or None",
+                                        self.ranges))
+            else:
+                fix("ranges", ranges)
+        if self.gravity is not None:
+            if (not isinstance(self.gravity, (int, float)) or isinstance(self.gravity, bool)
+                    or not 0 <= self.gravity < math.inf):
+                problems.append(must_be("gravity", "a finite magnitude >= 0 in m/s^2 (down), or None", self.gravity))
+            else:
+                fix("gravity", float(self.gravity))
+        try:
+            hold = tuple(float(h) for h in self.hold_s)
+        except (TypeError, ValueError):
+            hold = ()
+        if len(hold) != 2 or not 0 < hold[0] <= hold[1] < math.inf:
+            problems.append(must_be("hold_s", "(min, max) seconds with 0 < min <= max", self.hold_s))
+        else:
+            fix("hold_s", hold)
+        if not (isinstance(self.record_hz, (int, float)) and self.record_hz > 0):
+            problems.append(must_be("record_hz", "a positive rate in Hz", self.record_hz))
+        elif not (isinstance(self.episode_s, (int, float)) and self.episode_s * self.record_hz >= 2):
+            problems.append(must_be("episode_s", f"long enough for >= 2 samples at record_hz={self.record_hz}",
+                                    self.episode_s, "Raise --episode-s or --record-hz."))
+        if self.out is not None:
+            fix("out", Path(self.out))
+        if problems:
+            raise ValueError("\n".join(problems))
+
+    @property
+    def store_path(self) -> Path:
+        """Where the store goes: `out`, or data/<robot>_<sampler>_<n>.zarr."""
+        return self.out if self.out is not None else Path("data") / f"{self.robot}_{self.sampler}_{self.n}.zarr"
+
+    @property
+    def kinematic(self) -> bool:
+        """True when samples are independent poses (uniform, gaussian); False for babbling trajectories."""
+        return self.sampler in KINEMATIC_SAMPLERS
+
+    def episode_len(self) -> int:
+        """Samples per babbling episode (fixed, so episodes and shards line up)."""
+        return max(2, round(self.episode_s * self.record_hz))
+
+    def to_dict(self) -> dict[str, Any]:
+        """The config as plain JSON values (tuples as lists, Path as str), as stored in the Zarr attrs."""
+        return json.loads(json.dumps(dataclasses.asdict(self), default=str))
+
+    def identity(self) -> dict[str, Any]:
+        """The fields that determine the data; two configs with equal identity write byte-identical arrays."""
+        return {k: v for k, v in self.to_dict().items() if k not in EXECUTION_FIELDS}
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> DatagenConfig:
+        """Rebuild a config from `to_dict()` output (lists back to tuples); unknown keys are an error."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(values) - names)
+        if unknown:
+            raise ValueError(must_be("config keys", f"a subset of {sorted(names)}", unknown))
+
+        def tup(v: Any) -> Any:
+            return tuple(tup(x) for x in v) if isinstance(v, list) else v
+
+        return cls(**{k: tup(v) for k, v in values.items()})

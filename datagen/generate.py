@@ -1,0 +1,244 @@
+"""`generate(config)`: a sharded, deterministic, resumable dataset job (joblib loky or Ray).
+
+N samples are split into fixed-size shards (a shard = one Zarr chunk of rows; for babbling, whole episodes), the
+split depending on the config only, never on the worker count. Shard i draws from
+`np.random.SeedSequence([seed, i])`, so the same config gives byte-identical arrays for any workers and backend.
+Each worker builds its own Robot (once per process), writes its own chunks straight into the store and then its
+shard's done marker; the root attr `complete=True` is written last. Rerunning skips done shards.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+from bodyschema.datagen.robot import Robot  # first: sets MUJOCO_GL before mujoco is imported
+
+import numpy as np  # noqa: E402
+from tqdm.auto import tqdm  # noqa: E402
+
+from bodyschema.datagen.config import DatagenConfig  # noqa: E402
+from bodyschema.datagen.samplers import Babbler, sample_kinematic  # noqa: E402
+from bodyschema.datagen.store import (SCHEMA_VERSION, create_store, features, mark_complete,  # noqa: E402
+                                      mark_shard_done, now, open_store, shards_done, versions, write_shard)
+from bodyschema.errors import must_be  # noqa: E402
+
+
+@dataclass(frozen=True)
+class Shard:
+    """Rows [start, stop) of the store; for babbling also its episodes (first index and lengths)."""
+
+    index: int
+    start: int
+    stop: int
+    first_episode: int = 0
+    episode_lengths: tuple[int, ...] = ()
+
+
+def plan_shards(config: DatagenConfig) -> list[Shard]:
+    """The fixed split of N into chunk-aligned shards (depends on the config only)."""
+    n = config.n
+    if config.kinematic:
+        size = config.shard_size
+        return [Shard(i, s, min(n, s + size)) for i, s in enumerate(range(0, n, size))]
+    ep_len = config.episode_len()
+    per_shard = max(1, config.shard_size // ep_len)  # whole episodes per shard
+    lengths = [ep_len] * (n // ep_len) + ([n % ep_len] if n % ep_len else [])
+    shards = []
+    for i, e0 in enumerate(range(0, len(lengths), per_shard)):
+        ls = tuple(lengths[e0:e0 + per_shard])
+        shards.append(Shard(i, e0 * ep_len, e0 * ep_len + sum(ls), e0, ls))
+    return shards
+
+
+def chunk_len(config: DatagenConfig) -> int:
+    """Rows per Zarr chunk = rows per (full) shard."""
+    return config.shard_size if config.kinematic else max(1, config.shard_size // config.episode_len()) * \
+        config.episode_len()
+
+
+# ---- one shard, in whichever process runs it ----------------------------------------------------------------
+_ROBOTS: dict[tuple, tuple[Robot, Babbler | None]] = {}  # per process: building a Robot/GL context once
+
+
+def _robot(config: DatagenConfig) -> tuple[Robot, Babbler | None]:
+    key = (config.robot, config.image_size, config.rgb, config.gravity, config.sampler, config.record_hz,
+           config.hold_s)
+    if key not in _ROBOTS:
+        robot = Robot.load(config.robot, image_size=config.image_size, rgb=config.rgb, gravity=config.gravity)
+        babbler = None if config.kinematic else Babbler(robot.model, list(robot.joint_names), robot.joint_limits,
+                                                        config.record_hz, config.hold_s)
+        _ROBOTS[key] = (robot, babbler)
+    return _ROBOTS[key]
+
+
+def release_robots() -> None:
+    """Close the robots (GL contexts) cached in this process."""
+    while _ROBOTS:
+        _ROBOTS.popitem()[1][0].close()
+
+
+def sampling_ranges(config: DatagenConfig, robot: Robot) -> np.ndarray:
+    """(Dq, 2) rad: the config's override (checked against the MJCF limits) or the robot's defaults."""
+    if config.ranges is None:
+        return np.asarray(robot.sampling_ranges, float)
+    robot.check_ranges(config.ranges)
+    return np.asarray(config.ranges, float)
+
+
+def run_shard(path: str, config_dict: dict, shard: Shard) -> int:
+    """Sample, observe and write one shard, then its done marker. Returns the rows written."""
+    config = DatagenConfig.from_dict(config_dict)
+    robot, babbler = _robot(config)
+    rng = np.random.default_rng(np.random.SeedSequence([config.seed, shard.index]))
+    ranges = sampling_ranges(config, robot)
+    if babbler is None:
+        arrays = {"q": sample_kinematic(config.sampler, rng, ranges, robot.joint_limits, shard.stop - shard.start)}
+    else:
+        arrays = babbler.episodes(rng, ranges, list(shard.episode_lengths), shard.first_episode)
+    arrays.update(robot.observe(arrays["q"].astype(np.float64), image=config.images))  # q as stored (float32)
+    root = open_store(Path(path), mode="r+")
+    write_shard(root, shard.start, arrays)
+    mark_shard_done(root, shard.index)
+    return shard.stop - shard.start
+
+
+# ---- the job --------------------------------------------------------------------------------------------------
+def _attrs(config: DatagenConfig, robot: Robot, ranges: np.ndarray, shards: list[Shard], feats: dict) -> dict:
+    if config.sampler == "uniform":
+        params = {"low": ranges[:, 0].tolist(), "high": ranges[:, 1].tolist()}
+    elif config.sampler == "gaussian":
+        params = {"mean": ranges.mean(axis=1).tolist(), "std": (np.diff(ranges, axis=1)[:, 0] / 6).tolist(),
+                  "clip": ranges.tolist()}
+    else:
+        b = Babbler(robot.model, list(robot.joint_names), robot.joint_limits, config.record_hz, config.hold_s)
+        params = {"targets": "uniform in sampling_ranges", "hold_s": list(config.hold_s),
+                  "record_hz": config.record_hz, "rate_hz": b.rate_hz, "stride_steps": b.stride,
+                  "timestep_s": float(robot.model.opt.timestep), "episode_len": config.episode_len(),
+                  "n_episodes": sum(len(s.episode_lengths) for s in shards), "actuators": "position",
+                  "gravity_m_s2": float(-robot.model.opt.gravity[2]), "start": "at rest, uniform in sampling_ranges"}
+    return {"schema_version": SCHEMA_VERSION, "robot": robot.name, "mjcf_sha256": robot.mjcf_sha256,
+            "dq": robot.dq, "joint_names": list(robot.joint_names), "joint_limits": robot.joint_limits.tolist(),
+            "sampling_ranges": ranges.tolist(), "camera_name": robot.camera_name,
+            "intrinsics": robot.intrinsics().tolist(), "extrinsics": robot.extrinsics().tolist(),
+            "image_size": list(robot.image_size), "channels": robot.channels, "images": config.images,
+            "sampler": config.sampler, "sampler_params": params, "seed": config.seed, "config": config.to_dict(),
+            "versions": versions(), "created_at": now(), "n": config.n, "chunk_len": chunk_len(config),
+            "n_shards": len(shards), "features": feats}
+
+
+def _write_error(path: Path, e: OSError) -> OSError:
+    return OSError(must_be("output location", f"writable, with free space, for {path}", f"{type(e).__name__}: {e}",
+                           "Free space or choose another --out; rerunning the same command resumes "
+                           "(finished shards are kept, the store is not marked complete)."))
+
+
+def _check_location(path: Path, feats: dict, n: int) -> None:
+    """Fail before any work when the output cannot be written or the disk cannot hold the raw data."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=path.parent, prefix=".bodyschema-probe-"):
+            pass
+    except OSError as e:
+        raise _write_error(path, e) from e
+    need = n * sum(np.dtype(f["dtype"]).itemsize * math.prod(f["shape"]) for f in feats.values())  # raw bytes
+    free = shutil.disk_usage(path.parent).free
+    if free < need:
+        raise OSError(must_be("free space at the output location", f">= {need / 1e6:.1f} MB (uncompressed data)",
+                              f"{free / 1e6:.1f} MB free at {path.parent}", "Free space or choose another --out."))
+
+
+def _prepare(path: Path, config: DatagenConfig, feats: dict, attrs: dict) -> None:
+    """Resume a store made with the same config, replace it with --overwrite, or refuse; else create it."""
+    if path.exists():
+        if not (path / "zarr.json").exists():
+            if path.is_dir() and not any(path.iterdir()):
+                path.rmdir()
+            else:
+                raise FileExistsError(must_be("out", "a new path, an empty directory or a bodyschema store",
+                                              str(path), "Choose another --out; nothing was deleted."))
+        elif config.overwrite:
+            shutil.rmtree(path)
+        else:
+            old = dict(open_store(path).attrs)
+            old_id = {k: v for k, v in old.get("config", {}).items() if k in config.identity()}
+            if old_id != config.identity():
+                diff = sorted(k for k in config.identity() if old_id.get(k) != config.identity()[k])
+                raise FileExistsError(must_be("out", "a new path or a store made with the same config",
+                                              f"a store at {path} made with a different config (differs in {diff})",
+                                              "Pass --overwrite to replace it, or choose another --out."))
+            if old.get("created"):
+                return  # resume
+    create_store(path, feats, config.n, chunk_len(config), attrs["n_shards"], attrs)
+
+
+def _run_loky(jobs: list, workers: int, bar: tqdm) -> None:
+    from joblib import Parallel, delayed
+
+    for _ in Parallel(n_jobs=workers, backend="loky", return_as="generator_unordered")(
+            delayed(run_shard)(*job) for job in jobs):
+        bar.update(1)
+
+
+def _run_ray(jobs: list, workers: int, bar: tqdm) -> None:
+    import ray
+
+    started = not ray.is_initialized()
+    if started:
+        if os.environ.get("RAY_ADDRESS"):
+            ray.init(include_dashboard=False)  # connect to the cluster named by RAY_ADDRESS
+        else:  # a local instance on this machine only
+            ray.init(num_cpus=workers, include_dashboard=False, _node_ip_address="127.0.0.1",
+                     log_to_driver=False, configure_logging=False)
+    try:
+        task = ray.remote(num_cpus=1, max_retries=0)(run_shard)
+        pending = [task.remote(*job) for job in jobs]
+        while pending:
+            done, pending = ray.wait(pending, num_returns=1)
+            ray.get(done)
+            bar.update(len(done))
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def generate(config: DatagenConfig, progress: bool = True) -> Path:
+    """Write (or finish) the dataset described by `config`; returns the store path once it is complete."""
+    path = config.store_path
+    robot = Robot.load(config.robot, image_size=config.image_size, rgb=config.rgb, gravity=config.gravity)
+    try:
+        ranges = sampling_ranges(config, robot)
+        shards = plan_shards(config)
+        has_touch = robot.touch(ranges.mean(axis=1)[None]) is not None
+        image_shape = (*robot.image_size, 3) if robot.channels == 3 else tuple(robot.image_size)
+        feats = features(robot.dq, image_shape if config.images else None, has_touch, not config.kinematic)
+        attrs = _attrs(config, robot, ranges, shards, feats)
+    finally:
+        robot.close()
+    _check_location(path, feats, config.n)
+    try:
+        _prepare(path, config, feats, attrs)
+        done = shards_done(open_store(path))
+        jobs = [(str(path), config.to_dict(), s) for s in shards if not done[s.index]]
+        with tqdm(total=len(shards), initial=len(shards) - len(jobs), unit="shard", disable=not progress,
+                  desc=f"datagen {config.robot}/{config.sampler} -> {path.name}") as bar:
+            if jobs:
+                (_run_ray if config.backend == "ray" else _run_loky)(jobs, config.workers, bar)
+        root = open_store(path, mode="r+")
+        missing = np.flatnonzero(~shards_done(root))
+        if missing.size:
+            raise RuntimeError(must_be("every shard", "done after the run", f"shards {missing[:20].tolist()} not done",
+                                       "Rerun the same command to resume."))
+        if not root.attrs.get("complete"):
+            mark_complete(root)
+    except OSError as e:
+        if isinstance(e, FileExistsError):
+            raise
+        raise _write_error(path, e) from e
+    finally:
+        release_robots()
+    return path

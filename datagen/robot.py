@@ -1,0 +1,306 @@
+"""The `Robot` wrapper: a shipped MJCF arm with batched forward kinematics, Jacobians, camera and rendering.
+
+All arrays are numpy float64 and batched over N poses; q is in rad, positions in m, pixels in px as
+(u = column, v = row) with pixel centres at integer coordinates and the origin at the top-left pixel.
+Kinematic queries (fk, jacobian, render, observe, touch) run on a private MjData, so a caller stepping
+dynamics on `robot.data` keeps its state. The renderer is created lazily (first render), so a `Robot` is
+cheap to build in a worker process and its GL context belongs to the process that renders.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from importlib import resources
+
+os.environ.setdefault("MUJOCO_GL", "egl")   # headless rendering; must be set before mujoco is imported
+
+import cv2  # noqa: E402
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+
+from bodyschema.errors import must_be  # noqa: E402
+
+ROBOT_NAMES = ("planar2", "nao_arm", "panda")
+ACTUATOR_KINDS = ("position", "torque")
+IMAGE_SIZE_RANGE = (8, 1024)   # px, per side; the MJCF offscreen buffers are 1024 × 1024
+LIMIT_TOLERANCE = 0.05         # rad; the simulator's soft joint limits let recorded q overshoot a little
+GRAVITY = 9.81                 # m/s², default magnitude (downward, −z)
+
+# Per robot: camera, default image (H, W), default babbling ranges in rad (inside the MJCF limits).
+_PANDA_LIMITS = np.array([[-2.8973, 2.8973], [-1.7628, 1.7628], [-2.8973, 2.8973], [-3.0718, -0.0698],
+                          [-2.8973, 2.8973], [-0.0175, 3.7525], [-2.8973, 2.8973]])
+_PANDA_RANGES = _PANDA_LIMITS + np.array([1.0, -1.0]) * 0.05 * np.diff(_PANDA_LIMITS, axis=1)   # 5 % in
+ROBOT_DEFAULTS = {
+    "planar2": {"camera": "eye", "image_size": (64, 64), "ranges": [[-2.5, 2.5], [-2.5, 2.5]]},
+    "nao_arm": {"camera": "eye", "image_size": (56, 80),   # as Pixel-AIF (Sancaktar et al. 2020)
+                "ranges": [[-0.115, 1.146], [-0.314, 0.815], [-1.585, 1.094], [-1.411, -0.044]]},
+    "panda": {"camera": "eye", "image_size": (128, 128), "ranges": _PANDA_RANGES.tolist()},
+}
+_OPENCV_FROM_MUJOCO_CAM = np.diag([1.0, -1.0, -1.0])   # MuJoCo camera: x right, y up, looks along −z
+
+
+def _mjcf_text(name: str) -> bytes:
+    return resources.files("bodyschema.datagen").joinpath(f"robots/{name}.xml").read_bytes()
+
+
+class Robot:
+    """One robot arm: model + data, named joints, a fixed camera, and batched kinematic queries."""
+
+    def __init__(self, name: str, model: mujoco.MjModel, mjcf_sha256: str, image_size: tuple[int, int],
+                 rgb: bool, sampling_ranges: np.ndarray, camera_name: str):
+        self.name = name
+        self.model = model
+        self.data = mujoco.MjData(model)                  # for the caller's dynamics
+        self._kin = mujoco.MjData(model)                  # private: kinematic queries
+        self.mjcf_sha256 = mjcf_sha256
+        self.image_size = (int(image_size[0]), int(image_size[1]))
+        self.channels = 3 if rgb else 1
+        self.camera_name = camera_name
+        self.joint_names = tuple(model.joint(j).name for j in range(model.njnt))
+        self.dq = len(self.joint_names)
+        self.joint_limits = np.array(model.jnt_range, dtype=np.float64)            # (Dq, 2) rad
+        self._qadr = np.array(model.jnt_qposadr)
+        self._dofadr = np.array(model.jnt_dofadr)
+        self._site = model.site("ee").id
+        self._cam = model.camera(camera_name).id
+        touch = [s for s in range(model.nsensor) if model.sensor_type[s] == mujoco.mjtSensor.mjSENS_TOUCH]
+        self._touch_adr = int(model.sensor_adr[touch[0]]) if touch else None
+        self._position_actuated = bool(model.nu) and bool(np.all(model.actuator_biastype ==
+                                                                 mujoco.mjtBias.mjBIAS_AFFINE))
+        self.check_ranges(sampling_ranges)
+        self.sampling_ranges = np.array(sampling_ranges, dtype=np.float64)         # (Dq, 2) rad
+        self._renderer = None
+        self._camera_pose()
+
+    # ---- construction --------------------------------------------------------------------------------
+    @classmethod
+    def load(cls, name: str, image_size: tuple[int, int] | None = None, rgb: bool = False,
+             gravity: float | None = None, actuators: str = "position") -> "Robot":
+        """Build a shipped robot. gravity: m/s² magnitude pointing down (None = 9.81)."""
+        if name not in ROBOT_NAMES:
+            raise ValueError(must_be("robot", f"one of {ROBOT_NAMES}", name))
+        defaults = ROBOT_DEFAULTS[name]
+        image_size = _check_image_size(defaults["image_size"] if image_size is None else image_size)
+        if actuators not in ACTUATOR_KINDS:
+            raise ValueError(must_be("actuators", f"one of {ACTUATOR_KINDS}", actuators))
+        gravity = GRAVITY if gravity is None else gravity
+        if not (isinstance(gravity, (int, float)) and np.isfinite(gravity) and gravity >= 0):
+            raise ValueError(must_be("gravity", "a finite magnitude >= 0 in m/s^2", gravity,
+                                     "Pass 0 for no gravity; it always points down (-z)."))
+        text = _mjcf_text(name)
+        spec = mujoco.MjSpec.from_string(text.decode())
+        if actuators == "torque":
+            for act in spec.actuators:
+                force = np.array(act.forcerange, dtype=float)
+                act.set_to_motor()
+                act.forcelimited, act.ctrlrange = mujoco.mjtLimited.mjLIMITED_FALSE, force
+        model = spec.compile()
+        model.opt.gravity[:] = (0.0, 0.0, -float(gravity))
+        return cls(name, model, hashlib.sha256(text).hexdigest(), image_size, rgb,
+                   np.array(defaults["ranges"]), defaults["camera"])
+
+    def check_ranges(self, ranges) -> None:
+        """Raise the house ValueError unless `ranges` (Dq, 2) rad are ordered and inside the joint limits."""
+        r = np.asarray(ranges, dtype=np.float64)
+        if r.shape != (self.dq, 2) or not np.isfinite(r).all():
+            raise ValueError(must_be("sampling ranges", f"a finite array of shape ({self.dq}, 2) in rad",
+                                     r.tolist(), f"One [low, high] per joint of {list(self.joint_names)}."))
+        for j, (lo, hi) in enumerate(r):
+            jlo, jhi = self.joint_limits[j]
+            if not (jlo <= lo < hi <= jhi):
+                raise ValueError(must_be(f"sampling range of {self.joint_names[j]}",
+                                         f"ordered and inside the joint limits [{jlo:.4f}, {jhi:.4f}] rad",
+                                         [float(lo), float(hi)], f"Fix the range in the config of {self.name}."))
+
+    # ---- camera --------------------------------------------------------------------------------------
+    def _camera_pose(self) -> None:
+        # Cameras are fixed in the world: compute the pose once at qpos0 (mj_camlight sets cam_xpos/xmat).
+        mujoco.mj_kinematics(self.model, self._kin)
+        mujoco.mj_camlight(self.model, self._kin)
+        rot = _OPENCV_FROM_MUJOCO_CAM @ self._kin.cam_xmat[self._cam].reshape(3, 3).T   # world → camera
+        self._rot = rot
+        self._trans = -rot @ self._kin.cam_xpos[self._cam]
+        h, w = self.image_size
+        f = 0.5 * h / np.tan(0.5 * np.deg2rad(self.model.cam_fovy[self._cam]))   # px, square pixels
+        self._K = np.array([[f, 0.0, (w - 1) / 2], [0.0, f, (h - 1) / 2], [0.0, 0.0, 1.0]])
+
+    def intrinsics(self) -> np.ndarray:
+        """K (3, 3) in px for the configured image size."""
+        return self._K.copy()
+
+    def extrinsics(self) -> np.ndarray:
+        """(4, 4) world → camera, OpenCV convention (x right, y down, z forward)."""
+        t = np.eye(4)
+        t[:3, :3], t[:3, 3] = self._rot, self._trans
+        return t
+
+    def project(self, xyz) -> np.ndarray:
+        """(N, 3) m world → (N, 2) px (u = column, v = row)."""
+        xyz = self._check_points(xyz)
+        cam = xyz @ self._rot.T + self._trans                            # (N, 3) camera frame, m
+        f, cx, cy = self._K[0, 0], self._K[0, 2], self._K[1, 2]
+        return np.stack([f * cam[:, 0] / cam[:, 2] + cx, f * cam[:, 1] / cam[:, 2] + cy], axis=1)
+
+    def project_jacobian(self, xyz) -> np.ndarray:
+        """(N, 3) m → (N, 2, 3) d px / d m of `project`."""
+        xyz = self._check_points(xyz)
+        cam = xyz @ self._rot.T + self._trans                            # (N, 3)
+        f = self._K[0, 0]
+        inv_z = 1.0 / cam[:, 2:3]                                        # (N, 1)
+        # d(X/Z)/dx = (R₀ − (X/Z) R₂) / Z, likewise for Y
+        du = f * (self._rot[0][None] - cam[:, 0:1] * inv_z * self._rot[2][None]) * inv_z   # (N, 3)
+        dv = f * (self._rot[1][None] - cam[:, 1:2] * inv_z * self._rot[2][None]) * inv_z
+        return np.stack([du, dv], axis=1)
+
+    # ---- kinematics ----------------------------------------------------------------------------------
+    def fk(self, q) -> np.ndarray:
+        """(N, Dq) rad → (N, 3) m, the `ee` site position in the world."""
+        return self._fk(self.check_q(q))
+
+    def jacobian(self, q) -> np.ndarray:
+        """(N, Dq) rad → (N, 3, Dq) m/rad, d ee / d q from mj_jacSite."""
+        return self._jacobian(self.check_q(q))
+
+    def _fk(self, q: np.ndarray) -> np.ndarray:
+        m, d, out = self.model, self._kin, np.empty((q.shape[0], 3))
+        for i in range(q.shape[0]):
+            d.qpos[self._qadr] = q[i]
+            mujoco.mj_kinematics(m, d)
+            out[i] = d.site_xpos[self._site]
+        return out
+
+    def _jacobian(self, q: np.ndarray) -> np.ndarray:
+        return self._fk_and_jacobian(q)[1]
+
+    def _fk_and_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Unchecked (any finite q, limits not enforced): (N, 3) m and (N, 3, Dq) m/rad in one pass."""
+        m, d = self.model, self._kin
+        xyz, jac = np.empty((q.shape[0], 3)), np.empty((q.shape[0], 3, self.dq))
+        jacp = np.empty((3, m.nv))
+        for i in range(q.shape[0]):
+            d.qpos[self._qadr] = q[i]
+            mujoco.mj_kinematics(m, d)
+            mujoco.mj_comPos(m, d)                       # cdof, needed by mj_jacSite
+            xyz[i] = d.site_xpos[self._site]
+            mujoco.mj_jacSite(m, d, jacp, None, self._site)
+            jac[i] = jacp[:, self._dofadr]
+        return xyz, jac
+
+    # ---- sensing -------------------------------------------------------------------------------------
+    def render(self, q) -> np.ndarray:
+        """(N, Dq) rad → (N, H, W) uint8 grayscale or (N, H, W, 3) uint8 RGB from the fixed camera."""
+        return self.observe(q, image=True)["image"]
+
+    def touch(self, q) -> np.ndarray | None:
+        """(N, Dq) rad → (N, 1) fingertip touch (N) with the arm held at q at rest; None without a sensor."""
+        if self._touch_adr is None:
+            return None
+        return self._touch(self.check_q(q))
+
+    def _touch(self, q: np.ndarray) -> np.ndarray:
+        m, d, out = self.model, self._kin, np.empty((q.shape[0], 1))
+        d.qvel[:] = 0.0
+        for i in range(q.shape[0]):
+            d.qpos[self._qadr] = q[i]
+            d.ctrl[:] = q[i] if self._position_actuated else 0.0    # position servos hold the pose
+            mujoco.mj_forward(m, d)
+            out[i, 0] = d.sensordata[self._touch_adr]
+        return out
+
+    def observe(self, q, image: bool = True) -> dict[str, np.ndarray]:
+        """One pass over a batch: ee_xyz (N,3) m, ee_pixel (N,2) px, jacobian (N,3,Dq) m/rad as float32,
+        image (N,H,W[,3]) uint8 when `image`, touch (N,1) float32 when the robot has a touch sensor."""
+        q = self.check_q(q)
+        n, (h, w) = q.shape[0], self.image_size
+        m, d = self.model, self._kin
+        xyz, jac = np.empty((n, 3)), np.empty((n, 3, self.dq))
+        jacp = np.empty((3, m.nv))
+        images = None
+        if image:
+            renderer, camera, rgb_buf = self._ensure_renderer()
+            images = np.empty((n, h, w, 3) if self.channels == 3 else (n, h, w), dtype=np.uint8)
+        for i in range(n):
+            d.qpos[self._qadr] = q[i]
+            mujoco.mj_kinematics(m, d)
+            mujoco.mj_comPos(m, d)
+            xyz[i] = d.site_xpos[self._site]
+            mujoco.mj_jacSite(m, d, jacp, None, self._site)
+            jac[i] = jacp[:, self._dofadr]
+            if image:
+                mujoco.mj_camlight(m, d)
+                renderer.update_scene(d, camera)
+                if self.channels == 3:
+                    renderer.render(out=images[i])
+                else:
+                    cv2.cvtColor(renderer.render(out=rgb_buf), cv2.COLOR_RGB2GRAY, dst=images[i])
+        out = {"ee_xyz": xyz.astype(np.float32), "ee_pixel": self.project(xyz).astype(np.float32),
+               "jacobian": jac.astype(np.float32)}
+        if image:
+            out["image"] = images
+        if self._touch_adr is not None:
+            out["touch"] = self._touch(q).astype(np.float32)
+        return out
+
+    def _ensure_renderer(self):
+        if self._renderer is None:
+            h, w = self.image_size
+            self._renderer = mujoco.Renderer(self.model, height=h, width=w)
+            self._mjv_camera = mujoco.MjvCamera()
+            self._mjv_camera.type = mujoco.mjtCamera.mjCAMERA_FIXED
+            self._mjv_camera.fixedcamid = self._cam
+            self._rgb_buf = np.empty((h, w, 3), dtype=np.uint8)
+        return self._renderer, self._mjv_camera, self._rgb_buf
+
+    def close(self) -> None:
+        """Free the GL context (if one was created)."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def __repr__(self) -> str:
+        return (f"Robot({self.name!r}, joints={list(self.joint_names)}, image_size={self.image_size}, "
+                f"channels={self.channels}, camera={self.camera_name!r})")
+
+    # ---- validation ----------------------------------------------------------------------------------
+    def check_q(self, q) -> np.ndarray:
+        """Return q as a float64 (N, Dq) array; raise the house ValueError on bad shape, NaN or limits."""
+        q = np.asarray(q, dtype=np.float64)
+        if q.ndim != 2 or q.shape[1] != self.dq:
+            raise ValueError(must_be("q", f"an array of shape (N, {self.dq}) in rad for joints "
+                                     f"{list(self.joint_names)}", q.shape, "Add a batch axis with q[None]."))
+        if not np.isfinite(q).all():
+            raise ValueError(must_be("q", "finite", "NaN or inf values"))
+        low, high = self.joint_limits[:, 0] - LIMIT_TOLERANCE, self.joint_limits[:, 1] + LIMIT_TOLERANCE
+        bad = np.nonzero((q < low) | (q > high))
+        if bad[0].size:
+            i, j = bad[0][0], bad[1][0]
+            raise ValueError(must_be(f"q[:, {j}] ({self.joint_names[j]})",
+                                     f"inside the joint limits {self.joint_limits[j].round(4).tolist()} rad",
+                                     f"{q[i, j]:.4f} at row {i} ({bad[0].size} values outside)",
+                                     "Sample inside robot.sampling_ranges."))
+        return q
+
+    def _check_points(self, xyz) -> np.ndarray:
+        xyz = np.asarray(xyz, dtype=np.float64)
+        if xyz.ndim != 2 or xyz.shape[1] != 3 or not np.isfinite(xyz).all():
+            raise ValueError(must_be("xyz", "a finite array of shape (N, 3) in m", xyz.shape))
+        return xyz
+
+
+def _check_image_size(size) -> tuple[int, int]:
+    lo, hi = IMAGE_SIZE_RANGE
+    try:
+        h, w = (int(s) for s in size)
+        ok = all(float(s) == int(s) for s in size) and lo <= h <= hi and lo <= w <= hi
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise ValueError(must_be("image_size", f"(H, W) with each side an integer in [{lo}, {hi}] px", size))
+    return h, w

@@ -1,0 +1,114 @@
+"""Where the joint configurations q come from: kinematic samplers (uniform, gaussian) and motor babbling.
+
+Kinematic samplers draw independent poses inside the sampling ranges. Motor babbling is dynamic: the robot's
+position actuators track random joint targets, each held for a random duration, under gravity (`mj_step`), and the
+trajectory is recorded at a fixed rate in episodes that each start at rest from a random pose. All randomness
+comes from the `np.random.Generator` passed in. Returned q are float32 (what is stored), clipped to the joint limits.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")  # as robot.py: must precede the first `import mujoco` of the process
+
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+
+from bodyschema.errors import must_be  # noqa: E402
+
+
+def uniform(rng: np.random.Generator, ranges: np.ndarray, n: int) -> np.ndarray:
+    """n poses uniform in the box `ranges` (Dq, 2) rad -> (n, Dq) float64."""
+    lo, hi = ranges[:, 0], ranges[:, 1]
+    return lo + (hi - lo) * rng.random((n, len(lo)))  # (n, Dq)
+
+
+def gaussian(rng: np.random.Generator, ranges: np.ndarray, n: int) -> np.ndarray:
+    """n poses ~ N(range centre, (range / 6)^2) per joint, clipped to the range -> (n, Dq) float64."""
+    lo, hi = ranges[:, 0], ranges[:, 1]
+    q = (lo + hi) / 2 + (hi - lo) / 6 * rng.standard_normal((n, len(lo)))  # (n, Dq); +-3 sigma spans the range
+    return np.clip(q, lo, hi)
+
+
+KINEMATIC = {"uniform": uniform, "gaussian": gaussian}
+
+
+def to_stored_q(q: np.ndarray, limits: np.ndarray) -> np.ndarray:
+    """Cast to the stored float32 and clip to the joint limits (Dq, 2), so stored q is exactly what is observed."""
+    return np.clip(q.astype(np.float32), limits[:, 0].astype(np.float32), limits[:, 1].astype(np.float32))
+
+
+def sample_kinematic(sampler: str, rng: np.random.Generator, ranges: np.ndarray, limits: np.ndarray,
+                     n: int) -> np.ndarray:
+    """n poses from the named kinematic sampler -> (n, Dq) float32 within `limits`."""
+    if sampler not in KINEMATIC:
+        raise ValueError(must_be("sampler", f"one of {tuple(KINEMATIC)}", sampler))
+    return to_stored_q(KINEMATIC[sampler](rng, np.asarray(ranges, float), n), np.asarray(limits, float))
+
+
+class Babbler:
+    """Motor babbling on one robot: position targets held for random durations, simulated with `mj_step`.
+
+    Uses its own `MjData` (the robot's is left to `observe`). `record_hz` is realised as a whole number of
+    physics steps (`stride`); `rate_hz` is the rate actually used (stored in the attrs).
+    """
+
+    def __init__(self, model: mujoco.MjModel, joint_names: list[str], limits: np.ndarray, record_hz: float,
+                 hold_s: tuple[float, float]):
+        self.model = model
+        self.data = mujoco.MjData(model)
+        self.limits = np.asarray(limits, float)  # (Dq, 2) rad
+        joint_ids = [model.joint(name).id for name in joint_names]
+        self.qadr = np.array([model.jnt_qposadr[j] for j in joint_ids])
+        self.dadr = np.array([model.jnt_dofadr[j] for j in joint_ids])
+        self.act = np.array([self._position_actuator(j, name) for j, name in zip(joint_ids, joint_names)])
+        dt = model.opt.timestep
+        self.stride = max(1, round(1.0 / (record_hz * dt)))  # physics steps between recorded samples
+        self.rate_hz = 1.0 / (self.stride * dt)
+        self.hold_steps = (max(1, round(hold_s[0] / dt)), max(1, round(hold_s[1] / dt)))
+
+    def _position_actuator(self, joint_id: int, name: str) -> int:
+        m = self.model
+        for a in range(m.nu):
+            if (m.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT and m.actuator_trnid[a, 0] == joint_id
+                    and m.actuator_biastype[a] == mujoco.mjtBias.mjBIAS_AFFINE):  # a servo: ctrl is a target angle
+                return a
+        raise ValueError(must_be(f"joint {name!r}", "driven by a position actuator for babbling", "no actuator",
+                                 "Load the robot with actuators='position' or use a kinematic sampler."))
+
+    def episode(self, rng: np.random.Generator, ranges: np.ndarray, n: int) -> dict[str, np.ndarray]:
+        """One episode of n recorded samples, starting at rest from a random pose in `ranges` (Dq, 2) rad.
+
+        Returns q (n, Dq) float32 rad, qvel (n, Dq) float32 rad/s, t (n,) float32 s since the episode start.
+        """
+        m, d = self.model, self.data
+        lo, hi = ranges[:, 0], ranges[:, 1]
+        mujoco.mj_resetData(m, d)  # fresh state (and warm start) per episode: deterministic given rng
+        start = rng.uniform(lo, hi)
+        d.qpos[self.qadr] = start
+        d.ctrl[self.act] = start
+        mujoco.mj_forward(m, d)
+        q = np.empty((n, len(lo)))
+        qvel = np.empty((n, len(lo)))
+        t = np.empty(n)
+        step, next_switch = 0, 0
+        for k in range(n):
+            q[k], qvel[k], t[k] = d.qpos[self.qadr], d.qvel[self.dadr], d.time
+            record_at = step + self.stride
+            while step < record_at:  # advance to the next recording, switching targets on the way
+                if step >= next_switch:
+                    d.ctrl[self.act] = rng.uniform(lo, hi)
+                    next_switch = step + int(rng.integers(self.hold_steps[0], self.hold_steps[1] + 1))
+                nstep = min(record_at, next_switch) - step
+                mujoco.mj_step(m, d, nstep)
+                step += nstep
+        return {"q": to_stored_q(q, self.limits), "qvel": qvel.astype(np.float32), "t": t.astype(np.float32)}
+
+    def episodes(self, rng: np.random.Generator, ranges: np.ndarray, lengths: list[int],
+                 first_episode: int) -> dict[str, np.ndarray]:
+        """Consecutive episodes of the given lengths; adds `episode` (int32 global index) to the arrays."""
+        parts = [self.episode(rng, np.asarray(ranges, float), n) for n in lengths]
+        out = {key: np.concatenate([p[key] for p in parts]) for key in ("q", "qvel", "t")}
+        out["episode"] = np.repeat(np.arange(first_episode, first_episode + len(lengths), dtype=np.int32), lengths)
+        return out

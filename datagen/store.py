@@ -1,0 +1,130 @@
+"""The Zarr v3 dataset store: schema (`features`), creation, chunk-aligned shard writes and the markers.
+
+Layout of one store (a directory `*.zarr`), all data arrays sharing the first (sample) axis N:
+    q (N, Dq) f32 rad · ee_xyz (N, 3) f32 m · ee_pixel (N, 2) f32 px · jacobian (N, 3, Dq) f32 m/rad
+    image (N, H, W[, 3]) u8 (when rendered) · touch (N, 1) f32 · qvel (N, Dq) f32 rad/s · episode (N,) i32 · t (N,) f32 s
+    shard_done (n_shards,) u8 — bookkeeping, one chunk per shard, 1 once that shard's data are written.
+The sample-axis chunk length equals the shard length, so each worker writes whole chunks of its own: no locks.
+Root attrs hold the metadata (robot, camera, sampler, seed, config, versions); `complete=True` is written last.
+Float arrays are filled with NaN, so a sample never written shows up as NaN in `validate_store`.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import importlib.metadata
+import platform
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import zarr
+from zarr.codecs import ZstdCodec
+
+from bodyschema.errors import must_be
+
+SCHEMA_VERSION = 1
+DONE = "shard_done"
+COMPRESSORS = [ZstdCodec(level=1, checksum=True)]  # checksum: a flipped byte in a chunk is an error, not noise
+# Attrs every complete store carries (validate_store checks them).
+REQUIRED_ATTRS = ("schema_version", "robot", "mjcf_sha256", "dq", "joint_names", "joint_limits", "sampling_ranges",
+                  "camera_name", "intrinsics", "extrinsics", "image_size", "channels", "images", "sampler",
+                  "sampler_params", "seed", "config", "versions", "created_at", "n", "chunk_len", "n_shards",
+                  "features", "complete")
+
+
+def features(dq: int, image_shape: tuple[int, ...] | None, touch: bool, babble: bool) -> dict[str, dict[str, Any]]:
+    """The data arrays of a store as {name: {dtype, shape (per sample), unit, names}} (as LeRobot's features)."""
+    f: dict[str, dict[str, Any]] = {
+        "q": {"dtype": "float32", "shape": [dq], "unit": "rad", "names": ["joint"]},
+        "ee_xyz": {"dtype": "float32", "shape": [3], "unit": "m", "names": ["x", "y", "z"]},
+        "ee_pixel": {"dtype": "float32", "shape": [2], "unit": "px", "names": ["u", "v"]},
+        "jacobian": {"dtype": "float32", "shape": [3, dq], "unit": "m/rad", "names": ["xyz", "joint"]},
+    }
+    if image_shape is not None:
+        f["image"] = {"dtype": "uint8", "shape": list(image_shape), "unit": "intensity",
+                      "names": ["row", "col", "channel"][: len(image_shape)]}
+    if touch:
+        f["touch"] = {"dtype": "float32", "shape": [1], "unit": "N", "names": ["contact"]}
+    if babble:
+        f["qvel"] = {"dtype": "float32", "shape": [dq], "unit": "rad/s", "names": ["joint"]}
+        f["episode"] = {"dtype": "int32", "shape": [], "unit": "index", "names": []}
+        f["t"] = {"dtype": "float32", "shape": [], "unit": "s", "names": []}
+    return f
+
+
+def fill_value(dtype: str) -> float | int:
+    """NaN for floats (unwritten samples are visible), -1 for indices, 0 for pixels."""
+    return {"float32": float("nan"), "int32": -1, "uint8": 0}[dtype]
+
+
+def versions() -> dict[str, str]:
+    """Library versions recorded in every store."""
+    out = {"python": platform.python_version()}
+    for lib in ("numpy", "mujoco", "zarr", "bodyschema"):
+        try:
+            out[lib] = importlib.metadata.version(lib)
+        except importlib.metadata.PackageNotFoundError:
+            out[lib] = "unknown"
+    return out
+
+
+def now() -> str:
+    """UTC time stamp (ISO 8601)."""
+    return dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds")
+
+
+def create_store(path: Path, feats: dict[str, dict[str, Any]], n: int, chunk_len: int, n_shards: int,
+                 attrs: dict[str, Any]) -> zarr.Group:
+    """Create (or recreate) an empty store: attrs first with complete=False, then arrays, then `created=True`.
+
+    A kill in the middle leaves `created` unset, and the next run recreates the store from scratch.
+    """
+    root = zarr.open_group(str(path), mode="w", zarr_format=3,
+                           attributes={**attrs, "complete": False, "created": False})
+    for name, spec in feats.items():
+        shape = (n, *spec["shape"])
+        root.create_array(name, shape=shape, chunks=(chunk_len, *spec["shape"]), dtype=spec["dtype"],
+                          fill_value=fill_value(spec["dtype"]), compressors=COMPRESSORS,
+                          attributes={"unit": spec["unit"], "names": spec["names"]})
+    root.create_array(DONE, shape=(n_shards,), chunks=(1,), dtype="uint8", fill_value=0, compressors=None)
+    root.attrs["created"] = True
+    return root
+
+
+def open_store(path: Path, mode: str = "r") -> zarr.Group:
+    """Open an existing store; a clear error when `path` is not a Zarr v3 group."""
+    try:
+        return zarr.open_group(str(path), mode=mode, zarr_format=3)
+    except (FileNotFoundError, zarr.errors.GroupNotFoundError, ValueError, KeyError) as e:
+        raise FileNotFoundError(must_be("path", "a Zarr v3 dataset store (a directory with zarr.json)", str(path),
+                                        "Create one with `bodyschema datagen --out PATH`.")) from e
+
+
+def write_shard(root: zarr.Group, start: int, arrays: dict[str, np.ndarray]) -> None:
+    """Write one shard's arrays at rows [start, start + len) — whole chunks, owned by this shard only."""
+    for name, values in arrays.items():
+        root[name][start:start + len(values)] = values
+
+
+def mark_shard_done(root: zarr.Group, shard: int) -> None:
+    """Record that shard `shard` is fully written (its own chunk of `shard_done`)."""
+    root[DONE][shard] = 1
+
+
+def shards_done(root: zarr.Group) -> np.ndarray:
+    """(n_shards,) bool: which shards have finished."""
+    return np.asarray(root[DONE][:]).astype(bool)
+
+
+def mark_complete(root: zarr.Group) -> None:
+    """The completion marker, written last, once every shard is done."""
+    root.attrs.update({"complete": True, "completed_at": now()})
+
+
+def is_complete(path: Path) -> bool:
+    """True when `path` is a store whose completion marker is written."""
+    try:
+        return bool(open_store(path).attrs.get("complete", False))
+    except FileNotFoundError:
+        return False

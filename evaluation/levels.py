@@ -1,0 +1,226 @@
+"""Estimation levels 1–3, "where is my body?": batched perception from perturbed beliefs, against the simulator.
+
+For every run (seeded, held-out targets: targets.py) and level, all trials are inferred in one batch by
+`aif.Perception` over the given models; level 3 is also run with multi-start (aif/multistart.py). Metrics per
+level and run: joint error (deg, per joint and mean), end-effector error (mm, simulator FK at the belief),
+image MSE (with an image model), success rate (mean |joint error| < success_deg), steps, convergence,
+divergence and wall time. Tables, plots (level_report.py) and one MLflow run with them as artifacts.
+Robustness: `noise_sweep` and `broken_sweep` repeat one level under observation noise or a dead sensor.
+
+Models come as objects (`run_levels(config, models=[...])`) or as specs: "analytic:<robot>:<modality>",
+"models:/<name>@<alias>" (the registry, loaded lazily) or a local directory written by `model.save`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from bodyschema.aif.multistart import infer_multistart
+from bodyschema.aif.perception import Perception, PerceptionConfig
+from bodyschema.errors import must_be
+from bodyschema.evaluation import level_report
+from bodyschema.evaluation.targets import eval_rng, initial_beliefs, make_targets, sample_poses
+
+
+@dataclass(frozen=True)
+class LevelsConfig:
+    models: tuple[str, ...] = ("analytic:planar2:ee_xyz",)   # specs; ignored when models are passed in
+    levels: tuple[int, ...] = (1, 2, 3)
+    trials: int = 500                  # per run, as in Pixel-AIF
+    runs: int = 5                      # runs with different target seeds
+    seed: int = 0
+    out: Path = Path("results/levels")
+    noise: tuple[tuple[str, float], ...] = ()   # observation noise σ per modality (m, px, rad, intensity)
+    perception: PerceptionConfig = PerceptionConfig(record=True)
+    multistart: int = 8                # starts per trial for the level-3 remedy (0: off)
+    screen_steps: int = 20             # multi-start: updates before pruning
+    keep: int = 2                      # multi-start: starts per trial refined to convergence
+    success_deg: float = 1.0           # a trial succeeds when its mean |joint error| is below this
+    image_size: tuple[int, int] | None = None   # robot camera (H, W); default: the image model's, else the robot's
+    mlflow: bool = True
+    tracking_uri: str | None = None    # None: $MLFLOW_TRACKING_URI, else sqlite:///mlflow.db
+    experiment: str = "bodyschema-levels"
+    plots: bool = True
+
+    def __post_init__(self):
+        if not self.levels or any(level not in (1, 2, 3) for level in self.levels):
+            raise ValueError(must_be("levels", "a non-empty subset of (1, 2, 3)", self.levels))
+        for name in ("trials", "runs"):
+            if getattr(self, name) < 1:
+                raise ValueError(must_be(name, "at least 1", getattr(self, name)))
+        if self.multistart < 0 or self.multistart == 1:
+            raise ValueError(must_be("multistart", "0 (off) or at least 2 starts", self.multistart))
+
+
+@dataclass
+class LevelsSummary:
+    rows: list[dict]                            # one per (level, run)
+    table: list[dict]                           # one per level: mean (and std) over runs
+    per_trial: dict[str, np.ndarray] = field(default_factory=dict)   # level → (runs·trials,) mean error, deg
+    paths: dict[str, Path] = field(default_factory=dict)
+    run_id: str | None = None
+
+
+# ---- models and robot -----------------------------------------------------------------------------------
+def resolve_model(spec: str):
+    """"analytic:<robot>:<modality>" | "models:/…" (registry) | a local model directory → SensoryModel."""
+    if spec.startswith("analytic:"):
+        parts = spec.split(":")
+        if len(parts) != 3:
+            raise ValueError(must_be("model spec", "'analytic:<robot>:<modality>'", spec))
+        from bodyschema.models.analytic import AnalyticModel
+        return AnalyticModel(parts[1], parts[2])
+    if spec.startswith("models:/"):
+        from bodyschema.training.registry import load
+        return load(spec)
+    if Path(spec).is_dir():
+        from bodyschema.models import load_model
+        return load_model(spec)
+    raise ValueError(must_be("model spec", "'analytic:<robot>:<modality>', 'models:/<name>@<alias>' or a model "
+                             "directory", spec))
+
+
+def load_robot(models: Sequence, image_size: tuple[int, int] | None = None):
+    """The benchmark robot of the models, with the camera the image model (if any) was trained for."""
+    from bodyschema.datagen.robot import Robot
+    image = next((m for m in models if m.modality == "image"), None)
+    rgb = False
+    if image is not None:
+        image_size = image_size or tuple(image.output_shape[:2])
+        rgb = len(image.output_shape) == 3 and image.output_shape[2] == 3
+    pixel = next((m for m in models if getattr(m, "image_size", None)), None)
+    if image_size is None and pixel is not None:
+        image_size = tuple(pixel.image_size)
+    robot = Robot.load(models[0].body.robot, image_size=image_size, rgb=rgb)
+    check_models_match(models, robot)
+    return robot
+
+
+def check_models_match(models: Sequence, robot) -> None:
+    """Every model must be over the benchmark robot and its joints, in order."""
+    for m in models:
+        if (m.body.robot, tuple(m.body.joint_names)) != (robot.name, tuple(robot.joint_names)):
+            raise ValueError(must_be(f"{m.modality} model body", f"robot {robot.name!r} with joints "
+                                     f"{list(robot.joint_names)}", f"robot {m.body.robot!r} with joints "
+                                     f"{list(m.body.joint_names)}", "Evaluate models of the benchmark's robot."))
+
+
+# ---- one level ----------------------------------------------------------------------------------------
+def evaluate_level(perception: Perception, robot, targets, level: int, rng: np.random.Generator,
+                   success_deg: float = 1.0, multistart: int = 0, screen_steps: int = 20, keep: int = 2):
+    """Infer every target from its level-`level` belief; returns (metrics row, per-trial arrays, result)."""
+    models = perception.models
+    obs = targets.tensors([m.modality for m in models if m.modality not in _broken(perception)])
+    mu0 = initial_beliefs(level, targets.q, robot.sampling_ranges, rng)   # (N, Dq) rad
+    start = time.perf_counter()
+    if multistart:
+        extra = sample_poses(robot.sampling_ranges, len(mu0) * (multistart - 1), rng)
+        starts = np.concatenate([mu0[:, None], extra.reshape(len(mu0), multistart - 1, -1)], axis=1)
+        ms = infer_multistart(perception, obs, torch.from_numpy(starts), screen_steps, keep)
+        result, evaluations = ms.result, ms.evaluations
+    else:
+        result = perception.infer(obs, torch.from_numpy(mu0))
+        evaluations = result.evaluations
+    wall = time.perf_counter() - start
+    mu = result.mu.numpy()                                                 # (N, Dq) rad
+    err = np.rad2deg(np.abs(mu - targets.q))                               # (N, Dq) deg
+    mean_err = err.mean(axis=1)
+    lim = robot.joint_limits
+    ee_mm = 1e3 * np.linalg.norm(robot.fk(np.clip(mu, lim[:, 0], lim[:, 1])) - robot.fk(targets.q), axis=1)
+    row = {"level": f"{level}+ms" if multistart else str(level), "trials": len(mu),
+           "joint_err_deg": float(mean_err.mean()), "joint_err_median_deg": float(np.median(mean_err)),
+           **{f"joint_err_deg/{name}": float(e) for name, e in zip(robot.joint_names, err.mean(axis=0))},
+           "ee_err_mm": float(ee_mm.mean()), "success": float((mean_err < success_deg).mean()),
+           "steps": float(result.steps.double().mean()), "converged": float(result.converged.double().mean()),
+           "diverged": int(result.n_diverged), "evaluations_per_trial": evaluations / len(mu), "wall_s": wall}
+    image = next((m for m in models if m.modality == "image"), None)
+    if image is not None:
+        with torch.no_grad():
+            pred = image.predict(result.mu.to(torch.float32)).double()
+        row["image_mse"] = float((pred - torch.from_numpy(targets.observations["image"])).pow(2).mean())
+    return row, {"mean_err_deg": mean_err, "ee_err_mm": ee_mm}, result
+
+
+def _broken(perception: Perception) -> set[str]:
+    return {name for name, pi in perception.precisions.items() if np.all(np.asarray(pi) == 0)}
+
+
+# ---- the benchmark ------------------------------------------------------------------------------------
+def run_levels(config: LevelsConfig = LevelsConfig(), models: Sequence | None = None) -> LevelsSummary:
+    """Levels × runs on held-out targets; writes tables and plots to config.out and logs one MLflow run."""
+    from tqdm import tqdm
+    models = [resolve_model(s) for s in config.models] if models is None else list(models)
+    robot = load_robot(models, config.image_size)
+    perception = Perception(models, config.perception)
+    has_image = any(m.modality == "image" for m in models)
+    rows, per_trial, curves = [], {}, {}
+    jobs = [(run, level, ms) for run in range(config.runs) for level in config.levels
+            for ms in ((0, config.multistart) if level == 3 and config.multistart else (0,))]
+    targets = None
+    for run, level, ms in tqdm(jobs, desc="levels", disable=len(jobs) < 2):
+        if targets is None or targets[0] != run:
+            targets = (run, make_targets(robot, config.trials, eval_rng(config.seed, run, "targets"), has_image,
+                                         dict(config.noise), eval_rng(config.seed, run, "noise")))
+        rng = eval_rng(config.seed, run, "beliefs", level)                 # same μ0 with and without multi-start
+        row, trial, result = evaluate_level(perception, robot, targets[1], level, rng, config.success_deg, ms,
+                                            config.screen_steps, config.keep)
+        rows.append({"run": run, **row})
+        per_trial.setdefault(row["level"], []).append(trial["mean_err_deg"])
+        if result.trajectory is not None and row["level"] not in curves:
+            curves[row["level"]] = result.trajectory["F"].numpy()          # (T, N), first run
+    summary = LevelsSummary(rows, level_report.aggregate(rows), {k: np.concatenate(v) for k, v in per_trial.items()})
+    summary.paths = level_report.write_all(summary, curves, Path(config.out), plots=config.plots)
+    if config.mlflow:
+        summary.run_id = _log_mlflow(config, models, summary)
+    return summary
+
+
+def noise_sweep(config: LevelsConfig, modality: str, sigmas: Sequence[float], level: int = 2,
+                models: Sequence | None = None) -> list[dict]:
+    """Mean joint error vs observation noise σ on one modality (precisions unchanged: a mis-specified Π)."""
+    out = []
+    for sigma in sigmas:
+        noise = tuple((m, s) for m, s in config.noise if m != modality) + ((modality, float(sigma)),)
+        cfg = replace(config, levels=(level,), multistart=0, noise=noise, mlflow=False, plots=False,
+                      perception=replace(config.perception, record=False), out=Path(config.out) / f"noise_{sigma:g}")
+        table = run_levels(cfg, models).table
+        out.append({"modality": modality, "sigma": float(sigma), **table[0]})
+    return out
+
+
+def broken_sweep(config: LevelsConfig, models: Sequence | None = None, level: int = 2) -> list[dict]:
+    """One row per modality set to precision 0 (a dead sensor), plus the intact baseline."""
+    models = [resolve_model(s) for s in config.models] if models is None else list(models)
+    out = []
+    for dead in (None, *[m.modality for m in models]):
+        pcfg = replace(config.perception, record=False,
+                       precisions=config.perception.precisions + (((dead, 0.0),) if dead else ()))
+        cfg = replace(config, levels=(level,), multistart=0, perception=pcfg, mlflow=False, plots=False,
+                      out=Path(config.out) / f"broken_{dead or 'none'}")
+        out.append({"broken": dead or "none", **run_levels(cfg, models).table[0]})
+    return out
+
+
+def _log_mlflow(config: LevelsConfig, models: Sequence, summary: LevelsSummary) -> str:
+    import mlflow
+
+    from bodyschema.training.registry import ensure_experiment, use_tracking
+    use_tracking(config.tracking_uri)
+    params = {k: str(v) for k, v in asdict(config).items() if k != "perception"}
+    params.update({f"perception.{k}": str(v) for k, v in asdict(config.perception).items()})
+    params["model_kinds"] = ",".join(f"{getattr(m, 'kind', type(m).__name__)}:{m.modality}" for m in models)
+    with mlflow.start_run(experiment_id=ensure_experiment(config.experiment), run_name="levels") as run:
+        mlflow.log_params(params)
+        for row in summary.table:
+            for key, value in row.items():
+                if isinstance(value, (int, float)) and key != "level":
+                    mlflow.log_metric(f"L{row['level'].replace('+', '_')}.{key.replace('/', '.')}", float(value))
+        for path in summary.paths.values():
+            mlflow.log_artifact(str(path))
+        return run.info.run_id

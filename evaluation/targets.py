@@ -1,0 +1,99 @@
+"""Held-out evaluation targets and the initial beliefs of levels 1–3 ("where is my body?").
+
+Targets are true poses drawn uniformly from the robot's sampling ranges (the distribution babbling sampled)
+with their observations from the simulator. Their seed stream is `SeedSequence([EVAL_STREAM, seed, run,
+purpose])`, disjoint from datagen's `SeedSequence([seed, shard])`, so evaluation poses are held out from any
+training set generated with the same seed. Initial beliefs, as in Pixel-AIF (Sancaktar et al. 2020, §4.1):
+  level 1  one random joint off by ±5–10° (the sign flipped where the belief would leave the range);
+  level 2  every joint off by ±5–10° (same rule per joint);
+  level 3  the belief starts at another random target's pose.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from bodyschema.errors import must_be
+
+EVAL_STREAM = 0xB0D7_E7A1          # first entropy word of every evaluation seed sequence
+PURPOSE = {"targets": 0, "beliefs": 1, "noise": 2, "starts": 3}
+OFFSET_DEG = (5.0, 10.0)           # level 1–2 belief offsets, uniform in magnitude
+IMAGE_SCALE = 255.0                # uint8 image → intensity in [0, 1], the pixel decoder's output range
+
+
+def eval_rng(seed: int, run: int, purpose: str, *keys: int) -> np.random.Generator:
+    """The generator of one evaluation run for one purpose (targets, beliefs, noise, starts) and extra keys."""
+    words = [EVAL_STREAM, int(seed), int(run), PURPOSE[purpose], *map(int, keys)]
+    return np.random.default_rng(np.random.SeedSequence(words))
+
+
+@dataclass
+class Targets:
+    q: np.ndarray                          # (N, Dq) rad, true poses
+    observations: dict[str, np.ndarray]    # modality → (N, *out): ee_xyz m, ee_pixel px, joints rad, image [0, 1]
+
+    def tensors(self, modalities) -> dict[str, torch.Tensor]:
+        """Observations of the given modalities as float64 tensors."""
+        missing = sorted(set(modalities) - set(self.observations))
+        if missing:
+            raise ValueError(must_be("modalities", f"among the simulated observations {sorted(self.observations)}",
+                                     missing, "Models of other modalities cannot be evaluated on this robot."))
+        return {m: torch.from_numpy(np.asarray(self.observations[m], dtype=np.float64)) for m in modalities}
+
+
+def sample_poses(ranges: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    """Uniform poses inside `ranges` (Dq, 2) rad. → (n, Dq)"""
+    low, high = np.asarray(ranges, dtype=np.float64).T
+    return low + rng.random((n, low.size)) * (high - low)
+
+
+def make_targets(robot, n: int, rng: np.random.Generator, image: bool = False,
+                 noise: Mapping[str, float] | None = None, noise_rng: np.random.Generator | None = None) -> Targets:
+    """n poses from `robot.sampling_ranges` and what the simulator senses there, with optional Gaussian noise
+    (standard deviation per modality, in its units: m, px, rad, intensity) added to the observations."""
+    q = sample_poses(robot.sampling_ranges, n, rng)                       # (N, Dq) rad
+    sensed = robot.observe(q, image=image)
+    obs = {"ee_xyz": sensed["ee_xyz"].astype(np.float64), "ee_pixel": sensed["ee_pixel"].astype(np.float64),
+           "joints": q.copy()}
+    if image:
+        obs["image"] = sensed["image"].astype(np.float64) / IMAGE_SCALE
+    for modality, sigma in (noise or {}).items():
+        if modality not in obs:
+            raise ValueError(must_be("noise modality", f"one of {sorted(obs)}", modality))
+        if not sigma >= 0:
+            raise ValueError(must_be(f"noise[{modality!r}]", "a standard deviation ≥ 0", sigma))
+        if sigma > 0:
+            gen = noise_rng if noise_rng is not None else rng
+            obs[modality] = obs[modality] + sigma * gen.standard_normal(obs[modality].shape)
+            if modality == "image":
+                obs[modality] = np.clip(obs[modality], 0.0, 1.0)
+    return Targets(q, obs)
+
+
+def initial_beliefs(level: int, q: np.ndarray, ranges: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """The initial belief μ0 (N, Dq) rad of every trial at `level` for true poses q (N, Dq)."""
+    n, dq = q.shape
+    low, high = np.asarray(ranges, dtype=np.float64).T
+    if level == 3:
+        if n == 1:
+            return sample_poses(ranges, 1, rng)
+        order = rng.permutation(n)                                         # a derangement: each trial gets
+        mu0 = np.empty_like(q)                                             # the pose of another target
+        mu0[order] = q[np.roll(order, -1)]
+        return mu0
+    if level not in (1, 2):
+        raise ValueError(must_be("level", "1, 2 or 3", level))
+    magnitude = np.deg2rad(rng.uniform(*OFFSET_DEG, size=(n, dq)))        # (N, Dq) rad
+    sign = rng.choice([-1.0, 1.0], size=(n, dq))
+    if level == 1:
+        mask = np.zeros((n, dq))
+        mask[np.arange(n), rng.integers(0, dq, size=n)] = 1.0
+        magnitude = magnitude * mask
+    mu0 = q + sign * magnitude
+    outside = (mu0 < low) | (mu0 > high)
+    mu0 = np.where(outside, q - sign * magnitude, mu0)                     # flip the sign where it would leave
+    return np.clip(mu0, low, high)                                         # a range narrower than 2·offset

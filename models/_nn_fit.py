@@ -1,0 +1,263 @@
+"""Shared machinery of the neural-network models (MDN, pixel decoder, multimodal members).
+
+- `check_fit_data`: validate and convert (q, x) at the `fit` edge (numpy or torch; uint8 images → [0, 1]).
+- `build`: construct a module without touching the global RNG and initialise it from a `torch.Generator`.
+- `train`: the one minibatch loop (seeded shuffling, Adam, early stopping on the validation loss keeping the
+  best weights, a checkpoint written every epoch from which a killed run resumes bit-for-bit, tqdm bar).
+- `NetModel`: mixin giving a `BaseSensoryModel` its float32/float64 inference copies of the network and the
+  autograd derivatives: Jacobian by forward mode (`vmap(jacfwd)`: Dz JVPs, cheap when outputs ≫ Dz) and a
+  VJP as one backward over the whole batch.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import os
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import torch
+from torch import nn
+from tqdm.auto import tqdm
+
+from bodyschema.errors import must_be
+
+_INIT_LAYERS = (nn.Linear, nn.Conv2d, nn.ConvTranspose2d)
+
+
+# ---- data at the fit edge ---------------------------------------------------------------------------
+def check_fit_data(q, x, latent_dim: int, output_shape: tuple[int, ...], name: str = "x"
+                   ) -> tuple[torch.Tensor, torch.Tensor]:
+    """(N, Dz) rad and (N, *output_shape) → float32 tensors; uint8 x is divided by 255. Raises the house errors."""
+    q = _as_float_tensor("q", q)
+    x_raw = x.numpy() if isinstance(x, torch.Tensor) and x.dtype == torch.uint8 else x
+    is_uint8 = isinstance(x_raw, np.ndarray) and x_raw.dtype == np.uint8
+    x = _as_float_tensor(name, x)
+    if is_uint8:
+        x = x / 255.0
+    if q.ndim != 2 or q.shape[1] != latent_dim:
+        raise ValueError(must_be("q", f"of shape (N, {latent_dim}) joint angles in rad", tuple(q.shape)))
+    if tuple(x.shape[1:]) != tuple(output_shape):
+        raise ValueError(must_be(name, f"of shape (N, {', '.join(map(str, output_shape))})", tuple(x.shape),
+                                 "The model's output_shape must match the data."))
+    if x.shape[0] != q.shape[0]:
+        raise ValueError(must_be(f"len({name})", f"equal to len(q) = {q.shape[0]} (one row per pose)", x.shape[0]))
+    if q.shape[0] < 2:
+        raise ValueError(must_be("len(q)", "at least 2 samples", q.shape[0]))
+    return q, x
+
+
+def check_val(val, latent_dim: int, output_shape: tuple[int, ...]) -> tuple[torch.Tensor, torch.Tensor] | None:
+    """`val` = (q_val, x_val) or None, checked as the training data."""
+    if val is None:
+        return None
+    if not isinstance(val, (tuple, list)) or len(val) != 2:
+        raise TypeError(must_be("val", "a pair (q_val, x_val) or None", type(val).__name__))
+    return check_fit_data(val[0], val[1], latent_dim, output_shape, name="x_val")
+
+
+def output_standardizer(x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Per-output mean and scale (std; 1 where an output is constant, e.g. z of a planar arm). # (O,), (O,)"""
+    flat = x.reshape(x.shape[0], -1)   # (N, O)
+    std = flat.std(0)
+    return flat.mean(0), torch.where(std > 1e-8, std, torch.ones_like(std))
+
+
+def _as_float_tensor(name: str, a) -> torch.Tensor:
+    if isinstance(a, np.ndarray):
+        a = torch.from_numpy(np.ascontiguousarray(a))
+    if not isinstance(a, torch.Tensor):
+        raise TypeError(must_be(name, "a numpy array or torch.Tensor", type(a).__name__))
+    if not (a.dtype.is_floating_point or a.dtype in (torch.uint8, torch.int32, torch.int64, torch.bool)):
+        raise TypeError(must_be(f"{name}.dtype", "a float or uint8 type", a.dtype))
+    a = a.detach().to(torch.float32)
+    if not torch.isfinite(a).all():
+        bad = int((~torch.isfinite(a)).reshape(a.shape[0], -1).any(1).sum()) if a.ndim else 1
+        raise ValueError(must_be(name, "finite", f"{bad} rows with NaN or inf", "Drop or repair those samples."))
+    return a.contiguous()
+
+
+# ---- seeded construction ----------------------------------------------------------------------------
+def build(factory: Callable[[], nn.Module], gen: torch.Generator) -> nn.Module:
+    """Build on the meta device (no global RNG draw), then initialise every layer from `gen`."""
+    with torch.device("meta"):
+        module = factory()
+    module = module.to_empty(device="cpu")
+    for layer in module.modules():
+        if isinstance(layer, _INIT_LAYERS):   # PyTorch's default init, drawn from `gen`
+            nn.init.kaiming_uniform_(layer.weight, a=math.sqrt(5), generator=gen)
+            if layer.bias is not None:
+                fan_in, _ = nn.init._calculate_fan_in_and_fan_out(layer.weight)
+                bound = 1.0 / math.sqrt(fan_in) if fan_in > 0 else 0.0
+                nn.init.uniform_(layer.bias, -bound, bound, generator=gen)
+        elif isinstance(layer, LeafParams):
+            for p in layer.parameters(recurse=False):
+                nn.init.zeros_(p)
+        elif any(True for _ in layer.parameters(recurse=False)):
+            raise TypeError(must_be("layer", f"one of {[c.__name__ for c in _INIT_LAYERS]}", type(layer).__name__))
+    return module
+
+
+class LeafParams(nn.Module):
+    """Free parameters (e.g. log-precisions) that the owner initialises itself after `build`."""
+
+    def __init__(self, **shapes: tuple[int, ...]):
+        super().__init__()
+        for name, shape in shapes.items():
+            self.register_parameter(name, nn.Parameter(torch.zeros(shape)))
+
+
+# ---- the training loop ------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class TrainSettings:
+    epochs: int = 200
+    batch_size: int = 128
+    lr: float = 1e-3
+    patience: int = 20            # epochs without improvement of the validation (else train) loss
+    weight_decay: float = 0.0
+
+
+def train(module: nn.Module, loss_fn: Callable[..., torch.Tensor], data: tuple[torch.Tensor, ...],
+          settings: TrainSettings, gen: torch.Generator, *, val: tuple[torch.Tensor, ...] | None = None,
+          on_epoch: Callable[[int, dict], None] | None = None, progress: bool = True,
+          checkpoint: str | Path | None = None, param_groups: list[dict] | None = None,
+          desc: str = "fit") -> dict[str, float]:
+    """Minimise `loss_fn(module, *batch)` (a mean over the batch); leaves the best weights in `module`.
+
+    The score is the validation loss when `val` is given, else the train loss. `checkpoint` is rewritten
+    atomically after every epoch (before `on_epoch`), and resumed from when it exists at the start.
+    """
+    n = data[0].shape[0]
+    opt = torch.optim.Adam(param_groups or module.parameters(), lr=settings.lr, weight_decay=settings.weight_decay)
+    fingerprint = {"n": n, "shapes": [list(d.shape[1:]) for d in data], **asdict(settings)}
+    state = {"epoch": -1, "best": math.inf, "best_epoch": -1, "bad": 0,
+             "best_weights": _clone(module.state_dict()), "metrics": {}}
+    if checkpoint is not None and Path(checkpoint).is_file():
+        state = _resume(Path(checkpoint), module, opt, gen, fingerprint)
+    bar = tqdm(total=settings.epochs, initial=state["epoch"] + 1, desc=desc, disable=not progress, leave=False)
+    for epoch in range(state["epoch"] + 1, settings.epochs):
+        if state["bad"] >= settings.patience:
+            break
+        start = time.perf_counter()
+        module.train()
+        perm = torch.randperm(n, generator=gen)
+        total = 0.0
+        for i in range(0, n, settings.batch_size):
+            idx = perm[i:i + settings.batch_size]
+            loss = loss_fn(module, *(d[idx] for d in data))
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            total += float(loss.detach()) * len(idx)
+        metrics = {"train_loss": total / n}
+        if val is not None:
+            metrics["val_loss"] = evaluate(module, loss_fn, val, settings.batch_size)
+        score = metrics.get("val_loss", metrics["train_loss"])
+        if score < state["best"]:
+            state.update(best=score, best_epoch=epoch, bad=0, best_weights=_clone(module.state_dict()))
+        else:
+            state["bad"] += 1
+        metrics.update(best_loss=state["best"], epoch_seconds=time.perf_counter() - start)
+        state.update(epoch=epoch, metrics=metrics)
+        if checkpoint is not None:
+            _save_checkpoint(Path(checkpoint), state, module, opt, gen, fingerprint)
+        bar.update(1)
+        bar.set_postfix({k: f"{v:.4g}" for k, v in metrics.items() if k.endswith("loss")})
+        if on_epoch is not None:
+            on_epoch(epoch, dict(metrics))
+    bar.close()
+    module.load_state_dict(state["best_weights"])
+    module.eval()
+    return {"best_loss": state["best"], "best_epoch": state["best_epoch"], "epochs_run": state["epoch"] + 1}
+
+
+@torch.no_grad()
+def evaluate(module: nn.Module, loss_fn, data: tuple[torch.Tensor, ...], batch_size: int) -> float:
+    was_training = module.training
+    module.eval()
+    n = data[0].shape[0]
+    total = sum(float(loss_fn(module, *(d[i:i + batch_size] for d in data))) * min(batch_size, n - i)
+                for i in range(0, n, batch_size))
+    module.train(was_training)
+    return total / n
+
+
+def _clone(weights: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    return {k: v.detach().clone() for k, v in weights.items()}
+
+
+def _save_checkpoint(path: Path, state: dict, module, opt, gen, fingerprint) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save({**state, "weights": module.state_dict(), "optimizer": opt.state_dict(),
+                "rng": gen.get_state(), "fingerprint": fingerprint}, tmp)
+    os.replace(tmp, path)   # atomic: a kill mid-write leaves the previous checkpoint intact
+
+
+def _resume(path: Path, module, opt, gen, fingerprint) -> dict:
+    saved = torch.load(path, weights_only=True)
+    if saved.get("fingerprint") != fingerprint:
+        raise ValueError(must_be("checkpoint", f"from a run with the same data and settings {fingerprint}",
+                                 saved.get("fingerprint"), f"Delete {str(path)!r} or pass another checkpoint path."))
+    module.load_state_dict(saved["weights"])
+    opt.load_state_dict(saved["optimizer"])
+    gen.set_state(saved["rng"])
+    return {k: saved[k] for k in ("epoch", "best", "best_epoch", "bad", "best_weights", "metrics")}
+
+
+# ---- inference plumbing for BaseSensoryModel subclasses ----------------------------------------------
+class NetModel:
+    """Mixin: the subclass sets `self.net_` (float32, trained) and implements `_outputs(net, u)`, u in [-1, 1]."""
+
+    net_: nn.Module | None = None
+
+    @property
+    def is_fitted(self) -> bool:
+        return self.net_ is not None
+
+    def _set_net(self, net: nn.Module) -> None:
+        net = net.eval().requires_grad_(False)   # inference: no weight gradients in VJP/Jacobian graphs
+        self.net_ = net
+        self._nets = {torch.float32: net}
+
+    def _net(self, dtype: torch.dtype) -> nn.Module:
+        if dtype not in self._nets:   # a float64 copy, so finite-difference checks are meaningful
+            self._nets[dtype] = copy.deepcopy(self.net_).to(dtype)
+        return self._nets[dtype]
+
+    def _outputs(self, net: nn.Module, u: torch.Tensor) -> torch.Tensor:
+        raise NotImplementedError
+
+    def _g(self, z: torch.Tensor) -> torch.Tensor:
+        """g(z) with z in rad, scaled inside so autograd derivatives are w.r.t. rad. # (B, Dz) → (B, *out)"""
+        return self._outputs(self._net(z.dtype), self.body.to_unit(z))
+
+    def _predict(self, z: torch.Tensor) -> torch.Tensor:
+        with torch.no_grad():
+            return self._g(z)
+
+    def _jacobian(self, z: torch.Tensor) -> torch.Tensor:
+        def single(zi):   # (Dz,) → (O,)
+            return self._g(zi[None]).reshape(-1)
+        with torch.no_grad():
+            return torch.func.vmap(torch.func.jacfwd(single))(z)   # (B, O, Dz)
+
+    def _vjp(self, z: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+        with torch.enable_grad():   # one backward for the whole batch: rows are independent
+            z = z.detach().requires_grad_(True)
+            (grad,) = torch.autograd.grad(self._g(z), z, v)
+        return grad   # (B, Dz)
+
+    def _state(self) -> dict[str, torch.Tensor]:
+        return {f"net.{k}": v for k, v in self.net_.state_dict().items()}
+
+    def _restore_net(self, factory: Callable[[], nn.Module], state: dict[str, torch.Tensor]) -> None:
+        with torch.device("meta"):
+            net = factory()
+        net = net.to_empty(device="cpu")
+        net.load_state_dict({k[4:]: v for k, v in state.items() if k.startswith("net.")})
+        self._set_net(net)

@@ -1,0 +1,96 @@
+"""`AnalyticModel`: the robot's exact MuJoCo forward kinematics as a SensoryModel — the oracle.
+
+x = g(z) for z = joint angles (rad): the `ee` site position (ee_xyz, m), its camera projection (ee_pixel, px)
+or the joints themselves (joints, rad, identity). The Jacobian is closed-form: mj_jacSite, chained with
+the pinhole projection Jacobian for ee_pixel. Precision is fixed. Nothing is learned, so saving stores the
+config only and loading rebuilds the robot from the shipped MJCF (a changed MJCF is reported on load).
+The FK is evaluated for any finite z, also outside the joint limits, since inference may probe there.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import torch
+
+from bodyschema.datagen.robot import Robot
+from bodyschema.errors import must_be
+from bodyschema.models.contract import BaseSensoryModel, register_kind
+from bodyschema.models.scaling import BodySpec
+
+MODALITIES = ("ee_xyz", "ee_pixel", "joints")
+# Default diagonal precisions Π_x: 1 / σ² with σ = 1 mm, 1 px, 1°.
+DEFAULT_PRECISION = {"ee_xyz": 1.0 / 1e-3 ** 2,                  # m⁻²
+                     "ee_pixel": 1.0,                            # px⁻²
+                     "joints": 1.0 / np.deg2rad(1.0) ** 2}       # rad⁻²
+
+
+@register_kind
+class AnalyticModel(BaseSensoryModel):
+    """Exact FK of a shipped robot: ee_xyz (3,) m, ee_pixel (2,) px or joints (Dq,) rad, fixed precision."""
+
+    kind = "analytic"
+
+    def __init__(self, robot: str, modality: str, image_size: tuple[int, int] | None = None,
+                 precision: float | None = None):
+        if modality not in MODALITIES:
+            raise ValueError(must_be("modality", f"one of {MODALITIES}", modality))
+        if precision is None:
+            precision = DEFAULT_PRECISION[modality]
+        if not (isinstance(precision, (int, float)) and np.isfinite(precision) and precision > 0):
+            raise ValueError(must_be("precision", "a finite number > 0 (1 / variance of x)", precision,
+                                     f"The default for {modality} is {DEFAULT_PRECISION[modality]:.6g}."))
+        self.robot = Robot.load(robot, image_size=image_size)   # cheap: no renderer until render()
+        low, high = self.robot.sampling_ranges.T
+        body = BodySpec(robot, self.robot.joint_names, tuple(map(float, low)), tuple(map(float, high)))
+        out = {"ee_xyz": (3,), "ee_pixel": (2,), "joints": (self.robot.dq,)}[modality]
+        super().__init__(body, modality, out)
+        self.image_size = self.robot.image_size if modality == "ee_pixel" else None
+        self.fixed_precision = float(precision)
+
+    # ---- hooks ----------------------------------------------------------------------------------------
+    def _predict(self, z: torch.Tensor) -> torch.Tensor:
+        if self.modality == "joints":
+            return z.clone()
+        q = _numpy(z)                                                     # (B, Dz) rad, float64
+        xyz = self.robot._fk(q)                                           # (B, 3) m
+        x = self.robot.project(xyz) if self.modality == "ee_pixel" else xyz   # (B, 2) px | (B, 3) m
+        return torch.from_numpy(x).to(device=z.device, dtype=z.dtype)
+
+    def _jacobian(self, z: torch.Tensor) -> torch.Tensor:
+        if self.modality == "joints":
+            eye = torch.eye(self.latent_dim, dtype=z.dtype, device=z.device)
+            return eye.expand(z.shape[0], -1, -1).clone()                 # (B, Dz, Dz)
+        xyz, jac = self.robot._fk_and_jacobian(_numpy(z))                 # (B, 3) m, (B, 3, Dz) m/rad
+        if self.modality == "ee_pixel":
+            jac = self.robot.project_jacobian(xyz) @ jac                  # (B, 2, 3) px/m @ (B, 3, Dz) → (B, 2, Dz)
+        return torch.from_numpy(jac).to(device=z.device, dtype=z.dtype)
+
+    def _precision(self, z: torch.Tensor) -> torch.Tensor:
+        return torch.full((z.shape[0], *self.output_shape), self.fixed_precision, dtype=z.dtype, device=z.device)
+
+    # ---- persistence ------------------------------------------------------------------------------------
+    def _config(self) -> dict:
+        return {"robot": self.robot.name, "modality": self.modality,
+                "image_size": list(self.image_size) if self.image_size else None,
+                "precision": self.fixed_precision, "mjcf_sha256": self.robot.mjcf_sha256}
+
+    @classmethod
+    def _from_saved(cls, body, modality, output_shape, config, state):
+        size = tuple(config["image_size"]) if config.get("image_size") else None
+        model = cls(config["robot"], config["modality"], size, config["precision"])
+        body.check_compatible(model.body, "saved analytic model")
+        if config.get("mjcf_sha256") not in (None, model.robot.mjcf_sha256):
+            warnings.warn(f"The shipped MJCF of {config['robot']!r} changed since this model was saved "
+                          f"(sha256 {config['mjcf_sha256'][:12]}… → {model.robot.mjcf_sha256[:12]}…); "
+                          "the oracle now follows the new MJCF.", stacklevel=3)
+        return model
+
+    def __repr__(self) -> str:
+        return (f"AnalyticModel(robot={self.robot.name!r}, modality={self.modality!r}, "
+                f"output_shape={self.output_shape}, precision={self.fixed_precision:.6g})")
+
+
+def _numpy(z: torch.Tensor) -> np.ndarray:
+    return z.detach().to("cpu", torch.float64).numpy()                   # (B, Dz) rad

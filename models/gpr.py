@@ -1,0 +1,222 @@
+"""`gpr`: exact Gaussian-process regression (gpytorch) of x = g(z), with a closed-form Jacobian.
+
+One independent GP per output dimension, all in ONE batched gpytorch model (batch_shape = n_outputs): ARD RBF
+kernel with an output scale, zero mean on standardized targets, learned Gaussian noise with a low floor, float64.
+
+Fitting (`fit`):
+1. at most `max_points` samples are kept (a seeded uniform random subset beyond that);
+2. hyper-parameters maximize the exact marginal likelihood (Adam, then L-BFGS) on a seeded random subset of
+   `hyper_points` samples, with gpytorch forced to Cholesky (it silently switches to approximate CG solves
+   above `max_cholesky_size` = 800 points, measured ~1000× worse mean error on arm kinematics);
+3. the GP is conditioned on all kept samples with our own Cholesky: α = (K + σ²I)⁻¹ y (see `_gp_math.py`).
+
+Prediction, Jacobian (no autograd) and variance are closed form from the cached α (`_gp_math.py`), then
+chained through the target de-standardization and the latent scaling rad → [-1, 1].
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import gpytorch
+import torch
+from tqdm.auto import tqdm
+
+from bodyschema.errors import must_be
+from bodyschema.models import _gp_data, _gp_math
+from bodyschema.models.contract import BaseSensoryModel, register_kind
+from bodyschema.models.scaling import BodySpec
+
+STATE_KEYS = ("train_u", "alpha", "lengthscale", "outputscale", "noise", "y_mean", "y_std")
+
+
+class BatchExactGP(gpytorch.models.ExactGP):
+    """O independent exact GPs in one batched model. train_u (O, n, D) in [-1, 1], train_y (O, n) standardized."""
+
+    def __init__(self, train_u: torch.Tensor, train_y: torch.Tensor, likelihood):
+        super().__init__(train_u, train_y, likelihood)
+        batch = torch.Size([train_y.shape[0]])
+        self.mean_module = gpytorch.means.ZeroMean(batch_shape=batch)
+        self.covar_module = gpytorch.kernels.ScaleKernel(
+            gpytorch.kernels.RBFKernel(ard_num_dims=train_u.shape[-1], batch_shape=batch), batch_shape=batch)
+
+    def forward(self, u):
+        return gpytorch.distributions.MultivariateNormal(self.mean_module(u), self.covar_module(u))
+
+
+def build_exact_gp(train_u: torch.Tensor, train_y: torch.Tensor, noise_floor: float,
+                   lengthscale: float | torch.Tensor = 0.5, outputscale: float | torch.Tensor = 1.0,
+                   noise: float | torch.Tensor = 1e-3) -> BatchExactGP:
+    """A float64 batched gpytorch GP. train_u (n, D), train_y (O, n); hyper-parameters scalar or (O, D)/(O,)."""
+    n_out = train_y.shape[0]
+    likelihood = gpytorch.likelihoods.GaussianLikelihood(
+        batch_shape=torch.Size([n_out]), noise_constraint=gpytorch.constraints.GreaterThan(noise_floor))
+    gp = BatchExactGP(train_u.expand(n_out, *train_u.shape), train_y, likelihood).double()
+    likelihood.double()
+    as_t = lambda v, shape: torch.as_tensor(v, dtype=torch.float64).expand(shape).clone()  # noqa: E731
+    gp.covar_module.base_kernel.lengthscale = as_t(lengthscale, (n_out, 1, train_u.shape[-1]))
+    gp.covar_module.outputscale = as_t(outputscale, (n_out,))
+    likelihood.noise = as_t(noise, (n_out, 1)).clamp_min(noise_floor * 1.0001)
+    return gp
+
+
+@register_kind
+class GPRModel(BaseSensoryModel):
+    """Exact GP sensory model, kind "gpr". `__init__` stores hyper-parameters only; `fit` learns."""
+
+    kind = "gpr"
+
+    def __init__(self, body: BodySpec, modality: str, output_shape: tuple[int, ...], *,
+                 hyper_points: int = 500,     # MLL fitted on this many samples: O(m³) per step, 500 takes seconds
+                 max_points: int = 5000,      # conditioned on at most this many: O(n³) once, O(n²) memory per output
+                 adam_steps: int = 50,        # coarse search from the initial guess, robust to a bad start
+                 lbfgs_steps: int = 200,      # max MLL evaluations of L-BFGS, which converges where Adam crawls
+                 lr: float = 0.05,            # Adam step on the raw (softplus⁻¹) hyper-parameters
+                 noise_floor: float = 1e-7):  # on standardized targets; a 1e-4 floor (gpytorch's) costs accuracy
+        super().__init__(body, modality, output_shape)
+        for name, value in (("hyper_points", hyper_points), ("max_points", max_points)):
+            if int(value) < 2:
+                raise ValueError(must_be(name, "an integer ≥ 2", value))
+        if not noise_floor > 0:
+            raise ValueError(must_be("noise_floor", "> 0 (standardized target units)", noise_floor))
+        self.hyper_points, self.max_points = int(hyper_points), int(max_points)
+        self.adam_steps, self.lbfgs_steps, self.lr = int(adam_steps), int(lbfgs_steps), float(lr)
+        self.noise_floor = float(noise_floor)
+        self._factor = None                   # Cholesky of K + σ²I, (O, n, n); rebuilt lazily after load
+
+    @property
+    def is_fitted(self) -> bool:
+        return hasattr(self, "alpha_")
+
+    # ---- fitting ------------------------------------------------------------------------------------
+    def fit(self, q, x, *, seed: int = 0, val=None, on_epoch: Callable[[int, dict[str, float]], None] | None = None,
+            progress: bool = True) -> "GPRModel":
+        """Fit on joint angles q (N, Dz) rad and observations x (N, *output_shape). Returns self."""
+        q, y = _gp_data.check_training_data(q, x, self.body, self.output_shape)        # (N, Dz), (N, O)
+        if val is not None:
+            val = _gp_data.check_training_data(*val, self.body, self.output_shape, prefix="val ")
+        gen = torch.Generator().manual_seed(int(seed))
+        keep = _gp_data.random_subset(q.shape[0], self.max_points, gen)
+        u = self.body.to_unit(q[keep])                                                # (n, Dz)
+        ys, y_mean, y_std = _gp_data.standardize(y[keep])                             # (O, n), (O,), (O,)
+        sub = _gp_data.random_subset(u.shape[0], self.hyper_points, gen)
+        lengthscale, outputscale, noise, step = self._fit_hyper(u[sub], ys[:, sub], on_epoch, progress)
+
+        self.lengthscale_, self.outputscale_, self.noise_ = lengthscale, outputscale, noise
+        self.train_u_, self.y_mean_, self.y_std_ = u, y_mean, y_std
+        self._factor = _gp_math.cholesky_factor(u, lengthscale, outputscale, noise)   # (O, n, n)
+        self.alpha_ = _gp_math.solve_weights(self._factor, ys)                        # (O, n)
+        if val is not None and on_epoch is not None:
+            pred = self._predict(val[0])                                              # (Nv, *out)
+            err = (pred.reshape(pred.shape[0], -1) - val[1]).norm(dim=-1)             # (Nv,)
+            on_epoch(step, {"val_mean_error": float(err.mean()), "val_rmse": float(err.pow(2).mean().sqrt())})
+        return self
+
+    def _fit_hyper(self, u, ys, on_epoch, progress):
+        """Maximize the exact MLL on (u (m, D), ys (O, m)). → lengthscale (O, D), outputscale (O,), noise (O,)."""
+        gp = build_exact_gp(u, ys, self.noise_floor)
+        gp.train()
+        mll = gpytorch.mlls.ExactMarginalLogLikelihood(gp.likelihood, gp)
+
+        def loss_fn():
+            return -mll(gp(*gp.train_inputs), ys).sum()            # Σ over outputs of −MLL / m
+
+        bar = tqdm(total=self.adam_steps + self.lbfgs_steps, desc="gpr hyper-parameters", disable=not progress)
+        step = 0
+
+        def closure(optimizer):
+            nonlocal step
+            optimizer.zero_grad()
+            loss = loss_fn()
+            loss.backward()
+            step += 1
+            bar.update(1)
+            if on_epoch is not None:
+                on_epoch(step, {"train_neg_mll": loss.item()})
+            return loss
+
+        with gpytorch.settings.max_cholesky_size(u.shape[0] + 1), gpytorch.settings.cholesky_max_tries(8):
+            adam = torch.optim.Adam(gp.parameters(), lr=self.lr)
+            for _ in range(self.adam_steps):
+                adam.step(lambda: closure(adam))
+            if self.lbfgs_steps > 0:
+                # One L-BFGS run (stepping it one iteration at a time stalls); tolerances tight for float64.
+                lbfgs = torch.optim.LBFGS(gp.parameters(), lr=1.0, max_iter=self.lbfgs_steps,
+                                          max_eval=self.lbfgs_steps, tolerance_grad=1e-9, tolerance_change=1e-12,
+                                          history_size=20, line_search_fn="strong_wolfe")
+                lbfgs.step(lambda: closure(lbfgs))
+        bar.close()
+        kernel = gp.covar_module
+        return (kernel.base_kernel.lengthscale.detach().reshape(ys.shape[0], -1).clone(),   # (O, D)
+                kernel.outputscale.detach().reshape(-1).clone(),                             # (O,)
+                gp.likelihood.noise.detach().reshape(-1).clone(), step)                      # (O,)
+
+    # ---- closed-form prediction ---------------------------------------------------------------------
+    def _kernel(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        u = self.body.to_unit(z.to(torch.float64))                                    # (B, Dz)
+        return u, _gp_math.rbf(u, self.train_u_, self.lengthscale_, self.outputscale_)  # (O, B, n)
+
+    def _predict(self, z):
+        _, k = self._kernel(z)
+        mean = _gp_math.posterior_mean(k, self.alpha_).T * self.y_std_ + self.y_mean_   # (B, O)
+        return mean.reshape(z.shape[0], *self.output_shape)
+
+    def _jacobian(self, z):
+        u, k = self._kernel(z)
+        jac_u = _gp_math.mean_jacobian(u, self.train_u_, k, self.alpha_, self.lengthscale_)   # (B, O, Dz)
+        return jac_u * self.y_std_[:, None] * self.body.unit_per_rad(u)               # (B, O, Dz) per rad
+
+    def _vjp(self, z, v):
+        # Jᵀv in float64 (the hooks compute in float64; the base class casts the result to z.dtype).
+        return torch.einsum("bod,bo->bd", self._jacobian(z), v.reshape(v.shape[0], -1).to(torch.float64))
+
+    def predict_with_jacobian(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """predict(z) and jacobian(z) sharing one kernel matrix. → (B, *out), (B, O, Dz)."""
+        z = self._check_z(z)
+        u, k = self._kernel(z)
+        mean = _gp_math.posterior_mean(k, self.alpha_).T * self.y_std_ + self.y_mean_   # (B, O)
+        jac_u = _gp_math.mean_jacobian(u, self.train_u_, k, self.alpha_, self.lengthscale_)
+        jac = jac_u * self.y_std_[:, None] * self.body.unit_per_rad(u)                # (B, O, Dz)
+        return mean.reshape(z.shape[0], *self.output_shape).to(z.dtype), jac.to(z.dtype)
+
+    def _precision(self, z):
+        """1 / (σ²_pred + σ²_noise) in output units⁻², diagonal. # (B, *out)"""
+        _, k = self._kernel(z)
+        var = _gp_math.posterior_variance(k, self.factor, self.outputscale_)         # (O, B) standardized
+        var_out = (var + self.noise_[:, None]) * self.y_std_[:, None].pow(2)          # (O, B) output units²
+        return (1.0 / var_out).T.reshape(z.shape[0], *self.output_shape)
+
+    @property
+    def factor(self) -> torch.Tensor:
+        """Cholesky factor of K + σ²I (O, n, n): kept after fit, recomputed on first use after load."""
+        if self._factor is None:
+            self._factor = _gp_math.cholesky_factor(self.train_u_, self.lengthscale_, self.outputscale_, self.noise_)
+        return self._factor
+
+    def to_gpytorch(self) -> BatchExactGP:
+        """The fitted model as a gpytorch ExactGP in eval mode (for comparisons; inputs in [-1, 1], targets
+        standardized). Its targets are rebuilt from α as y = (K + σ²I) α."""
+        ys = (self.factor @ (self.factor.transpose(-1, -2) @ self.alpha_[..., None])).squeeze(-1)  # (O, n)
+        floor = min(self.noise_floor, 0.5 * float(self.noise_.min()))
+        gp = build_exact_gp(self.train_u_, ys, floor, self.lengthscale_[:, None, :],
+                            self.outputscale_, self.noise_[:, None])
+        gp.eval()
+        return gp
+
+    # ---- persistence --------------------------------------------------------------------------------
+    def _config(self):
+        return {"hyper_points": self.hyper_points, "max_points": self.max_points, "adam_steps": self.adam_steps,
+                "lbfgs_steps": self.lbfgs_steps, "lr": self.lr, "noise_floor": self.noise_floor}
+
+    def _state(self):
+        return {key: getattr(self, f"{key}_") for key in STATE_KEYS}
+
+    @classmethod
+    def _from_saved(cls, body, modality, output_shape, config, state):
+        model = cls(body, modality, output_shape, **config)
+        missing = [key for key in STATE_KEYS if key not in state]
+        if missing:
+            raise ValueError(must_be("state.pt", f"a gpr state with tensors {list(STATE_KEYS)}", f"missing {missing}"))
+        for key in STATE_KEYS:
+            setattr(model, f"{key}_", state[key].to(torch.float64))
+        return model

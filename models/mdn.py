@@ -1,0 +1,134 @@
+"""Mixture density network x ~ Σ_k π_k(z) N(μ_k(z), diag σ_k(z)²) as a SensoryModel (kind "mdn").
+
+An MLP (tanh, smooth so the Jacobian is too) maps scaled joint angles to K mixture components over the
+standardized outputs; trained by the negative log-likelihood (Bishop 1994, "Mixture Density Networks").
+`predict` is the mixture mean (`mode="mean"`) or the mean of the most probable component (`mode="max"`);
+the Jacobian is autograd through that choice; the precision is the inverse expected squared error around
+the prediction, Σ_k π_k (σ_k² + (μ_k − x̂)²) — the mixture variance when x̂ is the mixture mean.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import nn
+
+from bodyschema.errors import must_be
+from bodyschema.models._nn_fit import (NetModel, TrainSettings, build, check_fit_data, check_val,
+                                       output_standardizer, train)
+from bodyschema.models.contract import BaseSensoryModel, register_kind
+from bodyschema.models.scaling import BodySpec
+
+MODES = ("mean", "max")
+
+
+class MDNNet(nn.Module):
+    """u (B, Dz) in [-1, 1] → logits (B, K), means (B, K, O), stds (B, K, O) in standardized output units."""
+
+    def __init__(self, latent_dim: int, n_out: int, hidden: tuple[int, ...], n_components: int, min_std: float):
+        super().__init__()
+        layers, width = [], latent_dim
+        for h in hidden:
+            layers += [nn.Linear(width, h), nn.Tanh()]
+            width = h
+        self.trunk = nn.Sequential(*layers)
+        self.head = nn.Linear(width, n_components * (1 + 2 * n_out))
+        self.k, self.o, self.min_std = n_components, n_out, min_std
+
+    def forward(self, u):
+        p = self.head(self.trunk(u))                                   # (B, K(1 + 2O))
+        logits = p[:, :self.k]                                         # (B, K)
+        means = p[:, self.k:self.k * (1 + self.o)].reshape(-1, self.k, self.o)      # (B, K, O)
+        raw = p[:, self.k * (1 + self.o):].reshape(-1, self.k, self.o)              # (B, K, O)
+        return logits, means, nn.functional.softplus(raw) + self.min_std
+
+
+@register_kind
+class MDNModel(NetModel, BaseSensoryModel):
+    kind = "mdn"
+
+    def __init__(self, body: BodySpec, modality: str, output_shape: tuple[int, ...], *,
+                 hidden: tuple[int, ...] = (64, 64),
+                 n_components: int = 3,       # forward kinematics is unimodal; a few components absorb noise/contact
+                 min_std: float = 1e-3,       # std floor in standardized units: bounds the precision
+                 mode: str = "mean",
+                 epochs: int = 300, batch_size: int = 128, lr: float = 3e-3, patience: int = 30,
+                 weight_decay: float = 0.0):
+        super().__init__(body, modality, output_shape)
+        if mode not in MODES:
+            raise ValueError(must_be("mode", f"one of {MODES}", mode))
+        if n_components < 1 or min_std <= 0:
+            raise ValueError(must_be("n_components and min_std", "≥ 1 and > 0", (n_components, min_std)))
+        self.hidden, self.n_components, self.min_std, self.mode = tuple(hidden), n_components, min_std, mode
+        self.settings = TrainSettings(epochs, batch_size, lr, patience, weight_decay)
+        self.x_mean_ = self.x_scale_ = None
+        self.fit_info_: dict = {}
+
+    # ---- fit ------------------------------------------------------------------------------------------
+    def fit(self, q, x, *, seed: int = 0, val=None, on_epoch=None, progress: bool = True, checkpoint=None):
+        q, x = check_fit_data(q, x, self.latent_dim, self.output_shape)     # (N, Dz), (N, *out)
+        val = check_val(val, self.latent_dim, self.output_shape)
+        self.x_mean_, self.x_scale_ = output_standardizer(x)             # (O,), (O,)
+        gen = torch.Generator().manual_seed(seed)
+        net = build(self._factory, gen)
+        data = self._training_pair(q, x)
+        val = self._training_pair(*val) if val is not None else None
+        self.fit_info_ = train(net, _mixture_nll, data, self.settings, gen, val=val, on_epoch=on_epoch,
+                               progress=progress, checkpoint=checkpoint, desc="fit mdn")
+        self._set_net(net)
+        return self
+
+    def _training_pair(self, q, x):
+        return self.body.to_unit(q), (x.reshape(x.shape[0], -1) - self.x_mean_) / self.x_scale_
+
+    def _factory(self) -> MDNNet:
+        n_out = math.prod(self.output_shape)
+        return MDNNet(self.latent_dim, n_out, self.hidden, self.n_components, self.min_std)
+
+    # ---- hooks ----------------------------------------------------------------------------------------
+    def _outputs(self, net, u):
+        logits, means, stds = net(u)
+        x_std = self._point(logits, means)                               # (B, O) standardized
+        mean, scale = self.x_mean_.to(u.dtype), self.x_scale_.to(u.dtype)
+        return (x_std * scale + mean).reshape(-1, *self.output_shape)
+
+    def _point(self, logits, means):
+        weights = logits.softmax(-1)                                     # (B, K)
+        if self.mode == "max":   # a one-hot mask (no argmax indexing: it must run under vmap)
+            weights = (logits == logits.max(-1, keepdim=True).values).to(logits.dtype)
+            weights = weights / weights.sum(-1, keepdim=True)
+        return torch.einsum("bk,bko->bo", weights, means)
+
+    def _precision(self, z):
+        with torch.no_grad():
+            logits, means, stds = self._net(z.dtype)(self.body.to_unit(z))
+            point = self._point(logits, means)                           # (B, O)
+            pi = logits.softmax(-1)[..., None]                           # (B, K, 1)
+            second = (pi * (stds ** 2 + (means - point[:, None]) ** 2)).sum(1)   # (B, O) standardized
+            var = second * self.x_scale_.to(z.dtype) ** 2
+        return (1.0 / var).reshape(-1, *self.output_shape)
+
+    def _config(self):
+        return {"hidden": list(self.hidden), "n_components": self.n_components, "min_std": self.min_std,
+                "mode": self.mode, "epochs": self.settings.epochs, "batch_size": self.settings.batch_size,
+                "lr": self.settings.lr, "patience": self.settings.patience,
+                "weight_decay": self.settings.weight_decay}
+
+    def _state(self):
+        return {**super()._state(), "x_mean": self.x_mean_, "x_scale": self.x_scale_}
+
+    @classmethod
+    def _from_saved(cls, body, modality, output_shape, config, state):
+        model = cls(body, modality, output_shape, **{**config, "hidden": tuple(config["hidden"])})
+        model.x_mean_, model.x_scale_ = state["x_mean"], state["x_scale"]
+        model._restore_net(model._factory, state)
+        return model
+
+
+def _mixture_nll(net: MDNNet, u: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
+    """Mean over the batch of −log Σ_k π_k Π_o N(x_o; μ_ko, σ_ko). u (B, Dz), x (B, O) standardized."""
+    logits, means, stds = net(u)
+    log_pi = logits.log_softmax(-1)                                      # (B, K)
+    log_n = (-0.5 * ((x[:, None] - means) / stds) ** 2 - stds.log() - 0.5 * math.log(2 * math.pi)).sum(-1)
+    return -torch.logsumexp(log_pi + log_n, -1).mean()                   # (B, K) → ()

@@ -1,0 +1,59 @@
+"""The Zarr store: schema, chunk-aligned shard writes, markers, and NaN for rows never written."""
+
+import numpy as np
+import pytest
+
+from bodyschema.datagen.store import (DONE, create_store, features, is_complete, mark_complete, mark_shard_done,
+                                      open_store, shards_done, write_shard)
+
+
+def test_features_follow_the_schema():
+    f = features(4, (56, 80), touch=True, babble=True)
+    assert f["q"]["shape"] == [4] and f["jacobian"]["shape"] == [3, 4] and f["image"]["shape"] == [56, 80]
+    assert {f[k]["dtype"] for k in ("q", "ee_xyz", "ee_pixel", "jacobian", "touch", "qvel", "t")} == {"float32"}
+    assert f["image"]["dtype"] == "uint8" and f["episode"]["dtype"] == "int32"
+    assert f["q"]["unit"] == "rad" and f["ee_xyz"]["unit"] == "m" and f["ee_pixel"]["unit"] == "px"
+    kinematic = features(2, None, touch=False, babble=False)
+    assert set(kinematic) == {"q", "ee_xyz", "ee_pixel", "jacobian"}
+    assert features(2, (8, 8, 3), False, False)["image"]["names"] == ["row", "col", "channel"]
+
+
+@pytest.fixture
+def store(tmp_path):
+    feats = features(2, (8, 8), touch=False, babble=False)
+    root = create_store(tmp_path / "s.zarr", feats, n=10, chunk_len=4, n_shards=3, attrs={"robot": "planar2"})
+    return tmp_path / "s.zarr", root
+
+
+def test_created_store_has_chunk_aligned_arrays_and_no_marker(store):
+    path, root = store
+    assert root["q"].shape == (10, 2) and root["q"].chunks == (4, 2)
+    assert root["image"].shape == (10, 8, 8) and root["image"].chunks == (4, 8, 8)
+    assert root[DONE].shape == (3,) and not shards_done(root).any()
+    assert root.attrs["robot"] == "planar2" and root.attrs["created"] is True
+    assert not is_complete(path)
+    assert np.isnan(root["q"][:]).all()  # never-written rows are visibly missing
+
+
+def test_a_shard_writes_only_its_own_chunk_files(store):
+    path, root = store
+    rows = {"q": np.ones((4, 2), np.float32), "image": np.full((4, 8, 8), 7, np.uint8)}
+    write_shard(root, 4, rows)
+    mark_shard_done(root, 1)
+    assert sorted(p.name for p in (path / "q" / "c").iterdir()) == ["1"]
+    assert sorted(p.name for p in (path / DONE / "c").iterdir()) == ["1"]
+    again = open_store(path)
+    assert np.array_equal(again["q"][4:8], rows["q"]) and np.isnan(again["q"][:4]).all()
+    assert np.array_equal(shards_done(again), [False, True, False])
+
+
+def test_the_completion_marker_is_explicit(store):
+    path, root = store
+    mark_complete(root)
+    assert is_complete(path) and "completed_at" in open_store(path).attrs
+
+
+def test_opening_a_non_store_names_the_fix(tmp_path):
+    with pytest.raises(FileNotFoundError, match="path must be a Zarr v3 dataset store.*bodyschema datagen"):
+        open_store(tmp_path)
+    assert not is_complete(tmp_path / "missing.zarr")

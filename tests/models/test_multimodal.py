@@ -1,0 +1,104 @@
+"""Multimodal members under the shared contract; joint fit, learned precisions, save→load, bad data."""
+
+import numpy as np
+import pytest
+import torch
+
+from bodyschema.models import load_model
+from bodyschema.models.multimodal import MultimodalMember, MultimodalModel
+from tests.models.contract import SensoryModelContract
+from tests.models.test_pixel import blob_images, joint_angles
+from tests.toy_models import ToyPlanarArm
+
+BODY = ToyPlanarArm().body
+TINY = dict(hidden=(16, 16), fc_hidden=16, channels=(8, 4), epochs=20, batch_size=32, lr=1e-2, patience=100,
+            precision_lr=5e-2)
+SHAPES = {"ee_xyz": (3,), "joints": (2,), "image": (8, 12)}
+
+
+def toy_modalities(q: torch.Tensor) -> dict[str, torch.Tensor]:
+    return {"ee_xyz": ToyPlanarArm().predict(q.double()).float(), "joints": q.clone(), "image": blob_images(q)}
+
+
+class TestMultimodalMember(SensoryModelContract):
+    def make_model(self, seed):
+        q = joint_angles(128, seed=0)
+        return MultimodalMember(BODY, "ee_xyz", (3,), **TINY).fit(q, toy_modalities(q)["ee_xyz"], seed=seed,
+                                                                  progress=False)
+
+    def make_inputs(self, n, dtype=torch.float64):
+        return joint_angles(n, seed=100 + n).to(dtype)
+
+    def make_unfitted_model(self):
+        return MultimodalMember(BODY, "ee_xyz", (3,), **TINY)
+
+
+class TestMultimodalImageMember(TestMultimodalMember):
+    batch = 3
+
+    def make_model(self, seed):
+        q = joint_angles(96, seed=0)
+        return MultimodalMember(BODY, "image", (8, 12), **{**TINY, "epochs": 8}).fit(q, blob_images(q), seed=seed,
+                                                                                     progress=False)
+
+
+@pytest.fixture(scope="module")
+def fitted():
+    q, q_val = joint_angles(256, seed=0), joint_angles(64, seed=1)
+    history = []
+    model = MultimodalModel(BODY, SHAPES, precisions={"joints": 1e4}, **{**TINY, "epochs": 40})
+    model.fit(q, toy_modalities(q), val=(q_val, toy_modalities(q_val)), progress=False,
+              on_epoch=lambda e, m: history.append(m))
+    return model, history, q_val
+
+
+def test_joint_fit_reduces_loss_and_learns_each_precision(fitted):
+    model, history, q_val = fitted
+    assert history[-1]["val_loss"] < history[0]["val_loss"] - 1.0
+    z, truth = q_val.double(), toy_modalities(q_val)
+    for m in ("ee_xyz", "image"):   # learned λ sits near the NLL optimum: 1 / mean squared residual
+        residual = (model.members[m].predict(z) - truth[m].double()).pow(2).mean()
+        ratio = float(model.precisions[m].mean() * residual)
+        assert 0.2 < ratio < 5, f"{m}: precision × residual variance = {ratio:.2f}, expected ≈ 1"
+    assert model.precisions["ee_xyz"].mean() > 100, "ee_xyz should be fitted to well under 0.1 m"
+    torch.testing.assert_close(model.precisions["joints"], torch.full((2,), 1e4, dtype=torch.float64))
+    assert model.members["image"].decoder == "pixel" and model.members["joints"].decoder == "mlp"
+
+
+def test_save_then_load_round_trip(fitted, tmp_path):
+    model, _, q_val = fitted
+    model.save(tmp_path / "mm")
+    again = MultimodalModel.load(tmp_path / "mm")
+    assert list(again.members) == list(model.members)
+    z = q_val[:5].double()
+    for m, member in model.members.items():
+        torch.testing.assert_close(again.members[m].predict(z), member.predict(z), rtol=0, atol=0)
+        torch.testing.assert_close(again.members[m].precision(z), member.precision(z), rtol=0, atol=0)
+        assert isinstance(load_model(tmp_path / "mm" / m), MultimodalMember)
+
+
+def test_separate_fit_trains_every_member():
+    q = joint_angles(64, seed=0)
+    seen = []
+    model = MultimodalModel(BODY, {"ee_xyz": (3,), "joints": (2,)}, joint=False, **{**TINY, "epochs": 2})
+    xs = {k: v for k, v in toy_modalities(q).items() if k != "image"}
+    model.fit(q, xs, progress=False, on_epoch=lambda e, m: seen.extend(m))
+    assert model.is_fitted and {"ee_xyz/train_loss", "joints/train_loss"} <= set(seen)
+
+
+def test_fit_rejects_bad_modalities_lengths_and_nan():
+    q = joint_angles(32, seed=0)
+    xs = toy_modalities(q)
+    model = MultimodalModel(BODY, SHAPES, **TINY)
+    with pytest.raises(ValueError, match=r"xs must be a dict with exactly the modalities"):
+        model.fit(q, {"ee_xyz": xs["ee_xyz"]}, progress=False)
+    with pytest.raises(ValueError, match=r"len\(xs\['joints'\]\) must be equal to len\(q\) = 32"):
+        model.fit(q, {**xs, "joints": xs["joints"][:-2]}, progress=False)
+    bad = xs["image"].numpy().copy()
+    bad[0, 0, 0] = np.nan
+    with pytest.raises(ValueError, match=r"xs\['image'\] must be finite"):
+        model.fit(q, {**xs, "image": bad}, progress=False)
+    with pytest.raises(ValueError, match="precisions keys must be among the modalities"):
+        MultimodalModel(BODY, SHAPES, precisions={"touch": 1.0})
+    with pytest.raises(FileNotFoundError, match="multimodal.json"):
+        MultimodalModel.load("/nonexistent/mm")

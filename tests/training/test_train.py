@@ -1,0 +1,111 @@
+"""`train` end to end on the default embedded store: what a run logs, resume after a kill, failure leaves no trace."""
+
+import json
+
+import mlflow
+import numpy as np
+import pytest
+import torch
+from mlflow import MlflowClient
+
+from bodyschema.training.data import load_dataset
+from bodyschema.training.mlflow_model import DIGEST_TAG, directory_sha256
+from bodyschema.training.registry import load
+from bodyschema.training.train import train
+from tests.training.tiny_model import Boom, tiny_config
+
+
+def _client(workdir):
+    return MlflowClient(f"sqlite:///{workdir / 'mlflow.db'}")
+
+
+def test_a_run_logs_config_epochs_dataset_versions_plots_and_registers(workdir, kin_store, tiny_kind):
+    result = train(tiny_config(kin_store, hyper={"epochs": "12"}))
+    client = _client(workdir)
+    run = client.get_run(result.run_id)
+    data = load_dataset(kin_store, "ee_xyz")
+
+    assert run.info.status == "FINISHED"
+    assert run.data.params["model"] == "tiny" and run.data.params["hyper.epochs"] == "12"
+    assert run.data.params["seed"] == "0" and run.data.params["n_val"] == str(len(data.val))
+    assert [m.step for m in client.get_metric_history(result.run_id, "train_loss")] == list(range(12))
+    assert run.data.metrics["val_rmse"] == pytest.approx(result.metrics["val_rmse"])
+    (dataset_input,) = run.inputs.dataset_inputs
+    assert dataset_input.dataset.digest == data.sha256[:32] and dataset_input.dataset.name == "kin.zarr"
+    assert run.data.tags["robot"] == "planar2" and run.data.tags["mjcf_sha256"] == data.attrs["mjcf_sha256"]
+    assert run.data.tags["version.torch"] == torch.__version__ and run.data.tags["version.mlflow"] == mlflow.__version__
+    logged = {f.path for f in client.list_artifacts(result.run_id, "plots")}
+    assert logged == {"plots/loss_curves.png", "plots/val_scatter.png"}
+    assert all(p.stat().st_size > 1000 for p in result.plots.values())
+    assert (workdir / "mlartifacts").is_dir(), "artifacts go under the working directory"
+
+    assert result.registered_name == "bodyschema-planar2-ee_xyz-tiny" and result.model_version == "1"
+    assert result.champion
+    version = client.get_model_version(result.registered_name, "1")
+    assert version.tags[DIGEST_TAG] == directory_sha256(result.model_dir) == run.data.tags[DIGEST_TAG]
+    assert float(version.tags["val_rmse"]) == result.metrics["val_rmse"]
+
+    model = load("models:/bodyschema-planar2-ee_xyz-tiny@champion")
+    z = torch.as_tensor(data.val.q[:16], dtype=torch.float64)
+    from bodyschema.models import load_model
+    saved = load_model(result.model_dir)
+    torch.testing.assert_close(model.predict(z), saved.predict(z), rtol=0, atol=0)
+    assert model.jacobian(z).shape == (16, 3, 2) and model.precision(z).shape == (16, 3)
+    # The val metric is what the model really scores on the held-out rows.
+    pred = model.predict(torch.as_tensor(data.val.q)).numpy()
+    assert np.sqrt(np.mean((pred - data.val.x) ** 2)) == pytest.approx(result.metrics["val_rmse"], rel=1e-5)
+
+
+def test_the_pyfunc_predicts_g_of_z(workdir, kin_store, tiny_kind):
+    result = train(tiny_config(kin_store, hyper={"epochs": "3"}))
+    pyfunc = mlflow.pyfunc.load_model(f"models:/{result.registered_name}/{result.model_version}")
+    z = load_dataset(kin_store, "ee_xyz").val.q[:5].astype(np.float64)
+    expected = load("models:/bodyschema-planar2-ee_xyz-tiny/1").predict(torch.as_tensor(z)).numpy()
+    np.testing.assert_allclose(pyfunc.predict(z), expected, rtol=0, atol=0)
+
+
+def test_killed_run_resumes_its_checkpoint_and_its_mlflow_run(workdir, kin_store, tiny_kind, monkeypatch):
+    config = tiny_config(kin_store, hyper={"epochs": "20"})
+    monkeypatch.setattr(tiny_kind, "fail_at", 7)
+    monkeypatch.setattr(tiny_kind, "fail_with", "interrupt")
+    with pytest.raises(KeyboardInterrupt):
+        train(config)
+    client = _client(workdir)
+    (run_dir,) = (workdir / "runs").iterdir()
+    first_id = (run_dir / "mlflow_run_id").read_text()
+    assert client.get_run(first_id).info.status != "FINISHED"
+    assert not client.search_registered_models(), "an interrupted run registers nothing"
+
+    monkeypatch.setattr(tiny_kind, "fail_at", -1)
+    resumed = train(config)
+    assert resumed.run_id == first_id and client.get_run(first_id).info.status == "FINISHED"
+    steps = [m.step for m in client.get_metric_history(first_id, "train_loss")]
+    assert steps == list(range(20)), "each epoch ran exactly once over the two attempts"
+    lines = (run_dir / "history.jsonl").read_text().splitlines()
+    assert [json.loads(line)["epoch"] for line in lines] == list(range(20))
+
+    # Same weights as an uninterrupted run of the same config.
+    fresh = train(tiny_config(kin_store, hyper={"epochs": "20"}, run_root=workdir / "fresh", register=False))
+    assert directory_sha256(fresh.model_dir) == directory_sha256(resumed.model_dir)
+
+
+def test_a_failed_fit_ends_failed_registers_nothing_and_keeps_the_champion(workdir, kin_store, tiny_kind,
+                                                                           monkeypatch):
+    good = train(tiny_config(kin_store, hyper={"epochs": "5"}))
+    monkeypatch.setattr(tiny_kind, "fail_at", 2)
+    with pytest.raises(Boom):
+        train(tiny_config(kin_store, hyper={"epochs": "40"}))
+    client = _client(workdir)
+    runs = client.search_runs([client.get_experiment_by_name("bodyschema").experiment_id])
+    assert sorted(r.info.status for r in runs) == ["FAILED", "FINISHED"]
+    versions = client.search_model_versions(f"name = '{good.registered_name}'")
+    assert [str(v.version) for v in versions] == ["1"]
+    assert str(client.get_model_version_by_alias(good.registered_name, "champion").version) == "1"
+
+
+def test_image_run_logs_a_target_vs_prediction_grid(workdir, image_store, tiny_kind):
+    result = train(tiny_config(image_store, modality="image", hyper={"epochs": "3"}, register=False))
+    assert set(result.plots) == {"loss_curves", "val_images"} and result.registered_name is None
+    assert 0 < result.metrics["val_rmse"] < 1, "image errors are in [0, 1] intensity units"
+    logged = {f.path for f in _client(workdir).list_artifacts(result.run_id, "plots")}
+    assert "plots/val_images.png" in logged

@@ -1,0 +1,165 @@
+"""Training data from a Zarr dataset store: validated, read chunk by chunk, digested, split train/validation.
+
+The store is validated first (`bodyschema.datagen.validate.validate_store` reports every problem at once; an
+invalid or incomplete store is refused). The joint angles `q` and one modality array are read whole, one
+chunk at a time (the sample-axis chunk is the unit the store was written in), while a sha256 of what was read
+is computed on the way: the dataset's content digest, logged to MLflow and part of the run's identity.
+Images stay uint8 here (4x smaller than float32) and become float in [0, 1] only at batch time (`as_float`).
+The validation split holds out whole episodes when the store has `episode` (babbling trajectories: neighbouring
+samples are nearly equal, so a random split would leak), else a seeded random share of the samples.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import zarr
+from tqdm.auto import tqdm
+
+from bodyschema.errors import must_be
+from bodyschema.models.scaling import BodySpec
+
+DATA_ARRAYS = ("q", "ee_xyz", "ee_pixel", "image", "jacobian", "qvel", "touch")  # not bookkeeping (shard_done)
+
+
+@dataclass(frozen=True)
+class Split:
+    q: np.ndarray        # (N, Dq) float32 rad
+    x: np.ndarray        # (N, *out) float32 in output units, or uint8 for images
+    rows: np.ndarray     # (N,) int64 row indices in the store
+
+    def __len__(self) -> int:
+        return len(self.q)
+
+
+@dataclass(frozen=True)
+class Dataset:
+    path: Path
+    modality: str
+    body: BodySpec           # robot, joints and the sampled joint ranges (the model's latent scaling)
+    attrs: dict[str, Any]    # the store's root attrs (robot, mjcf_sha256, config, ...)
+    train: Split
+    val: Split
+    sha256: str              # content digest of the arrays read (q, modality, episode), in row order
+    split_by: str            # "episode" or "random"
+
+    @property
+    def output_shape(self) -> tuple[int, ...]:
+        return tuple(self.train.x.shape[1:])
+
+    @property
+    def is_image(self) -> bool:
+        return self.train.x.dtype == np.uint8
+
+
+def as_float(x: np.ndarray | torch.Tensor) -> torch.Tensor:
+    """A batch as float32 tensor: uint8 images → [0, 1], everything else unchanged in value."""
+    t = torch.as_tensor(x)
+    return t.float().div_(255.0) if t.dtype == torch.uint8 else t.float()
+
+
+def store_problems(path: Path, modality: str) -> list[str]:
+    """Every reason `path` cannot be trained on (empty when it can)."""
+    try:
+        from bodyschema.datagen.validate import validate_store
+    except ImportError:          # datagen's validator not installed: the basic checks below still run
+        validate_store = None
+    if not (path / "zarr.json").is_file():
+        return [must_be("data", "a Zarr v3 dataset store (a directory with zarr.json)", str(path),
+                        "Create one with `bodyschema datagen --out PATH`.")]
+    problems = list(validate_store(path)) if validate_store is not None else []
+    root = zarr.open_group(str(path), mode="r", zarr_format=3)
+    if not root.attrs.get("complete", False):
+        problems.append(must_be("data attrs['complete']", "True (the completion marker)", root.attrs.get("complete"),
+                                "The dataset job did not finish: run the same `bodyschema datagen` again to resume."))
+    names = sorted(k for k in root.array_keys())
+    for need in ("q", modality):
+        if need not in names:
+            problems.append(must_be(f"data array {need!r}", f"present (arrays: {names})", "missing",
+                                    "Choose --modality among the store's arrays." if need == modality else ""))
+    for key in ("robot", "joint_names"):
+        if key not in root.attrs:
+            problems.append(must_be(f"data attrs[{key!r}]", "present", "missing"))
+    if "q" in names and modality in names and root["q"].shape[0] != root[modality].shape[0]:
+        problems.append(must_be(f"{modality}.shape[0]", f"equal to q.shape[0] = {root['q'].shape[0]}",
+                                root[modality].shape[0]))
+    return list(dict.fromkeys(problems))          # the validator and the basic checks may say the same thing
+
+
+def load_dataset(path: str | Path, modality: str, *, val_fraction: float = 0.2, seed: int = 0,
+                 max_train: int | None = None, progress: bool = False) -> Dataset:
+    """Validate, read and split a store. Raises the house ValueError listing every problem of a bad store."""
+    path = Path(path)
+    problems = store_problems(path, modality)
+    if problems:
+        raise ValueError(f"Dataset {str(path)!r} cannot be used for training:\n - " + "\n - ".join(problems))
+    root = zarr.open_group(str(path), mode="r", zarr_format=3)
+    attrs = dict(root.attrs)
+    digest = hashlib.sha256()
+    names = ["q", modality] + (["episode"] if "episode" in root.array_keys() else [])
+    arrays = {name: _read_chunked(root[name], name, digest, progress) for name in names}
+    q, x = arrays["q"].astype(np.float32, copy=False), arrays[modality]
+    if x.dtype != np.uint8:
+        x = x.astype(np.float32, copy=False)
+    finite = np.isfinite(q).all(axis=1)
+    if x.dtype != np.uint8:
+        finite &= np.isfinite(x.reshape(len(x), -1)).all(axis=1)
+    if not finite.all():
+        raise ValueError(must_be(f"data arrays q and {modality}", "finite in every row",
+                                 f"{int((~finite).sum())} rows with NaN or inf",
+                                 "The store has unwritten samples: regenerate or resume it with `bodyschema datagen`."))
+    rng = np.random.default_rng(seed)
+    train_rows, val_rows, split_by = split_rows(arrays.get("episode"), len(q), val_fraction, rng)
+    if max_train is not None and len(train_rows) > max_train:
+        train_rows = np.sort(rng.choice(train_rows, size=max_train, replace=False))
+    body = body_from_attrs(attrs, q)
+    return Dataset(path, modality, body, attrs, Split(q[train_rows], x[train_rows], train_rows),
+                   Split(q[val_rows], x[val_rows], val_rows), digest.hexdigest(), split_by)
+
+
+def split_rows(episode: np.ndarray | None, n: int, val_fraction: float,
+               rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, str]:
+    """(train rows, validation rows, how): whole episodes held out when there are ≥ 2, else random rows."""
+    if n < 2:
+        raise ValueError(must_be("dataset size", "at least 2 samples (one to train, one to validate)", n))
+    if episode is not None and len(np.unique(episode)) >= 2:
+        ids, counts = np.unique(episode, return_counts=True)
+        order = rng.permutation(len(ids))
+        # Smallest number of shuffled episodes reaching the validation share; at least one, never all.
+        k = int(np.searchsorted(np.cumsum(counts[order]), val_fraction * n)) + 1
+        held = ids[order[:min(max(k, 1), len(ids) - 1)]]
+        is_val = np.isin(episode, held)
+        return np.flatnonzero(~is_val), np.flatnonzero(is_val), "episode"
+    n_val = min(max(1, round(val_fraction * n)), n - 1)
+    perm = rng.permutation(n)
+    return np.sort(perm[n_val:]), np.sort(perm[:n_val]), "random"
+
+
+def body_from_attrs(attrs: dict[str, Any], q: np.ndarray) -> BodySpec:
+    """The model's BodySpec: robot and joints from the attrs, latent scaling from the sampled ranges (rad)."""
+    names = tuple(attrs["joint_names"])
+    if len(names) != q.shape[1]:
+        raise ValueError(must_be("data attrs['joint_names']", f"one name per column of q ({q.shape[1]})", list(names)))
+    ranges = attrs.get("sampling_ranges")
+    if ranges is not None:
+        low, high = (tuple(float(r[i]) for r in ranges) for i in (0, 1))
+    else:                       # older stores: the observed range of q
+        low, high = tuple(map(float, q.min(axis=0))), tuple(map(float, q.max(axis=0)))
+    return BodySpec(str(attrs["robot"]), names, low, high)
+
+
+def _read_chunked(array: zarr.Array, name: str, digest, progress: bool) -> np.ndarray:
+    """Read a whole array chunk by chunk along the sample axis, feeding the digest in row order."""
+    n, step = array.shape[0], array.chunks[0]
+    out = np.empty(array.shape, dtype=array.dtype)
+    digest.update(f"{name}|{array.dtype}|{array.shape}".encode())
+    starts = range(0, n, step)
+    for start in tqdm(starts, desc=f"read {name}", unit="chunk", disable=not progress or len(starts) < 8):
+        out[start:start + step] = array[start:start + step]
+        digest.update(np.ascontiguousarray(out[start:start + step]).tobytes())
+    return out

@@ -1,0 +1,210 @@
+"""`train(config)`: dataset → fit → validation metrics and plots → MLflow run → registered model (maybe champion).
+
+One call is one MLflow run. Steps: resolve tracking; load, validate and split the dataset; build the model
+from the kind table; fit it with a checkpoint in `<run_root>/<kind>-<modality>-<config hash>/` (a killed run
+started again with the same config resumes there, and continues the same MLflow run); score it on the
+held-out split (`val_rmse` in output units decides the champion); save, plot, log, register.
+An exception anywhere before registration ends the run FAILED and registers nothing.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import inspect
+import json
+import math
+import platform
+import shutil
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import mlflow
+import numpy as np
+import torch
+from mlflow.data.dataset_source_registry import resolve_dataset_source
+from mlflow.data.meta_dataset import MetaDataset
+from mlflow.exceptions import MlflowException
+
+from bodyschema.training import plots
+from bodyschema.training.config import TrainConfig, build_model
+from bodyschema.training.data import Dataset, Split, as_float, load_dataset
+from bodyschema.training.mlflow_model import DIGEST_TAG, log_sensory_model
+from bodyschema.training.registry import (METRIC, ensure_experiment, registered_name, update_champion,
+                                          use_tracking)
+
+UNITS = {"ee_xyz": "m", "ee_pixel": "px", "image": "intensity", "touch": "N", "jacobian": "m/rad"}
+PREDICT_BATCH = 256       # validation prediction batch: bounded memory for image decoders
+FINAL_METRICS = ("val_rmse", "val_mean_error", "train_rmse", "train_mean_error", "fit_seconds")
+LIBRARIES = ("bodyschema", "torch", "numpy", "mlflow", "zarr", "gpytorch", "scikit-learn", "mujoco")
+
+
+@dataclass(frozen=True)
+class TrainResult:
+    run_id: str
+    registered_name: str | None      # None when config.register is False
+    model_version: str | None
+    champion: bool                   # True when this version now holds the `champion` alias
+    metrics: dict[str, float]        # val_rmse, val_mean_error, train_rmse, fit_seconds, last epoch's metrics
+    plots: dict[str, Path] = field(default_factory=dict)
+    model_dir: Path | None = None    # the saved model (meta.json + state.pt)
+    run_dir: Path | None = None      # checkpoint, history, plots of this config
+
+
+def train(config: TrainConfig) -> TrainResult:
+    """Train, evaluate, log and (unless `config.register` is False) register one model. See the module doc."""
+    client = use_tracking(config.tracking_uri)
+    data = load_dataset(config.data, config.modality, val_fraction=config.val_fraction, seed=config.seed,
+                        max_train=config.max_train, progress=config.progress)
+    model = build_model(config.model, data.body, config.modality, data.output_shape, config.hyper_values())
+    run_dir = config.run_dir(data.sha256)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "config.json").write_text(json.dumps(config.identity(data.sha256), indent=2, default=str))
+    experiment_id = ensure_experiment(config.experiment)
+    resume_id = _resumable_run(client, run_dir)
+    history = _History(run_dir / "history.jsonl")
+    name = registered_name(data.body.robot, config.modality, config.model)
+
+    start = dict(run_id=resume_id) if resume_id else dict(experiment_id=experiment_id, run_name=run_dir.name)
+    with mlflow.start_run(**start) as run:          # an exception inside ends the run FAILED
+        (run_dir / "mlflow_run_id").write_text(run.info.run_id)
+        _log_inputs(config, data, run_dir.name)
+
+        def on_epoch(epoch: int, metrics: dict[str, float]) -> None:
+            history.add(epoch, metrics)
+            # Final held-out scores use the plain names; an epoch metric of the same name becomes fit_<name>.
+            mlflow.log_metrics({(f"fit_{k}" if k in FINAL_METRICS else k): float(v) for k, v in metrics.items()},
+                               step=int(epoch), synchronous=False)
+
+        fit_kwargs = dict(seed=config.seed, val=(data.val.q, data.val.x), on_epoch=on_epoch,
+                          progress=config.progress)
+        if "checkpoint" in inspect.signature(model.fit).parameters:
+            fit_kwargs["checkpoint"] = run_dir / "checkpoint.pt"
+        t0 = time.perf_counter()
+        model.fit(data.train.q, data.train.x, **fit_kwargs)
+        metrics = {"fit_seconds": time.perf_counter() - t0}
+        val_pred = predict_batched(model, data.val.q)
+        metrics.update(score(val_pred, as_float(data.val.x).numpy(), "val"))
+        sub = _subset(data.train, 2000, config.seed)
+        metrics.update(score(predict_batched(model, sub.q), as_float(sub.x).numpy(), "train"))
+        if not math.isfinite(metrics[METRIC]):
+            raise FloatingPointError(f"{METRIC} is {metrics[METRIC]}: the fit diverged; nothing is registered.")
+        mlflow.log_metrics(metrics)
+
+        model_dir = run_dir / "model"
+        shutil.rmtree(model_dir, ignore_errors=True)    # stale files would change the digest
+        model.save(model_dir)
+        made = _plots(history.epochs, data, val_pred, run_dir / "plots", run_dir.name)
+        for path in made.values():
+            mlflow.log_artifact(str(path), artifact_path="plots")
+
+        if not config.register:
+            info, digest = log_sensory_model(model_dir, model)
+            mlflow.set_tag(DIGEST_TAG, digest)
+            return TrainResult(run.info.run_id, None, None, False, metrics, made, model_dir, run_dir)
+        info, digest = log_sensory_model(model_dir, model, registered_name=name)
+        mlflow.set_tag(DIGEST_TAG, digest)
+        version = str(info.registered_model_version)
+        tags = {DIGEST_TAG: digest, METRIC: repr(metrics[METRIC]), "robot": data.body.robot,
+                "modality": config.modality, "kind": config.model, "joint_names": ",".join(data.body.joint_names),
+                "dataset_sha256": data.sha256, "mjcf_sha256": str(data.attrs.get("mjcf_sha256", ""))}
+        for key, value in tags.items():
+            client.set_model_version_tag(name, version, key, value)
+        is_champion = update_champion(client, name, version, metrics[METRIC])
+        mlflow.set_tag("bodyschema.champion", str(is_champion))
+    all_metrics = {**history.last(), **metrics}
+    return TrainResult(run.info.run_id, name, version, is_champion, all_metrics, made, model_dir, run_dir)
+
+
+def predict_batched(model, q: np.ndarray, batch: int = PREDICT_BATCH) -> np.ndarray:
+    """g(q) for a whole split, in batches, as float32 numpy. # (N, Dz) → (N, *out)"""
+    z = torch.as_tensor(q, dtype=torch.float32)
+    with torch.no_grad():
+        return torch.cat([model.predict(z[i:i + batch]) for i in range(0, len(z), batch)]).numpy()
+
+
+def score(pred: np.ndarray, target: np.ndarray, prefix: str) -> dict[str, float]:
+    """RMSE over all output elements and mean per-sample Euclidean error, both in output units."""
+    err = (pred.astype(np.float64) - target).reshape(len(target), -1)            # (N, O)
+    return {f"{prefix}_rmse": float(np.sqrt(np.mean(err ** 2))),
+            f"{prefix}_mean_error": float(np.linalg.norm(err, axis=1).mean())}
+
+
+def _subset(split: Split, n: int, seed: int) -> Split:
+    if len(split) <= n:
+        return split
+    rows = np.sort(np.random.default_rng(seed).choice(len(split), n, replace=False))
+    return Split(split.q[rows], split.x[rows], split.rows[rows])
+
+
+def _log_inputs(config: TrainConfig, data: Dataset, run_name: str) -> None:
+    """Params (the run identity), tags (robot, MJCF, versions), and the dataset as an MLflow input."""
+    identity = config.identity(data.sha256)
+    params = {k: v for k, v in identity.items() if k not in ("hyper", "dataset_sha256")}
+    params.update({f"hyper.{k}": v for k, v in identity["hyper"].items()})
+    params.update(n_train=len(data.train), n_val=len(data.val), split_by=data.split_by,
+                  output_shape=list(data.output_shape), joint_names=",".join(data.body.joint_names))
+    mlflow.log_params({k: str(v) for k, v in params.items()})
+    tags = {"robot": data.body.robot, "mjcf_sha256": str(data.attrs.get("mjcf_sha256", "")),
+            "dataset_sha256": data.sha256, "modality": config.modality, "kind": config.model,
+            "config_hash": run_name.rsplit("-", 1)[-1], "python": platform.python_version(),
+            "run_root": str(config.run_root)}
+    for lib in LIBRARIES:
+        try:
+            tags[f"version.{lib}"] = importlib.metadata.version(lib)
+        except importlib.metadata.PackageNotFoundError:
+            pass
+    mlflow.set_tags(tags)
+    with warnings.catch_warnings():   # "can be interpreted in multiple ways": both are the local-file source
+        warnings.filterwarnings("ignore", message=".*interpreted in multiple ways.*", category=UserWarning)
+        source = resolve_dataset_source(str(Path(data.path).resolve()))
+    dataset = MetaDataset(source, name=Path(data.path).name, digest=data.sha256[:32])
+    mlflow.log_input(dataset, context="training", tags={"robot": tags["robot"], "mjcf_sha256": tags["mjcf_sha256"],
+                                                         "modality": config.modality})
+
+
+def _plots(history: dict[int, dict[str, float]], data: Dataset, val_pred: np.ndarray, out: Path,
+           title: str) -> dict[str, Path]:
+    made = {}
+    curves = plots.loss_curves(history, out / "loss_curves.png", title)
+    if curves is not None:
+        made["loss_curves"] = curves
+    target = as_float(data.val.x).numpy()
+    if data.is_image:
+        made["val_images"] = plots.image_grid(target, val_pred, out / "val_images.png", title)
+    else:
+        made["val_scatter"] = plots.prediction_scatter(target, val_pred, out / "val_scatter.png",
+                                                       UNITS.get(data.modality, "?"), title)
+    return made
+
+
+def _resumable_run(client, run_dir: Path) -> str | None:
+    """The MLflow run of an interrupted earlier attempt at this config (not FINISHED), else None."""
+    marker = run_dir / "mlflow_run_id"
+    if not marker.is_file():
+        return None
+    try:
+        run = client.get_run(marker.read_text().strip())
+    except MlflowException:
+        return None                 # another tracking store, or the run was deleted
+    return run.info.run_id if run.info.status != "FINISHED" and run.info.lifecycle_stage == "active" else None
+
+
+class _History:
+    """Per-epoch metrics, appended to a JSONL file so a resumed run's curves include the epochs before the kill."""
+
+    def __init__(self, path: Path):
+        self.path, self.epochs = path, {}
+        if path.is_file():
+            for line in path.read_text().splitlines():
+                row = json.loads(line)
+                self.epochs[int(row["epoch"])] = row["metrics"]
+
+    def add(self, epoch: int, metrics: dict[str, float]) -> None:
+        self.epochs[int(epoch)] = {k: float(v) for k, v in metrics.items()}
+        with self.path.open("a") as f:
+            f.write(json.dumps({"epoch": int(epoch), "metrics": self.epochs[int(epoch)]}) + "\n")
+
+    def last(self) -> dict[str, float]:
+        return self.epochs[max(self.epochs)] if self.epochs else {}
