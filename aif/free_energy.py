@@ -81,11 +81,12 @@ def check_observations(models: Sequence[SensoryModel], observations: Mapping[str
 
 def sensory_terms(models: Sequence[SensoryModel], observations: Mapping[str, torch.Tensor],
                   precisions: Mapping[str, torch.Tensor | None], mu: torch.Tensor, need_hessian: bool,
-                  jacobian_max_outputs: int = JACOBIAN_MAX_OUTPUTS) -> SensoryTerms:
+                  jacobian_max_outputs: int = JACOBIAN_MAX_OUTPUTS, need_grad: bool = True) -> SensoryTerms:
     """F_x, its gradient and (optionally) its Gauss–Newton curvature at beliefs mu (B, Dz).
 
     `precisions[modality]` is a (B, *out) tensor, or None to ask the model (`model.precision(mu)`).
     Modalities absent from `observations` are skipped (callers drop modalities of zero precision).
+    need_grad=False evaluates F only (no Jacobian, no VJP); the gradient is then left at zero.
     """
     b, dz = mu.shape
     free = torch.zeros(b, dtype=mu.dtype)
@@ -100,13 +101,13 @@ def sensory_terms(models: Sequence[SensoryModel], observations: Mapping[str, tor
         pi = m.precision(mu) if pi is None else pi.to(mu.dtype)            # (B, *out)
         n_out = x[0].numel()
         small = n_out <= jacobian_max_outputs
-        jac = m.jacobian(mu) if small else None                           # (B, O, Dz)
+        jac = m.jacobian(mu) if small and need_grad else None                          # (B, O, Dz)
         eps = (x - m.predict(mu)).reshape(b, n_out)                        # (B, O) ε = x − g(μ)
         pi = pi.reshape(b, n_out)
         pe = pi * eps                                                      # (B, O) Π ε
-        if small:
+        if need_grad and small:
             grad -= torch.einsum("bod,bo->bd", jac, pe)                    # −Jᵀ Π ε
-        else:
+        elif need_grad:
             grad -= m.vjp(mu, pe.reshape(x.shape))
         term = 0.5 * (pe * eps).sum(-1)
         logdet = torch.where(pi > 0, pi.clamp_min(1e-300).log(), torch.zeros_like(pi)).sum(-1)

@@ -19,7 +19,7 @@ from bodyschema.errors import must_be
 
 @dataclass
 class MultiStartResult:
-    result: PerceptionResult       # of the chosen start per trial (steps: of its refinement only)
+    result: PerceptionResult       # of the chosen start per trial (steps: screening + refinement)
     chosen: torch.Tensor           # (B,) index of the chosen start in 0..S−1
     screen_F: torch.Tensor         # (B, S) free energy after screening
     evaluations: int               # model evaluations, screening + refinement, summed over trials
@@ -50,7 +50,8 @@ def infer_multistart(perception: Perception, observations: Mapping[str, torch.Te
     idx = torch.arange(b) * keep + pick
     chosen = best[torch.arange(b), pick]
     res = final
-    picked = PerceptionResult(res.mu[idx], res.mu_tilde[idx], res.steps[idx], res.converged[idx],
+    screened_steps = first.steps.reshape(b, s)[torch.arange(b), chosen]
+    picked = PerceptionResult(res.mu[idx], res.mu_tilde[idx], screened_steps + res.steps[idx], res.converged[idx],
                               res.diverged[idx], res.diverged_step[idx], res.F[idx], 0,
                               None if res.trajectory is None else
                               {k: v[:, idx] for k, v in res.trajectory.items()})

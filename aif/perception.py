@@ -8,8 +8,9 @@ Integration: "local_linear" (default) takes Ozaki's step Δt φ₁(Δt 𝓙) u̇
 tuning of Δt to the sensory precision — and converges in tens of steps; "implicit" is the linearly implicit
 Euler step (same limits, a solve instead of an exponential); "euler" is the plain Δt·u̇ of the Pixel-AIF protocol. A step of the joints is capped at `max_step` rad (trust region), the belief is clamped
 to the joint limits, and every trial stops on its own: trials that converged (moved < tol) or diverged (F
-or the step not finite, or a raw step > divergence_step rad) leave the active batch and are never evaluated
-again. Batched and per-trial runs perform the same arithmetic row by row.
+or the step not finite, a raw step > divergence_step rad, or the precision-weighted prediction error E = F + ½ln|Π|
+grown above divergence_ratio · max(E at the start, 1) — an unstable update bouncing between the joint limits)
+leave the active batch and are never evaluated again. Batched and per-trial runs perform the same arithmetic row by row.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ STEPS = {"local_linear": local_linear_step, "implicit": implicit_step}
 
 @dataclass(frozen=True)
 class PerceptionConfig:
-    dt: float = 10.0               # s; local_linear is stable for any Δt, large Δt → Gauss–Newton steps
+    dt: float = 1e3                # s; local_linear is stable for any Δt; Δt·k·λ ≫ 1 → Gauss–Newton steps
     k_z: float = 1.0               # gain on ∂F/∂μ̃
     order: int = 0                 # n: generalized coordinates μ, μ', …, μ^(n); n ∈ {0, 1, 2}
     max_steps: int = 300           # per trial
@@ -41,6 +42,7 @@ class PerceptionConfig:
     integrator: str = "local_linear"
     max_step: float | None = 0.2   # rad; trust region on one step of the joints (None: off)
     divergence_step: float = 1e3   # rad; a raw step larger than this marks the trial diverged
+    divergence_ratio: float | None = 100.0   # E growing this much above max(E_start, 1) marks it diverged
     precisions: tuple[tuple[str, float], ...] = ()   # per-modality overrides, e.g. (("ee_xyz", 1e4),)
     precision_update: str = "step"  # "step": Π from model.precision(μ) at every step; "initial": at μ0 only
     record: bool = False           # keep the trajectory of μ̃, F and the prediction errors
@@ -58,6 +60,8 @@ class PerceptionConfig:
             raise ValueError(must_be("prior", f"one of {PRIORS}", self.prior))
         if self.integrator not in INTEGRATORS:
             raise ValueError(must_be("integrator", f"one of {INTEGRATORS}", self.integrator))
+        if self.divergence_ratio is not None and not self.divergence_ratio > 1:
+            raise ValueError(must_be("divergence_ratio", "greater than 1 or None", self.divergence_ratio))
         if self.max_step is not None and not self.max_step > 0:
             raise ValueError(must_be("max_step", "positive or None", self.max_step))
         if self.precision_update not in ("step", "initial"):
@@ -141,6 +145,7 @@ class Perception:
         diverged = torch.zeros(b, dtype=torch.bool)
         diverged_step = torch.full((b,), -1, dtype=torch.long)
         free = torch.full((b,), float("nan"), dtype=torch.float64)
+        start_error = torch.zeros(b, dtype=torch.float64)                  # E at the first step, per trial
         active = torch.arange(b)
         trajectory = {"mu": [], "F": []} if cfg.record else None
         evaluations = 0
@@ -149,6 +154,9 @@ class Perception:
                 break
             ua = u[active]                                                 # (b_a, K, Dz)
             f_a, grad, hess, errors = self._terms(sensors, ua, active, need_h)
+            energy = sum(errors.values(), torch.zeros_like(f_a))               # (b_a,) E = Σ ½ εᵀΠε
+            if t == 0:
+                start_error[active] = energy
             evaluations += active.numel()
             flow = shift(ua) - cfg.k_z * grad                              # (b_a, K, Dz) u̇ = Dμ̃ − k ∂F/∂μ̃
             if need_h:
@@ -159,6 +167,8 @@ class Perception:
                 du = cfg.dt * flow
             raw = du.abs().amax(dim=(1, 2))                                # (b_a,)
             bad = ~torch.isfinite(f_a) | ~torch.isfinite(raw) | (raw > cfg.divergence_step)
+            if cfg.divergence_ratio is not None:
+                bad |= energy > cfg.divergence_ratio * start_error[active].clamp_min(1.0)
             if cfg.max_step is not None:
                 scale = (cfg.max_step / du[:, 0].abs().amax(-1).clamp_min(1e-300)).clamp(max=1.0)
                 du = du * torch.where(bad, 0.0, scale)[:, None, None]
@@ -177,7 +187,7 @@ class Perception:
             active = active[~bad & ~done]
         keep = torch.nonzero(~diverged).squeeze(-1)
         if keep.numel():
-            free[keep] = self._terms(sensors, u[keep], keep, False)[0]
+            free[keep] = self._terms(sensors, u[keep], keep, False, need_grad=False)[0]
             evaluations += keep.numel()
         traj = None
         if trajectory is not None:
@@ -240,7 +250,7 @@ class Perception:
                                      {name: tuple(getattr(x_d, "shape", ()))}))
         return model, x_d.to(torch.float64)
 
-    def _terms(self, sensors: _Sensors, u: torch.Tensor, rows: torch.Tensor, need_h: bool):
+    def _terms(self, sensors: _Sensors, u: torch.Tensor, rows: torch.Tensor, need_h: bool, need_grad: bool = True):
         """F (b,), ∂F/∂μ̃ (b, K, Dz), Gauss–Newton H (b, K·Dz, K·Dz) or None, prediction errors, at beliefs u."""
         cfg = self.config
         b, k, dz = u.shape
@@ -248,7 +258,7 @@ class Perception:
         obs = {name: x[rows] for name, x in sensors.observations.items()}
         pis = {m.modality: sensors.fixed[m.modality][rows] if m.modality in sensors.fixed else None
                for m in self.models}
-        s = sensory_terms(self.models, obs, pis, mu, need_h)
+        s = sensory_terms(self.models, obs, pis, mu, need_h, need_grad=need_grad)
         free = s.free_energy
         grad = torch.zeros_like(u)
         grad[:, 0] = s.grad
@@ -266,7 +276,10 @@ class Perception:
             grad = grad + prior.grad
             if need_h:
                 hess = hess + prior.hessian
-        return free, grad, hess, s.weighted
+        weighted = dict(s.weighted)
+        if prior is not None:
+            weighted["prior"] = 0.5 * cfg.prior_precision * prior.error.pow(2).sum(dim=(1, 2))
+        return free, grad, hess, weighted
 
     @staticmethod
     def _record(trajectory, b, active, ua, f_a, errors):

@@ -87,7 +87,8 @@ def main() -> None:
     us = 1e6 / b
     print(f"PixelDecoder 56×80 gray, defaults (fc_hidden={model.fc_hidden}, channels={model.channels}, "
           f"{n_params} params), batch {b}, {args.threads} threads")
-    print(f"  batched vjp (forward + backward) : {t_batched * 1e3:8.1f} ms/batch  {t_batched * us:7.1f} µs/sample-step")
+    print(f"  batched vjp (forward + backward) : {t_batched * 1e3:8.1f} ms/batch  "
+          f"{t_batched * us:7.1f} µs/sample-step")
     print(f"  forward only (predict)           : {t_forward * 1e3:8.1f} ms/batch  {t_forward * us:7.1f} µs/sample")
     print(f"  per-sample vjp loop              : {t_loop * 1e3:8.1f} ms/batch  {t_loop * us:7.1f} µs/sample-step")
     print(f"  Jacobian (B, 4480, 4) then Jᵀv   : {t_jac * 1e3:8.1f} ms/batch  {t_jac * us:7.1f} µs/sample-step")

@@ -33,7 +33,7 @@ class DatagenConfig:
     sampler: Literal["uniform", "gaussian", "babble"] = "uniform"  # uniform covers the joint box evenly
     image_size: tuple[int, int] | None = None  # (H, W) px; None: the robot's default camera size
     rgb: bool = False  # grayscale is what the pixel decoder of the seed paper learns from
-    images: bool = True  # False: kinematics only (q, ee_xyz, ee_pixel, jacobian), ~10x faster
+    images: bool = True  # False: kinematics only (q, ee_xyz, ee_pixel, jacobian), ~100x faster: no rendering
     workers: int = 1  # processes; the data do not depend on it
     backend: Literal["loky", "ray"] = "loky"  # loky: local cores, no server; ray: a cluster (RAY_ADDRESS)
     seed: int = 0  # shard i draws from SeedSequence([seed, i]); same seed -> byte-identical arrays
@@ -41,7 +41,8 @@ class DatagenConfig:
     overwrite: bool = False  # an existing store with another config is refused unless this is set
     ranges: tuple[tuple[float, float], ...] | None = None  # rad (lo, hi) per joint; None: robot's sampling ranges
     gravity: float | None = None  # m/s^2 magnitude, pointing down; None: 9.81 (0 or 3.7 for adaptation studies)
-    shard_size: int = 512  # samples per shard = Zarr chunk length; resume and progress granularity
+    shard_size: int | None = None  # samples per shard = Zarr chunk rows; None: 512 with images, 16384 without
+    # (~1-3 MB chunks: small enough for progress and resume, large enough that Zarr calls cost nothing)
     hold_s: tuple[float, float] = (0.2, 1.0)  # babble: each random target is held this long (s), uniform
     record_hz: float = 20.0  # babble: sampling rate of the recorded trajectory (Hz), ~ a camera frame rate
     episode_s: float = 10.0  # babble: each episode restarts from a random pose at rest after this long (s)
@@ -59,6 +60,8 @@ class DatagenConfig:
             problems.append(must_be("backend", f"one of {BACKENDS}", self.backend))
         for name, low in (("n", 1), ("workers", 1), ("shard_size", 1), ("seed", 0)):
             value = getattr(self, name)
+            if name == "shard_size" and value is None:
+                continue
             if not isinstance(value, int) or isinstance(value, bool) or value < low:
                 problems.append(must_be(name, f"an integer >= {low}", value))
         if self.image_size is not None:
@@ -112,6 +115,12 @@ class DatagenConfig:
     def kinematic(self) -> bool:
         """True when samples are independent poses (uniform, gaussian); False for babbling trajectories."""
         return self.sampler in KINEMATIC_SAMPLERS
+
+    def shard_rows(self) -> int:
+        """The requested samples per shard (`shard_size`, or its default for images / kinematics only)."""
+        if self.shard_size is not None:
+            return self.shard_size
+        return 512 if self.images else 16384
 
     def episode_len(self) -> int:
         """Samples per babbling episode (fixed, so episodes and shards line up)."""

@@ -23,8 +23,9 @@ from tqdm.auto import tqdm  # noqa: E402
 
 from bodyschema.datagen.config import DatagenConfig  # noqa: E402
 from bodyschema.datagen.samplers import Babbler, sample_kinematic  # noqa: E402
-from bodyschema.datagen.store import (SCHEMA_VERSION, create_store, features, mark_complete,  # noqa: E402
-                                      mark_shard_done, now, open_store, shards_done, versions, write_shard)
+from bodyschema.datagen.store import (SCHEMA_VERSION, StoreWriteError, create_store, features,  # noqa: E402
+                                      mark_complete, mark_shard_done, now, open_store, shards_done, versions,
+                                      write_shard)
 from bodyschema.errors import must_be  # noqa: E402
 
 
@@ -43,10 +44,10 @@ def plan_shards(config: DatagenConfig) -> list[Shard]:
     """The fixed split of N into chunk-aligned shards (depends on the config only)."""
     n = config.n
     if config.kinematic:
-        size = config.shard_size
+        size = config.shard_rows()
         return [Shard(i, s, min(n, s + size)) for i, s in enumerate(range(0, n, size))]
     ep_len = config.episode_len()
-    per_shard = max(1, config.shard_size // ep_len)  # whole episodes per shard
+    per_shard = max(1, config.shard_rows() // ep_len)  # whole episodes per shard
     lengths = [ep_len] * (n // ep_len) + ([n % ep_len] if n % ep_len else [])
     shards = []
     for i, e0 in enumerate(range(0, len(lengths), per_shard)):
@@ -57,8 +58,9 @@ def plan_shards(config: DatagenConfig) -> list[Shard]:
 
 def chunk_len(config: DatagenConfig) -> int:
     """Rows per Zarr chunk = rows per (full) shard."""
-    return config.shard_size if config.kinematic else max(1, config.shard_size // config.episode_len()) * \
-        config.episode_len()
+    if config.kinematic:
+        return config.shard_rows()
+    return max(1, config.shard_rows() // config.episode_len()) * config.episode_len()
 
 
 # ---- one shard, in whichever process runs it ----------------------------------------------------------------
@@ -101,9 +103,12 @@ def run_shard(path: str, config_dict: dict, shard: Shard) -> int:
     else:
         arrays = babbler.episodes(rng, ranges, list(shard.episode_lengths), shard.first_episode)
     arrays.update(robot.observe(arrays["q"].astype(np.float64), image=config.images))  # q as stored (float32)
-    root = open_store(Path(path), mode="r+")
-    write_shard(root, shard.start, arrays)
-    mark_shard_done(root, shard.index)
+    try:
+        root = open_store(Path(path), mode="r+")
+        write_shard(root, shard.start, arrays)
+        mark_shard_done(root, shard.index)
+    except OSError as e:  # raised here, in the worker, so a network error elsewhere is never called "disk full"
+        raise StoreWriteError.from_os_error(path, e) from e
     return shard.stop - shard.start
 
 
@@ -131,12 +136,6 @@ def _attrs(config: DatagenConfig, robot: Robot, ranges: np.ndarray, shards: list
             "n_shards": len(shards), "features": feats}
 
 
-def _write_error(path: Path, e: OSError) -> OSError:
-    return OSError(must_be("output location", f"writable, with free space, for {path}", f"{type(e).__name__}: {e}",
-                           "Free space or choose another --out; rerunning the same command resumes "
-                           "(finished shards are kept, the store is not marked complete)."))
-
-
 def _check_location(path: Path, feats: dict, n: int) -> None:
     """Fail before any work when the output cannot be written or the disk cannot hold the raw data."""
     try:
@@ -144,7 +143,7 @@ def _check_location(path: Path, feats: dict, n: int) -> None:
         with tempfile.NamedTemporaryFile(dir=path.parent, prefix=".bodyschema-probe-"):
             pass
     except OSError as e:
-        raise _write_error(path, e) from e
+        raise StoreWriteError.from_os_error(path, e) from e
     need = n * sum(np.dtype(f["dtype"]).itemsize * math.prod(f["shape"]) for f in feats.values())  # raw bytes
     free = shutil.disk_usage(path.parent).free
     if free < need:
@@ -154,17 +153,22 @@ def _check_location(path: Path, feats: dict, n: int) -> None:
 
 def _prepare(path: Path, config: DatagenConfig, feats: dict, attrs: dict) -> None:
     """Resume a store made with the same config, replace it with --overwrite, or refuse; else create it."""
+    if path.exists() and not (path / "zarr.json").exists():
+        if not (path.is_dir() and not any(path.iterdir())):
+            raise FileExistsError(must_be("out", "a new path, an empty directory or a bodyschema store",
+                                          str(path), "Choose another --out; nothing was deleted."))
+        path.rmdir()
     if path.exists():
-        if not (path / "zarr.json").exists():
-            if path.is_dir() and not any(path.iterdir()):
-                path.rmdir()
-            else:
-                raise FileExistsError(must_be("out", "a new path, an empty directory or a bodyschema store",
-                                              str(path), "Choose another --out; nothing was deleted."))
-        elif config.overwrite:
-            shutil.rmtree(path)
+        old = dict(open_store(path).attrs)
+        if "schema_version" not in old or "config" not in old:
+            raise FileExistsError(must_be("out", "a new path or a bodyschema store", f"another Zarr store at {path}",
+                                          "Choose another --out; nothing was deleted."))
+        if config.overwrite:
+            try:
+                shutil.rmtree(path)
+            except OSError as e:
+                raise StoreWriteError.from_os_error(path, e) from e
         else:
-            old = dict(open_store(path).attrs)
             old_id = {k: v for k, v in old.get("config", {}).items() if k in config.identity()}
             if old_id != config.identity():
                 diff = sorted(k for k in config.identity() if old_id.get(k) != config.identity()[k])
@@ -173,7 +177,10 @@ def _prepare(path: Path, config: DatagenConfig, feats: dict, attrs: dict) -> Non
                                               "Pass --overwrite to replace it, or choose another --out."))
             if old.get("created"):
                 return  # resume
-    create_store(path, feats, config.n, chunk_len(config), attrs["n_shards"], attrs)
+    try:
+        create_store(path, feats, config.n, chunk_len(config), attrs["n_shards"], attrs)
+    except OSError as e:
+        raise StoreWriteError.from_os_error(path, e) from e
 
 
 def _run_loky(jobs: list, workers: int, bar: tqdm) -> None:
@@ -190,9 +197,9 @@ def _run_ray(jobs: list, workers: int, bar: tqdm) -> None:
     started = not ray.is_initialized()
     if started:
         if os.environ.get("RAY_ADDRESS"):
-            ray.init(include_dashboard=False)  # connect to the cluster named by RAY_ADDRESS
+            ray.init()  # connect to the cluster named by RAY_ADDRESS (its nodes need bodyschema installed)
         else:  # a local instance on this machine only
-            ray.init(num_cpus=workers, include_dashboard=False, _node_ip_address="127.0.0.1",
+            ray.init(address="local", num_cpus=workers, include_dashboard=False, _node_ip_address="127.0.0.1",
                      log_to_driver=False, configure_logging=False)
     try:
         task = ray.remote(num_cpus=1, max_retries=0)(run_shard)
@@ -208,7 +215,7 @@ def _run_ray(jobs: list, workers: int, bar: tqdm) -> None:
 
 def generate(config: DatagenConfig, progress: bool = True) -> Path:
     """Write (or finish) the dataset described by `config`; returns the store path once it is complete."""
-    path = config.store_path
+    path = config.store_path.resolve()  # absolute: Ray workers do not share the driver's working directory
     robot = Robot.load(config.robot, image_size=config.image_size, rgb=config.rgb, gravity=config.gravity)
     try:
         ranges = sampling_ranges(config, robot)
@@ -234,11 +241,10 @@ def generate(config: DatagenConfig, progress: bool = True) -> Path:
             raise RuntimeError(must_be("every shard", "done after the run", f"shards {missing[:20].tolist()} not done",
                                        "Rerun the same command to resume."))
         if not root.attrs.get("complete"):
-            mark_complete(root)
-    except OSError as e:
-        if isinstance(e, FileExistsError):
-            raise
-        raise _write_error(path, e) from e
+            try:
+                mark_complete(root)
+            except OSError as e:
+                raise StoreWriteError.from_os_error(path, e) from e
     finally:
         release_robots()
     return path

@@ -60,9 +60,13 @@ class Robot:
         self.joint_names = tuple(model.joint(j).name for j in range(model.njnt))
         self.dq = len(self.joint_names)
         self.joint_limits = np.array(model.jnt_range, dtype=np.float64)            # (Dq, 2) rad
-        self._qadr = np.array(model.jnt_qposadr)
-        self._dofadr = np.array(model.jnt_dofadr)
+        hinges = (model.jnt_type == mujoco.mjtJoint.mjJNT_HINGE).all()
+        if not (hinges and model.nq == model.nv == model.njnt):
+            raise ValueError(must_be(f"the MJCF of {name}", "an arm of hinge joints only (qpos = joint angles)",
+                                     f"nq={model.nq}, nv={model.nv}, njnt={model.njnt}"))
         self._site = model.site("ee").id
+        self._qpos = self._kin.qpos                       # cached views into the private MjData (hot loops)
+        self._ee = self._kin.site_xpos[self._site]
         self._cam = model.camera(camera_name).id
         touch = [s for s in range(model.nsensor) if model.sensor_type[s] == mujoco.mjtSensor.mjSENS_TOUCH]
         self._touch_adr = int(model.sensor_adr[touch[0]]) if touch else None
@@ -163,11 +167,12 @@ class Robot:
         return self._jacobian(self.check_q(q))
 
     def _fk(self, q: np.ndarray) -> np.ndarray:
-        m, d, out = self.model, self._kin, np.empty((q.shape[0], 3))
-        for i in range(q.shape[0]):
-            d.qpos[self._qadr] = q[i]
-            mujoco.mj_kinematics(m, d)
-            out[i] = d.site_xpos[self._site]
+        m, d, qpos, ee, kinematics = self.model, self._kin, self._qpos, self._ee, mujoco.mj_kinematics
+        out = np.empty((q.shape[0], 3))
+        for q_i, out_i in zip(q, out):
+            qpos[:] = q_i
+            kinematics(m, d)
+            out_i[:] = ee
         return out
 
     def _jacobian(self, q: np.ndarray) -> np.ndarray:
@@ -175,22 +180,37 @@ class Robot:
 
     def _fk_and_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Unchecked (any finite q, limits not enforced): (N, 3) m and (N, 3, Dq) m/rad in one pass."""
-        m, d = self.model, self._kin
+        m, d, qpos, ee, site = self.model, self._kin, self._qpos, self._ee, self._site
+        kinematics, com_pos, jac_site = mujoco.mj_kinematics, mujoco.mj_comPos, mujoco.mj_jacSite
         xyz, jac = np.empty((q.shape[0], 3)), np.empty((q.shape[0], 3, self.dq))
-        jacp = np.empty((3, m.nv))
-        for i in range(q.shape[0]):
-            d.qpos[self._qadr] = q[i]
-            mujoco.mj_kinematics(m, d)
-            mujoco.mj_comPos(m, d)                       # cdof, needed by mj_jacSite
-            xyz[i] = d.site_xpos[self._site]
-            mujoco.mj_jacSite(m, d, jacp, None, self._site)
-            jac[i] = jacp[:, self._dofadr]
+        for q_i, xyz_i, jac_i in zip(q, xyz, jac):
+            qpos[:] = q_i
+            kinematics(m, d)
+            com_pos(m, d)                                 # cdof and subtree_com, used by mj_jacSite
+            xyz_i[:] = ee
+            jac_site(m, d, jac_i, None, site)             # writes the (3, nv = Dq) row block in place
         return xyz, jac
 
     # ---- sensing -------------------------------------------------------------------------------------
     def render(self, q) -> np.ndarray:
         """(N, Dq) rad → (N, H, W) uint8 grayscale or (N, H, W, 3) uint8 RGB from the fixed camera."""
-        return self.observe(q, image=True)["image"]
+        return self._render(self.check_q(q))
+
+    def _render(self, q: np.ndarray) -> np.ndarray:
+        renderer, camera, rgb_buf = self._ensure_renderer()
+        m, d, qpos = self.model, self._kin, self._qpos
+        h, w = self.image_size
+        images = np.empty((q.shape[0], h, w, 3) if self.channels == 3 else (q.shape[0], h, w), dtype=np.uint8)
+        for q_i, image_i in zip(q, images):
+            qpos[:] = q_i
+            mujoco.mj_kinematics(m, d)
+            mujoco.mj_camlight(m, d)
+            renderer.update_scene(d, camera)
+            if self.channels == 3:
+                renderer.render(out=image_i)
+            else:                                         # ITU-R BT.601 luma, as cv2
+                cv2.cvtColor(renderer.render(out=rgb_buf), cv2.COLOR_RGB2GRAY, dst=image_i)
+        return images
 
     def touch(self, q) -> np.ndarray | None:
         """(N, Dq) rad → (N, 1) fingertip touch (N) with the arm held at q at rest; None without a sensor."""
@@ -202,42 +222,21 @@ class Robot:
         m, d, out = self.model, self._kin, np.empty((q.shape[0], 1))
         d.qvel[:] = 0.0
         for i in range(q.shape[0]):
-            d.qpos[self._qadr] = q[i]
+            d.qpos[:] = q[i]
             d.ctrl[:] = q[i] if self._position_actuated else 0.0    # position servos hold the pose
             mujoco.mj_forward(m, d)
             out[i, 0] = d.sensordata[self._touch_adr]
         return out
 
     def observe(self, q, image: bool = True) -> dict[str, np.ndarray]:
-        """One pass over a batch: ee_xyz (N,3) m, ee_pixel (N,2) px, jacobian (N,3,Dq) m/rad as float32,
+        """All observations of a batch: ee_xyz (N,3) m, ee_pixel (N,2) px, jacobian (N,3,Dq) m/rad as float32,
         image (N,H,W[,3]) uint8 when `image`, touch (N,1) float32 when the robot has a touch sensor."""
         q = self.check_q(q)
-        n, (h, w) = q.shape[0], self.image_size
-        m, d = self.model, self._kin
-        xyz, jac = np.empty((n, 3)), np.empty((n, 3, self.dq))
-        jacp = np.empty((3, m.nv))
-        images = None
-        if image:
-            renderer, camera, rgb_buf = self._ensure_renderer()
-            images = np.empty((n, h, w, 3) if self.channels == 3 else (n, h, w), dtype=np.uint8)
-        for i in range(n):
-            d.qpos[self._qadr] = q[i]
-            mujoco.mj_kinematics(m, d)
-            mujoco.mj_comPos(m, d)
-            xyz[i] = d.site_xpos[self._site]
-            mujoco.mj_jacSite(m, d, jacp, None, self._site)
-            jac[i] = jacp[:, self._dofadr]
-            if image:
-                mujoco.mj_camlight(m, d)
-                renderer.update_scene(d, camera)
-                if self.channels == 3:
-                    renderer.render(out=images[i])
-                else:
-                    cv2.cvtColor(renderer.render(out=rgb_buf), cv2.COLOR_RGB2GRAY, dst=images[i])
+        xyz, jac = self._fk_and_jacobian(q)
         out = {"ee_xyz": xyz.astype(np.float32), "ee_pixel": self.project(xyz).astype(np.float32),
                "jacobian": jac.astype(np.float32)}
         if image:
-            out["image"] = images
+            out["image"] = self._render(q)
         if self._touch_adr is not None:
             out["touch"] = self._touch(q).astype(np.float32)
         return out

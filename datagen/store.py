@@ -33,6 +33,16 @@ REQUIRED_ATTRS = ("schema_version", "robot", "mjcf_sha256", "dq", "joint_names",
                   "features", "complete")
 
 
+class StoreWriteError(OSError):
+    """Writing the store failed (disk full, permissions, read-only, I/O); the message says what to do."""
+
+    @classmethod
+    def from_os_error(cls, path: Path | str, e: OSError) -> StoreWriteError:
+        return cls(must_be("output location", f"writable, with free space, for {path}", f"{type(e).__name__}: {e}",
+                           "Free space or choose another --out; rerunning the same command resumes "
+                           "(finished shards are kept, the store is not marked complete)."))
+
+
 def features(dq: int, image_shape: tuple[int, ...] | None, touch: bool, babble: bool) -> dict[str, dict[str, Any]]:
     """The data arrays of a store as {name: {dtype, shape (per sample), unit, names}} (as LeRobot's features)."""
     f: dict[str, dict[str, Any]] = {

@@ -90,8 +90,8 @@ def _check_content(usable: dict[str, zarr.Array], attrs: dict, problems: list[st
             try:
                 block[name] = np.asarray(arr[start:stop])
             except Exception as e:  # noqa: BLE001 - any decoding failure is a corrupt chunk
-                problems.append(f"{name} rows {start}:{stop} are unreadable (corrupt or truncated chunk): "
-                                f"{type(e).__name__}: {e}. Regenerate the store.")
+                problems.append(must_be(f"{name} rows {start}:{stop}", "readable", f"{type(e).__name__}: {e}",
+                                        "Its chunk file is corrupt or truncated; regenerate with --overwrite."))
         for name, values in block.items():
             if values.dtype.kind == "f":
                 bad = ~np.isfinite(values.reshape(len(values), -1)).all(axis=1)
@@ -173,7 +173,7 @@ def summarize_store(path: str | Path, check: bool = True) -> str:
         lo, hi = np.nanmin(xyz, axis=0), np.nanmax(xyz, axis=0)
         lines.append("  ee_xyz box (m): " + ", ".join(f"{c} [{l:+.3f}, {h:+.3f}]" for c, l, h in zip("xyz", lo, hi)))
     size = sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
-    lines.append(f"  on disk: {size / 1e6:.1f} MB · versions {a.get('versions')}")
+    lines.append(f"  on disk: {size / 1e6:.2f} MB · versions {a.get('versions')}")
     if check:
         problems = validate_store(path)
         lines.append("  valid" if not problems else f"  {len(problems)} problems:\n    - " + "\n    - ".join(problems))

@@ -7,7 +7,8 @@ A kernel may be batched over outputs (one hyper-parameter set per output, `gpr`)
     k(u, x) = s · exp(−½ Σ_d (u_d − x_d)² / ℓ_d²)                        Rasmussen & Williams (2006) eq. (5.1)
     m(u)    = Σ_i α_i k(u, x_i),  α = (K + σ²I)⁻¹ y                       R&W Alg. 2.1, lines 2–4
     ∂m/∂u_d = −Σ_i α_i k(u, x_i)(u_d − x_id)/ℓ_d²
-            = −(u_d Σ_i w_i − Σ_i w_i x_id)/ℓ_d²,  w = α ⊙ k(u, X)        one matmul, no (B, n, D) tensor
+            = −(u_d Σ_i w_i − Σ_i w_i x_id)/ℓ_d²,  w = α ⊙ k(u, X)        one matmul, no (B, n, D) tensor;
+                                                                      Σ_i w_i = m(u) comes with it
     v(u)    = s − ‖L⁻¹ k(X, u)‖²,  L Lᵀ = K + σ²I                          R&W Alg. 2.1, lines 5–6
 """
 
@@ -22,10 +23,12 @@ def rbf(u: torch.Tensor, x: torch.Tensor, lengthscale: torch.Tensor, outputscale
     """ARD RBF kernel matrix. u (B, D), x (n, D), lengthscale (Ok, D), outputscale (Ok,) → (Ok, B, n)."""
     us = u[None] / lengthscale[:, None, :]                                  # (Ok, B, D)
     xs = x[None] / lengthscale[:, None, :]                                  # (Ok, n, D)
-    # Expanded squared distance |u|² + |x|² − 2 u·x (as gpytorch's sq_dist): one batched matmul.
-    sq = (us.pow(2).sum(-1, keepdim=True) + xs.pow(2).sum(-1)[:, None, :]
-          - 2.0 * us @ xs.transpose(-1, -2))                                # (Ok, B, n)
-    return outputscale[:, None, None] * torch.exp(-0.5 * sq.clamp_min_(0.0))
+    # log k = log s − ½|u|² + u·x − ½|x|² (the expanded square, as gpytorch's sq_dist): one matmul of
+    # augmented inputs, then one in-place exp — no (Ok, B, n) temporaries for the broadcast sums.
+    a = torch.cat([us, -0.5 * us.pow(2).sum(-1, keepdim=True), torch.ones_like(us[..., :1])], -1)   # (Ok, B, D+2)
+    b = torch.cat([xs, torch.ones_like(xs[..., :1]),
+                   outputscale.log()[:, None, None] - 0.5 * xs.pow(2).sum(-1, keepdim=True)], -1)   # (Ok, n, D+2)
+    return (a @ b.transpose(-1, -2)).exp_()                                 # (Ok, B, n)
 
 
 def rbf_train(x: torch.Tensor, lengthscale: torch.Tensor, outputscale: torch.Tensor) -> torch.Tensor:
@@ -67,13 +70,16 @@ def posterior_mean(k: torch.Tensor, alpha: torch.Tensor) -> torch.Tensor:
     return (k @ alpha[:, :, None]).squeeze(-1)                              # (O, B); Ok = 1 broadcasts
 
 
-def mean_jacobian(u: torch.Tensor, x: torch.Tensor, k: torch.Tensor, alpha: torch.Tensor,
-                  lengthscale: torch.Tensor) -> torch.Tensor:
-    """∂m/∂u in closed form. u (B, D), x (n, D), k (Ok, B, n), alpha (O, n), lengthscale (Ok, D) → (B, O, D)."""
+def mean_and_jacobian(u: torch.Tensor, x: torch.Tensor, k: torch.Tensor, alpha: torch.Tensor,
+                      lengthscale: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """m and ∂m/∂u in closed form from one kernel matrix.
+    u (B, D), x (n, D), k (Ok, B, n), alpha (O, n), lengthscale (Ok, D) → m (O, B), ∂m/∂u (B, O, D)."""
     w = k * alpha[:, None, :]                                               # (O, B, n)
-    weighted_x = w @ x                                                      # (O, B, D)
-    jac = -(u[None] * w.sum(-1, keepdim=True) - weighted_x) / lengthscale.pow(2)[:, None, :]   # (O, B, D)
-    return jac.transpose(0, 1)                                              # (B, O, D)
+    x1 = torch.cat([x, torch.ones_like(x[:, :1])], -1)                      # (n, D+1)
+    moments = w @ x1                                                        # (O, B, D+1): Σ w x, Σ w
+    mean = moments[..., -1]                                                 # (O, B): Σ_i α_i k_i = m
+    jac = -(u[None] * mean[..., None] - moments[..., :-1]) / lengthscale.pow(2)[:, None, :]   # (O, B, D)
+    return mean, jac.transpose(0, 1)                                        # (O, B), (B, O, D)
 
 
 def posterior_variance(k: torch.Tensor, factor: torch.Tensor, outputscale: torch.Tensor) -> torch.Tensor:

@@ -120,6 +120,11 @@ class TrainSettings:
     patience: int = 20            # epochs without improvement of the validation (else train) loss
     weight_decay: float = 0.0
 
+    def __post_init__(self):
+        if min(self.epochs, self.batch_size, self.patience) < 1 or not self.lr > 0 or self.weight_decay < 0:
+            raise ValueError(must_be("epochs, batch_size, patience, lr, weight_decay", "≥ 1, ≥ 1, ≥ 1, > 0, ≥ 0",
+                                     (self.epochs, self.batch_size, self.patience, self.lr, self.weight_decay)))
+
 
 def train(module: nn.Module, loss_fn: Callable[..., torch.Tensor], data: tuple[torch.Tensor, ...],
           settings: TrainSettings, gen: torch.Generator, *, val: tuple[torch.Tensor, ...] | None = None,

@@ -103,14 +103,28 @@ class GPRModel(BaseSensoryModel):
         lengthscale, outputscale, noise, step = self._fit_hyper(u[sub], ys[:, sub], on_epoch, progress)
 
         self.lengthscale_, self.outputscale_, self.noise_ = lengthscale, outputscale, noise
-        self.train_u_, self.y_mean_, self.y_std_ = u, y_mean, y_std
-        self._factor = _gp_math.cholesky_factor(u, lengthscale, outputscale, noise)   # (O, n, n)
-        self.alpha_ = _gp_math.solve_weights(self._factor, ys)                        # (O, n)
+        self.y_mean_, self.y_std_ = y_mean, y_std
+        self._condition_unit(u, ys)
         if val is not None and on_epoch is not None:
             pred = self._predict(val[0])                                              # (Nv, *out)
             err = (pred.reshape(pred.shape[0], -1) - val[1]).norm(dim=-1)             # (Nv,)
             on_epoch(step, {"val_mean_error": float(err.mean()), "val_rmse": float(err.pow(2).mean().sqrt())})
         return self
+
+    def condition(self, q, x, *, seed: int = 0) -> "GPRModel":
+        """Re-condition on new data (q (N, Dz) rad, x (N, *out)) keeping the fitted hyper-parameters and target
+        scaling: one Cholesky, no optimization (e.g. after a body change, or to compare training-set sizes)."""
+        self._require_fitted()
+        q, y = _gp_data.check_training_data(q, x, self.body, self.output_shape)        # (N, Dz), (N, O)
+        keep = _gp_data.random_subset(q.shape[0], self.max_points, torch.Generator().manual_seed(int(seed)))
+        self._condition_unit(self.body.to_unit(q[keep]), ((y[keep] - self.y_mean_) / self.y_std_).T.contiguous())
+        return self
+
+    def _condition_unit(self, u: torch.Tensor, ys: torch.Tensor) -> None:
+        """α = (K + σ²I)⁻¹ y by our own Cholesky, exact at any n. u (n, Dz) in [-1, 1], ys (O, n) standardized."""
+        self.train_u_ = u
+        self._factor = _gp_math.cholesky_factor(u, self.lengthscale_, self.outputscale_, self.noise_)   # (O, n, n)
+        self.alpha_ = _gp_math.solve_weights(self._factor, ys)                        # (O, n)
 
     def _fit_hyper(self, u, ys, on_epoch, progress):
         """Maximize the exact MLL on (u (m, D), ys (O, m)). → lengthscale (O, D), outputscale (O,), noise (O,)."""
@@ -163,7 +177,7 @@ class GPRModel(BaseSensoryModel):
 
     def _jacobian(self, z):
         u, k = self._kernel(z)
-        jac_u = _gp_math.mean_jacobian(u, self.train_u_, k, self.alpha_, self.lengthscale_)   # (B, O, Dz)
+        _, jac_u = _gp_math.mean_and_jacobian(u, self.train_u_, k, self.alpha_, self.lengthscale_)   # (B, O, Dz)
         return jac_u * self.y_std_[:, None] * self.body.unit_per_rad(u)               # (B, O, Dz) per rad
 
     def _vjp(self, z, v):
@@ -174,8 +188,8 @@ class GPRModel(BaseSensoryModel):
         """predict(z) and jacobian(z) sharing one kernel matrix. → (B, *out), (B, O, Dz)."""
         z = self._check_z(z)
         u, k = self._kernel(z)
-        mean = _gp_math.posterior_mean(k, self.alpha_).T * self.y_std_ + self.y_mean_   # (B, O)
-        jac_u = _gp_math.mean_jacobian(u, self.train_u_, k, self.alpha_, self.lengthscale_)
+        mean_u, jac_u = _gp_math.mean_and_jacobian(u, self.train_u_, k, self.alpha_, self.lengthscale_)
+        mean = mean_u.T * self.y_std_ + self.y_mean_                                 # (B, O)
         jac = jac_u * self.y_std_[:, None] * self.body.unit_per_rad(u)                # (B, O, Dz)
         return mean.reshape(z.shape[0], *self.output_shape).to(z.dtype), jac.to(z.dtype)
 

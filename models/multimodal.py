@@ -173,6 +173,11 @@ def fit_jointly(members: dict[str, MultimodalMember], q, xs: dict, *, seed: int,
     return info
 
 
+def _prefixed(on_epoch, modality: str):
+    """Per-member metrics for MLflow: {"ee_xyz/train_loss": ...}."""
+    return lambda epoch, metrics: on_epoch(epoch, {f"{modality}/{k}": v for k, v in metrics.items()})
+
+
 def _check_keys(what: str, d, members) -> None:
     if not isinstance(d, dict) or set(d) != set(members):
         got = sorted(d) if isinstance(d, dict) else type(d).__name__
@@ -221,7 +226,7 @@ class MultimodalModel:
             return self
         for i, (m, member) in enumerate(self.members.items()):
             ckpt = None if checkpoint is None else Path(checkpoint).with_name(f"{Path(checkpoint).stem}.{m}.pt")
-            report = None if on_epoch is None else (lambda e, met, m=m: on_epoch(e, {f"{m}/{k}": v for k, v in met.items()}))
+            report = None if on_epoch is None else _prefixed(on_epoch, m)
             member.fit(q, xs[m], seed=seed + i, val=None if val is None else (val[0], val[1][m]),
                        on_epoch=report, progress=progress, checkpoint=ckpt)
         return self

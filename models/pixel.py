@@ -71,7 +71,7 @@ class PixelDecoder(NetModel, BaseSensoryModel):
 
     def __init__(self, body: BodySpec, modality: str = "image", output_shape: tuple[int, ...] = (56, 80), *,
                  fc_hidden: int = 64,
-                 channels: tuple[int, ...] = (32, 16, 8),   # 56×80: 7×10×32 → 14×20×16 → 28×40×8 → 56×80×C
+                 channels: tuple[int, ...] = (32, 16, 8),   # 56×80: 7×10×32 → 14×20×16 → 28×40×8 → 56×80
                  precision: float | None = None,            # None: 1/σ² from the validation residuals
                  epochs: int = 100, batch_size: int = 64, lr: float = 2e-3, patience: int = 10,
                  weight_decay: float = 0.0):

@@ -134,7 +134,7 @@ class SklearnGPRModel(BaseSensoryModel):
         reg = self.regressor_
         k = _gp_math.rbf(u, self.train_u_, self.lengthscale_[None], self.outputscale_)  # (1, B, n)
         alpha = torch.from_numpy(reg.alpha_).reshape(self.train_u_.shape[0], -1).T      # (O, n)
-        jac_u = _gp_math.mean_jacobian(u, self.train_u_, k, alpha, self.lengthscale_[None])   # (B, O, Dz)
+        _, jac_u = _gp_math.mean_and_jacobian(u, self.train_u_, k, alpha, self.lengthscale_[None])   # (B, O, Dz)
         # normalize_y's per-output scale (private attribute; a change would fail the finite-difference test)
         y_std = torch.as_tensor(np.atleast_1d(reg._y_train_std), dtype=torch.float64)  # (O,)
         return jac_u * y_std[:, None] * self.body.unit_per_rad(u)                     # (B, O, Dz) per rad

@@ -28,7 +28,7 @@ MODEL_KINDS: dict[str, tuple[str, str]] = {
     "pixel": ("bodyschema.models.pixel", "PixelDecoder"),
     "multimodal": ("bodyschema.models.multimodal", "MultimodalModel"),
 }
-DEFAULT_MODALITY = {"pixel": "image"}          # every other kind defaults to "ee_xyz"
+DEFAULT_MODALITY = {"pixel": "image", "multimodal": "ee_xyz,image"}   # every other kind defaults to "ee_xyz"
 MODALITIES = ("ee_xyz", "ee_pixel", "image", "touch", "jacobian", "joints")
 NON_IDENTITY_FIELDS = ("tracking_uri", "experiment", "run_root", "progress", "register")
 
@@ -43,7 +43,7 @@ class TrainConfig:
 
     model: str  # model kind: gpr | sklearn-gpr | mdn | pixel | multimodal
     data: Path  # the Zarr store written by `bodyschema datagen`
-    modality: str | None = None  # what g predicts; None: "image" for pixel, "ee_xyz" otherwise
+    modality: str | None = None  # what g predicts; None: "image" for pixel, "ee_xyz,image" for multimodal (comma-separated), else "ee_xyz"
     seed: int = 0  # split and model init; same seed and data -> same model
     val_fraction: float = 0.2  # held-out share (whole episodes when the store has `episode`)
     max_train: int | None = None  # cap on training samples (GPs are O(N^3)); None: all of them
@@ -65,8 +65,11 @@ class TrainConfig:
         fix("run_root", Path(self.run_root))
         if self.modality is None:
             fix("modality", DEFAULT_MODALITY.get(self.model, "ee_xyz"))
-        elif not isinstance(self.modality, str) or not self.modality:
+        elif not isinstance(self.modality, str) or not all(self.modality.split(",")):
             problems.append(must_be("modality", f"a dataset array name such as {MODALITIES}", self.modality))
+        elif "," in self.modality and self.model != "multimodal":
+            problems.append(must_be("modality", f"one array name for model kind {self.model!r}", self.modality,
+                                    "Several modalities (comma-separated) need --model multimodal."))
         if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
             problems.append(must_be("seed", "an integer >= 0", self.seed))
         if not (isinstance(self.val_fraction, (int, float)) and 0 < self.val_fraction < 1):
@@ -80,6 +83,10 @@ class TrainConfig:
             problems.append(must_be("experiment", "a non-empty name", self.experiment))
         if problems:
             raise ValueError("\n".join(problems))
+
+    @property
+    def modalities(self) -> tuple[str, ...]:
+        return tuple(m.strip() for m in self.modality.split(","))
 
     def hyper_values(self) -> dict[str, Any]:
         """`hyper` with values parsed: JSON literals ("50", "1e-3", "true", "[64, 64]") become numbers etc."""
@@ -103,7 +110,7 @@ class TrainConfig:
         return hashlib.sha256(blob.encode()).hexdigest()
 
     def run_dir(self, dataset_sha256: str) -> Path:
-        return self.run_root / f"{self.model}-{self.modality}-{self.config_hash(dataset_sha256)[:12]}"
+        return self.run_root / f"{self.model}-{'+'.join(self.modalities)}-{self.config_hash(dataset_sha256)[:12]}"
 
 
 def _parse_value(value: Any) -> Any:
@@ -132,13 +139,21 @@ def model_class(kind: str) -> type:
     return getattr(module, class_name)
 
 
-def build_model(kind: str, body, modality: str, output_shape: tuple[int, ...], hyper: dict[str, Any]):
-    """`Model(body, modality, output_shape, **hyper)`; a wrong hyper-parameter name names the accepted ones."""
+def build_model(kind: str, body, output_shapes: dict[str, tuple[int, ...]], hyper: dict[str, Any]):
+    """`Model(body, modality, output_shape, **hyper)`, or for multimodal `Model(body, output_shapes, **hyper)`.
+
+    A wrong hyper-parameter name is reported with the accepted ones.
+    """
     cls = model_class(kind)
     params = inspect.signature(cls).parameters
     if not any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
-        accepted = [p for p in params if p not in ("self", "body", "modality", "output_shape")]
+        accepted = [p for p in params if p not in ("self", "body", "modality", "output_shape", "output_shapes")]
         unknown = sorted(set(hyper) - set(accepted))
         if unknown:
             raise ValueError(must_be("hyper", f"names accepted by {cls.__name__}: {accepted}", unknown))
-    return cls(body, modality, tuple(output_shape), **hyper)
+    if "output_shapes" in params:
+        return cls(body, {m: tuple(s) for m, s in output_shapes.items()}, **hyper)
+    if len(output_shapes) != 1:
+        raise ValueError(must_be("modality", f"a single modality for model kind {kind!r}", sorted(output_shapes)))
+    ((modality, shape),) = output_shapes.items()
+    return cls(body, modality, tuple(shape), **hyper)

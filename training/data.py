@@ -1,7 +1,7 @@
 """Training data from a Zarr dataset store: validated, read chunk by chunk, digested, split train/validation.
 
 The store is validated first (`bodyschema.datagen.validate.validate_store` reports every problem at once; an
-invalid or incomplete store is refused). The joint angles `q` and one modality array are read whole, one
+invalid or incomplete store is refused). The joint angles `q` and the modality arrays are read whole, one
 chunk at a time (the sample-axis chunk is the unit the store was written in), while a sha256 of what was read
 is computed on the way: the dataset's content digest, logged to MLflow and part of the run's identity.
 Images stay uint8 here (4x smaller than float32) and become float in [0, 1] only at batch time (`as_float`).
@@ -29,32 +29,40 @@ DATA_ARRAYS = ("q", "ee_xyz", "ee_pixel", "image", "jacobian", "qvel", "touch") 
 
 @dataclass(frozen=True)
 class Split:
-    q: np.ndarray        # (N, Dq) float32 rad
-    x: np.ndarray        # (N, *out) float32 in output units, or uint8 for images
-    rows: np.ndarray     # (N,) int64 row indices in the store
+    q: np.ndarray                  # (N, Dq) float32 rad
+    xs: dict[str, np.ndarray]      # modality -> (N, *out) float32 in output units, or uint8 for images
+    rows: np.ndarray               # (N,) int64 row indices in the store
 
     def __len__(self) -> int:
         return len(self.q)
+
+    @property
+    def x(self) -> np.ndarray:
+        """The one modality's array (single-modality datasets)."""
+        if len(self.xs) != 1:
+            raise ValueError(must_be("modalities", "exactly one to use `.x`", sorted(self.xs), "Use `.xs[name]`."))
+        return next(iter(self.xs.values()))
+
+    def take(self, rows: np.ndarray) -> "Split":
+        return Split(self.q[rows], {m: x[rows] for m, x in self.xs.items()}, self.rows[rows])
 
 
 @dataclass(frozen=True)
 class Dataset:
     path: Path
-    modality: str
+    modalities: tuple[str, ...]
     body: BodySpec           # robot, joints and the sampled joint ranges (the model's latent scaling)
     attrs: dict[str, Any]    # the store's root attrs (robot, mjcf_sha256, config, ...)
     train: Split
     val: Split
-    sha256: str              # content digest of the arrays read (q, modality, episode), in row order
+    sha256: str              # content digest of the arrays read (q, modalities, episode), in row order
     split_by: str            # "episode" or "random"
 
-    @property
-    def output_shape(self) -> tuple[int, ...]:
-        return tuple(self.train.x.shape[1:])
+    def output_shape(self, modality: str) -> tuple[int, ...]:
+        return tuple(self.train.xs[modality].shape[1:])
 
-    @property
-    def is_image(self) -> bool:
-        return self.train.x.dtype == np.uint8
+    def is_image(self, modality: str) -> bool:
+        return self.train.xs[modality].dtype == np.uint8
 
 
 def as_float(x: np.ndarray | torch.Tensor) -> torch.Tensor:
@@ -63,7 +71,7 @@ def as_float(x: np.ndarray | torch.Tensor) -> torch.Tensor:
     return t.float().div_(255.0) if t.dtype == torch.uint8 else t.float()
 
 
-def store_problems(path: Path, modality: str) -> list[str]:
+def store_problems(path: Path, modalities: tuple[str, ...]) -> list[str]:
     """Every reason `path` cannot be trained on (empty when it can)."""
     try:
         from bodyschema.datagen.validate import validate_store
@@ -78,48 +86,53 @@ def store_problems(path: Path, modality: str) -> list[str]:
         problems.append(must_be("data attrs['complete']", "True (the completion marker)", root.attrs.get("complete"),
                                 "The dataset job did not finish: run the same `bodyschema datagen` again to resume."))
     names = sorted(k for k in root.array_keys())
-    for need in ("q", modality):
+    for need in ("q", *modalities):
         if need not in names:
             problems.append(must_be(f"data array {need!r}", f"present (arrays: {names})", "missing",
-                                    "Choose --modality among the store's arrays." if need == modality else ""))
+                                    "Choose --modality among the store's arrays." if need != "q" else ""))
     for key in ("robot", "joint_names"):
         if key not in root.attrs:
             problems.append(must_be(f"data attrs[{key!r}]", "present", "missing"))
-    if "q" in names and modality in names and root["q"].shape[0] != root[modality].shape[0]:
-        problems.append(must_be(f"{modality}.shape[0]", f"equal to q.shape[0] = {root['q'].shape[0]}",
-                                root[modality].shape[0]))
+    for m in modalities:
+        if "q" in names and m in names and root["q"].shape[0] != root[m].shape[0]:
+            problems.append(must_be(f"{m}.shape[0]", f"equal to q.shape[0] = {root['q'].shape[0]}", root[m].shape[0]))
     return list(dict.fromkeys(problems))          # the validator and the basic checks may say the same thing
 
 
-def load_dataset(path: str | Path, modality: str, *, val_fraction: float = 0.2, seed: int = 0,
+def load_dataset(path: str | Path, modality: str | tuple[str, ...], *, val_fraction: float = 0.2, seed: int = 0,
                  max_train: int | None = None, progress: bool = False) -> Dataset:
-    """Validate, read and split a store. Raises the house ValueError listing every problem of a bad store."""
+    """Validate, read and split a store for one modality or several ("ee_xyz,image" or a tuple).
+
+    Raises the house ValueError listing every problem of a bad store.
+    """
     path = Path(path)
-    problems = store_problems(path, modality)
+    modalities = tuple(m.strip() for m in modality.split(",")) if isinstance(modality, str) else tuple(modality)
+    problems = store_problems(path, modalities)
     if problems:
         raise ValueError(f"Dataset {str(path)!r} cannot be used for training:\n - " + "\n - ".join(problems))
     root = zarr.open_group(str(path), mode="r", zarr_format=3)
     attrs = dict(root.attrs)
     digest = hashlib.sha256()
-    names = ["q", modality] + (["episode"] if "episode" in root.array_keys() else [])
+    names = ["q", *modalities] + (["episode"] if "episode" in root.array_keys() else [])
     arrays = {name: _read_chunked(root[name], name, digest, progress) for name in names}
-    q, x = arrays["q"].astype(np.float32, copy=False), arrays[modality]
-    if x.dtype != np.uint8:
-        x = x.astype(np.float32, copy=False)
+    q = arrays["q"].astype(np.float32, copy=False)
+    xs = {m: arrays[m] if arrays[m].dtype == np.uint8 else arrays[m].astype(np.float32, copy=False)
+          for m in modalities}
     finite = np.isfinite(q).all(axis=1)
-    if x.dtype != np.uint8:
-        finite &= np.isfinite(x.reshape(len(x), -1)).all(axis=1)
+    for x in xs.values():
+        if x.dtype != np.uint8:
+            finite &= np.isfinite(x.reshape(len(x), -1)).all(axis=1)
     if not finite.all():
-        raise ValueError(must_be(f"data arrays q and {modality}", "finite in every row",
+        raise ValueError(must_be(f"data arrays q and {', '.join(modalities)}", "finite in every row",
                                  f"{int((~finite).sum())} rows with NaN or inf",
                                  "The store has unwritten samples: regenerate or resume it with `bodyschema datagen`."))
     rng = np.random.default_rng(seed)
     train_rows, val_rows, split_by = split_rows(arrays.get("episode"), len(q), val_fraction, rng)
     if max_train is not None and len(train_rows) > max_train:
         train_rows = np.sort(rng.choice(train_rows, size=max_train, replace=False))
-    body = body_from_attrs(attrs, q)
-    return Dataset(path, modality, body, attrs, Split(q[train_rows], x[train_rows], train_rows),
-                   Split(q[val_rows], x[val_rows], val_rows), digest.hexdigest(), split_by)
+    whole = Split(q, xs, np.arange(len(q)))
+    return Dataset(path, modalities, body_from_attrs(attrs, q), attrs, whole.take(train_rows), whole.take(val_rows),
+                   digest.hexdigest(), split_by)
 
 
 def split_rows(episode: np.ndarray | None, n: int, val_fraction: float,

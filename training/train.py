@@ -41,30 +41,56 @@ LIBRARIES = ("bodyschema", "torch", "numpy", "mlflow", "zarr", "gpytorch", "scik
 
 
 @dataclass(frozen=True)
+class Registered:
+    modality: str
+    name: str                        # bodyschema-{robot}-{modality}-{kind}
+    version: str
+    champion: bool                   # True when this version now holds the `champion` alias
+    model_sha256: str
+
+
+@dataclass(frozen=True)
 class TrainResult:
     run_id: str
-    registered_name: str | None      # None when config.register is False
-    model_version: str | None
-    champion: bool                   # True when this version now holds the `champion` alias
+    registered: tuple[Registered, ...]  # one per modality (several for multimodal); empty when not registering
     metrics: dict[str, float]        # val_rmse, val_mean_error, train_rmse, fit_seconds, last epoch's metrics
     plots: dict[str, Path] = field(default_factory=dict)
-    model_dir: Path | None = None    # the saved model (meta.json + state.pt)
+    model_dirs: dict[str, Path] = field(default_factory=dict)   # modality -> saved model (meta.json + state.pt)
     run_dir: Path | None = None      # checkpoint, history, plots of this config
+
+    # Single-modality shortcuts (None when nothing, or several models, were registered).
+    @property
+    def registered_name(self) -> str | None:
+        return self.registered[0].name if len(self.registered) == 1 else None
+
+    @property
+    def model_version(self) -> str | None:
+        return self.registered[0].version if len(self.registered) == 1 else None
+
+    @property
+    def champion(self) -> bool:
+        return len(self.registered) == 1 and self.registered[0].champion
+
+    @property
+    def model_dir(self) -> Path | None:
+        return next(iter(self.model_dirs.values())) if len(self.model_dirs) == 1 else None
 
 
 def train(config: TrainConfig) -> TrainResult:
     """Train, evaluate, log and (unless `config.register` is False) register one model. See the module doc."""
     client = use_tracking(config.tracking_uri)
-    data = load_dataset(config.data, config.modality, val_fraction=config.val_fraction, seed=config.seed,
+    data = load_dataset(config.data, config.modalities, val_fraction=config.val_fraction, seed=config.seed,
                         max_train=config.max_train, progress=config.progress)
-    model = build_model(config.model, data.body, config.modality, data.output_shape, config.hyper_values())
+    shapes = {m: data.output_shape(m) for m in data.modalities}
+    model = build_model(config.model, data.body, shapes, config.hyper_values())
+    multi = hasattr(model, "members")              # MultimodalModel: one SensoryModel per modality
+    members = dict(model.members) if multi else {config.modality: model}
     run_dir = config.run_dir(data.sha256)
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "config.json").write_text(json.dumps(config.identity(data.sha256), indent=2, default=str))
     experiment_id = ensure_experiment(config.experiment)
     resume_id = _resumable_run(client, run_dir)
     history = _History(run_dir / "history.jsonl")
-    name = registered_name(data.body.robot, config.modality, config.model)
 
     start = dict(run_id=resume_id) if resume_id else dict(experiment_id=experiment_id, run_name=run_dir.name)
     with mlflow.start_run(**start) as run:          # an exception inside ends the run FAILED
@@ -77,44 +103,56 @@ def train(config: TrainConfig) -> TrainResult:
             mlflow.log_metrics({(f"fit_{k}" if k in FINAL_METRICS else k): float(v) for k, v in metrics.items()},
                                step=int(epoch), synchronous=False)
 
-        fit_kwargs = dict(seed=config.seed, val=(data.val.q, data.val.x), on_epoch=on_epoch,
-                          progress=config.progress)
+        train_x = data.train.xs if multi else data.train.x
+        val = (data.val.q, data.val.xs if multi else data.val.x)
+        fit_kwargs = dict(seed=config.seed, val=val, on_epoch=on_epoch, progress=config.progress)
         if "checkpoint" in inspect.signature(model.fit).parameters:
             fit_kwargs["checkpoint"] = run_dir / "checkpoint.pt"
         t0 = time.perf_counter()
-        model.fit(data.train.q, data.train.x, **fit_kwargs)
+        model.fit(data.train.q, train_x, **fit_kwargs)
         metrics = {"fit_seconds": time.perf_counter() - t0}
-        val_pred = predict_batched(model, data.val.q)
-        metrics.update(score(val_pred, as_float(data.val.x).numpy(), "val"))
-        sub = _subset(data.train, 2000, config.seed)
-        metrics.update(score(predict_batched(model, sub.q), as_float(sub.x).numpy(), "train"))
-        if not math.isfinite(metrics[METRIC]):
-            raise FloatingPointError(f"{METRIC} is {metrics[METRIC]}: the fit diverged; nothing is registered.")
-        mlflow.log_metrics(metrics)
 
-        model_dir = run_dir / "model"
-        shutil.rmtree(model_dir, ignore_errors=True)    # stale files would change the digest
-        model.save(model_dir)
-        made = _plots(history.epochs, data, val_pred, run_dir / "plots", run_dir.name)
+        made, model_dirs, val_preds = {}, {}, {}
+        curves = plots.loss_curves(history.epochs, run_dir / "plots" / "loss_curves.png", run_dir.name)
+        if curves is not None:
+            made["loss_curves"] = curves
+        sub = _subset(data.train, 2000, config.seed)
+        for m, member in members.items():
+            prefix = f"{m}/" if multi else ""
+            val_preds[m] = predict_batched(member, data.val.q)
+            scores = {**score(val_preds[m], as_float(data.val.xs[m]).numpy(), "val"),
+                      **score(predict_batched(member, sub.q), as_float(sub.xs[m]).numpy(), "train")}
+            if not math.isfinite(scores[METRIC]):
+                raise FloatingPointError(f"{prefix}{METRIC} is {scores[METRIC]}: the fit diverged; "
+                                         "nothing is registered.")
+            metrics.update({prefix + k: v for k, v in scores.items()})
+            model_dirs[m] = run_dir / ("model" if not multi else f"model-{m}")
+            shutil.rmtree(model_dirs[m], ignore_errors=True)    # stale files would change the digest
+            member.save(model_dirs[m])
+            made.update(_prediction_plot(data, m, val_preds[m], run_dir / "plots", f"{run_dir.name} {m}", prefix))
+        mlflow.log_metrics(metrics)
         for path in made.values():
             mlflow.log_artifact(str(path), artifact_path="plots")
 
-        if not config.register:
-            info, digest = log_sensory_model(model_dir, model)
-            mlflow.set_tag(DIGEST_TAG, digest)
-            return TrainResult(run.info.run_id, None, None, False, metrics, made, model_dir, run_dir)
-        info, digest = log_sensory_model(model_dir, model, registered_name=name)
-        mlflow.set_tag(DIGEST_TAG, digest)
-        version = str(info.registered_model_version)
-        tags = {DIGEST_TAG: digest, METRIC: repr(metrics[METRIC]), "robot": data.body.robot,
-                "modality": config.modality, "kind": config.model, "joint_names": ",".join(data.body.joint_names),
-                "dataset_sha256": data.sha256, "mjcf_sha256": str(data.attrs.get("mjcf_sha256", ""))}
-        for key, value in tags.items():
-            client.set_model_version_tag(name, version, key, value)
-        is_champion = update_champion(client, name, version, metrics[METRIC])
-        mlflow.set_tag("bodyschema.champion", str(is_champion))
-    all_metrics = {**history.last(), **metrics}
-    return TrainResult(run.info.run_id, name, version, is_champion, all_metrics, made, model_dir, run_dir)
+        registered = []
+        for m, member in members.items():               # registration last: a failure above registers nothing
+            name = registered_name(data.body.robot, m, config.model) if config.register else None
+            info, digest = log_sensory_model(model_dirs[m], member, registered_name=name,
+                                             name="model" if not multi else f"model-{m}")
+            mlflow.set_tag(DIGEST_TAG + ("" if not multi else f".{m}"), digest)
+            if name is None:
+                continue
+            version = str(info.registered_model_version)
+            val_rmse = metrics[(f"{m}/" if multi else "") + METRIC]
+            tags = {DIGEST_TAG: digest, METRIC: repr(val_rmse), "robot": data.body.robot, "modality": m,
+                    "kind": config.model, "joint_names": ",".join(data.body.joint_names),
+                    "dataset_sha256": data.sha256, "mjcf_sha256": str(data.attrs.get("mjcf_sha256", ""))}
+            for key, value in tags.items():
+                client.set_model_version_tag(name, version, key, value)
+            is_champion = update_champion(client, name, version, val_rmse)
+            registered.append(Registered(m, name, version, is_champion, digest))
+        mlflow.set_tag("bodyschema.champion", ",".join(r.name for r in registered if r.champion) or "none")
+    return TrainResult(run.info.run_id, tuple(registered), {**history.last(), **metrics}, made, model_dirs, run_dir)
 
 
 def predict_batched(model, q: np.ndarray, batch: int = PREDICT_BATCH) -> np.ndarray:
@@ -144,7 +182,7 @@ def _log_inputs(config: TrainConfig, data: Dataset, run_name: str) -> None:
     params = {k: v for k, v in identity.items() if k not in ("hyper", "dataset_sha256")}
     params.update({f"hyper.{k}": v for k, v in identity["hyper"].items()})
     params.update(n_train=len(data.train), n_val=len(data.val), split_by=data.split_by,
-                  output_shape=list(data.output_shape), joint_names=",".join(data.body.joint_names))
+                  output_shape={m: list(data.output_shape(m)) for m in data.modalities}, joint_names=",".join(data.body.joint_names))
     mlflow.log_params({k: str(v) for k, v in params.items()})
     tags = {"robot": data.body.robot, "mjcf_sha256": str(data.attrs.get("mjcf_sha256", "")),
             "dataset_sha256": data.sha256, "modality": config.modality, "kind": config.model,
@@ -164,19 +202,14 @@ def _log_inputs(config: TrainConfig, data: Dataset, run_name: str) -> None:
                                                          "modality": config.modality})
 
 
-def _plots(history: dict[int, dict[str, float]], data: Dataset, val_pred: np.ndarray, out: Path,
-           title: str) -> dict[str, Path]:
-    made = {}
-    curves = plots.loss_curves(history, out / "loss_curves.png", title)
-    if curves is not None:
-        made["loss_curves"] = curves
-    target = as_float(data.val.x).numpy()
-    if data.is_image:
-        made["val_images"] = plots.image_grid(target, val_pred, out / "val_images.png", title)
-    else:
-        made["val_scatter"] = plots.prediction_scatter(target, val_pred, out / "val_scatter.png",
-                                                       UNITS.get(data.modality, "?"), title)
-    return made
+def _prediction_plot(data: Dataset, modality: str, val_pred: np.ndarray, out: Path, title: str,
+                     prefix: str) -> dict[str, Path]:
+    target = as_float(data.val.xs[modality]).numpy()
+    stem = prefix.replace("/", "_")
+    if data.is_image(modality):
+        return {f"{prefix}val_images": plots.image_grid(target, val_pred, out / f"{stem}val_images.png", title)}
+    return {f"{prefix}val_scatter": plots.prediction_scatter(target, val_pred, out / f"{stem}val_scatter.png",
+                                                             UNITS.get(modality, "?"), title)}
 
 
 def _resumable_run(client, run_dir: Path) -> str | None:

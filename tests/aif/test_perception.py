@@ -159,3 +159,26 @@ def test_bad_mu0_and_config_raise(arm):
         PerceptionConfig(order=3)
     with pytest.raises(ValueError, match="precision override key must be"):
         Perception([arm], precisions={"image": 1.0})
+
+
+def test_unstable_update_bouncing_between_limits_is_flagged_diverged(arm):
+    q = planar_poses(50, seed=22)                                          # Euler with Δt·λ_max ≈ 30: unstable,
+    config = PerceptionConfig(integrator="euler", dt=0.01, max_steps=300, max_step=None)   # steps stay < 1e3 rad
+    result = Perception([arm], config).infer({"ee_xyz": arm.predict(q)}, perturb(q, seed=23))
+    assert result.n_diverged > 25 and not (result.converged & result.diverged).any()
+    assert (result.diverged_step[result.diverged] < 20).all()
+
+
+def test_image_model_gradient_goes_through_vjp_and_recovers_the_joints():
+    from tests.aif.toys import ToyBlobImage
+    image = ToyBlobImage()
+    q = planar_poses(30, seed=24)
+    for integrator in ("local_linear", "euler"):
+        image.calls = {"vjp": 0, "jacobian": 0}
+        config = PerceptionConfig(integrator=integrator, **({"dt": 0.05, "max_steps": 2000} if integrator == "euler"
+                                                            else {}))
+        result = Perception([image], config).infer({"image": image.predict(q)}, perturb(q, seed=25, max_rad=0.1))
+        assert (result.mu - q).abs().max() / DEG < 0.1, integrator
+        assert image.calls["vjp"] > 0
+        assert image.calls["jacobian"] == (0 if integrator == "euler" else image.calls["vjp"]), \
+            "Euler never builds the image Jacobian; the local-linear step builds it only for its curvature"

@@ -206,3 +206,12 @@ def test_disk_full_midway_leaves_an_incomplete_store_that_resumes(tmp_path, monk
     monkeypatch.setattr(gen, "write_shard", real)
     generate(cfg, progress=False)
     assert validate_store(out) == []
+
+
+def test_an_empty_directory_is_used_and_another_zarr_store_is_not_replaced(tmp_path):
+    (tmp_path / "empty.zarr").mkdir()
+    assert validate_store(generate(DatagenConfig(n=8, images=False, out=tmp_path / "empty.zarr"), progress=False)) == []
+    zarr.open_group(str(tmp_path / "other.zarr"), mode="w", zarr_format=3).create_array("x", shape=(3,), dtype="f4")
+    with pytest.raises(FileExistsError, match="another Zarr store"):
+        generate(DatagenConfig(n=8, images=False, out=tmp_path / "other.zarr", overwrite=True), progress=False)
+    assert "x" in zarr.open_group(str(tmp_path / "other.zarr"), mode="r").array_keys()

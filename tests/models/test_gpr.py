@@ -5,6 +5,7 @@ import os
 import numpy as np
 import pytest
 import torch
+from threadpoolctl import threadpool_limits
 
 from bodyschema.models.gpr import GPRModel
 from tests.models.contract import SensoryModelContract
@@ -14,19 +15,29 @@ TOY = ToyPlanarArm()
 REACH_M = 0.55   # toy arm reach: the noise-free output scale
 
 
+THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+
+
 @pytest.fixture(autouse=True, scope="module")
 def single_thread():
-    """Small GP matrices: OpenMP wake-ups dominate with several threads on a loaded machine (a 3×200² Cholesky
-    took 31 ms with 2 threads vs 0.35 ms with 1). The env var reaches the contract's fresh-process reload."""
-    threads, env = torch.get_num_threads(), os.environ.get("OMP_NUM_THREADS")
+    """One BLAS/OpenMP thread, here and in the contract's fresh-process reload (which inherits the env vars).
+
+    Small GP matrices: OpenMP wake-ups dominate with several threads on this VM (a 3×200² Cholesky took 31 ms
+    with 2 threads vs 0.35 ms with 1). And a reload is bit-identical only under the same thread counts, since
+    BLAS rounding depends on how a product is split over threads.
+    """
+    saved = {name: os.environ.get(name) for name in THREAD_VARS}
+    threads = torch.get_num_threads()
+    os.environ.update({name: "1" for name in THREAD_VARS})
     torch.set_num_threads(1)
-    os.environ["OMP_NUM_THREADS"] = "1"
-    yield
+    with threadpool_limits(limits=1):
+        yield
     torch.set_num_threads(threads)
-    if env is None:
-        os.environ.pop("OMP_NUM_THREADS")
-    else:
-        os.environ["OMP_NUM_THREADS"] = env
+    for name, value in saved.items():
+        if value is None:
+            os.environ.pop(name)
+        else:
+            os.environ[name] = value
 
 
 def toy_data(n: int, seed: int, low: float = -2.0, high: float = 2.0):
@@ -51,20 +62,32 @@ class TestGPR(SensoryModelContract):
     def make_unfitted_model(self):
         return GPRModel(TOY.body, "ee_xyz", (3,))
 
+    # ---- gpr-specific checks on the same cached model -------------------------------------------------
+    def test_held_out_error_and_jacobian_match_the_true_arm(self, model):
+        q, x = toy_data(500, seed=7)
+        err = (model.predict(q) - x).norm(dim=-1)                                     # (500,) m
+        assert err.mean() < 2e-4 * REACH_M, f"mean error {err.mean():.2e} m"          # measured 2.5e-5 m
+        jac_rmse = (model.jacobian(q) - TOY.jacobian(q)).pow(2).mean().sqrt()
+        assert jac_rmse < 1e-3, f"Jacobian RMSE {jac_rmse:.2e} m/rad"                # measured 1.7e-4 m/rad
+        std = model.precision(q)[:, :2].rsqrt()                                       # (500, 2) m
+        assert (std.mean(0) < 1e-3 * REACH_M).all(), "predicted std should be far below the reach"
 
-@pytest.fixture(scope="module")
-def toy_gpr():
-    return fit_gpr(200)
+    def test_predict_with_jacobian_equals_the_separate_calls(self, model):
+        z = toy_data(7, seed=13)[0].float()
+        mean, jac = model.predict_with_jacobian(z)
+        assert mean.dtype == jac.dtype == torch.float32
+        torch.testing.assert_close(mean, model.predict(z), rtol=0, atol=0)
+        torch.testing.assert_close(jac, model.jacobian(z), rtol=0, atol=0)
 
+    def test_gpytorch_view_predicts_the_same_mean(self, model):
+        import gpytorch
 
-def test_held_out_error_and_jacobian_match_the_true_arm(toy_gpr):
-    q, x = toy_data(500, seed=7)
-    err = (toy_gpr.predict(q) - x).norm(dim=-1)                                     # (500,) m
-    assert err.mean() < 1e-4 * REACH_M / 0.55, f"mean error {err.mean():.2e} m"     # measured 2.5e-5 m
-    jac_rmse = (toy_gpr.jacobian(q) - TOY.jacobian(q)).pow(2).mean().sqrt()
-    assert jac_rmse < 1e-3, f"Jacobian RMSE {jac_rmse:.2e} m/rad"                  # measured 1.7e-4 m/rad
-    precision = toy_gpr.precision(q)[:, :2]                                         # (500, 2) m⁻²
-    assert (precision.rsqrt().mean(0) < 1e-2).all(), "predicted std should be well below the reach"
+        z = toy_data(6, seed=14)[0]
+        gp = model.to_gpytorch()
+        u = TOY.body.to_unit(z)                                                       # (6, 2)
+        with torch.no_grad(), gpytorch.settings.skip_posterior_variances(), gpytorch.settings.max_cholesky_size(10**6):
+            mean = gp(u.expand(3, *u.shape)).mean.T * model.y_std_ + model.y_mean_     # (6, 3)
+        np.testing.assert_allclose(mean.numpy(), model.predict(z).numpy(), rtol=0, atol=1e-9)
 
 
 def test_precision_drops_away_from_the_training_data():
@@ -75,15 +98,16 @@ def test_precision_drops_away_from_the_training_data():
 
 
 def test_more_than_800_points_still_uses_exact_solves():
-    # gpytorch would switch to CG above 800 points (~1000× worse on arm kinematics); conditioning on 1000
-    # points with the same hyper-parameter subset must be at least as accurate as on 500.
-    q, x = toy_data(500, seed=9)
-    errors = {}
-    for n in (500, 1000):
-        model = fit_gpr(n, seed=1, hyper_points=200)
-        assert model.train_u_.shape[0] == n
-        errors[n] = (model.predict(q) - x).norm(dim=-1).mean()
-    assert errors[1000] <= errors[500], errors
+    # gpytorch would switch to CG above 800 points (~1000× worse on arm kinematics); with the same
+    # hyper-parameters, conditioning on 1000 points must be at least as accurate as on 500 of them.
+    q_test, x_test = toy_data(500, seed=9)
+    q, x = toy_data(1000, seed=10)
+    model = GPRModel(TOY.body, "ee_xyz", (3,), hyper_points=200).fit(q, x, progress=False)
+    error_1000 = (model.predict(q_test) - x_test).norm(dim=-1).mean()
+    model.condition(q[:500], x[:500])
+    assert model.train_u_.shape[0] == 500
+    error_500 = (model.predict(q_test) - x_test).norm(dim=-1).mean()
+    assert error_1000 <= error_500, (error_1000, error_500)
 
 
 def test_max_points_keeps_a_seeded_random_subset_and_reports_validation():
@@ -96,14 +120,6 @@ def test_max_points_keeps_a_seeded_random_subset_and_reports_validation():
     assert steps == sorted(steps) and len(steps) >= 6
     assert {"train_neg_mll", "val_mean_error", "val_rmse"} <= set(metrics)
     assert metrics["val_mean_error"] < 1e-2
-
-
-def test_predict_with_jacobian_equals_the_separate_calls(toy_gpr):
-    z = toy_data(7, seed=13)[0].float()
-    mean, jac = toy_gpr.predict_with_jacobian(z)
-    assert mean.dtype == jac.dtype == torch.float32
-    torch.testing.assert_close(mean, toy_gpr.predict(z), rtol=0, atol=0)
-    torch.testing.assert_close(jac, toy_gpr.jacobian(z), rtol=0, atol=0)
 
 
 @pytest.mark.parametrize("case", ["length", "nan", "shape"])
@@ -126,14 +142,3 @@ def test_bad_hyper_parameters_raise():
         GPRModel(TOY.body, "ee_xyz", (3,), noise_floor=0.0)
     with pytest.raises(ValueError, match="hyper_points must be an integer ≥ 2"):
         GPRModel(TOY.body, "ee_xyz", (3,), hyper_points=1)
-
-
-def test_gpytorch_view_predicts_the_same_mean(toy_gpr):
-    import gpytorch
-
-    z = toy_data(6, seed=14)[0]
-    gp = toy_gpr.to_gpytorch()
-    with torch.no_grad(), gpytorch.settings.skip_posterior_variances(), gpytorch.settings.max_cholesky_size(10**6):
-        u = TOY.body.to_unit(z)
-        mean = gp(u.expand(3, *u.shape)).mean.T * toy_gpr.y_std_ + toy_gpr.y_mean_   # (6, 3)
-    np.testing.assert_allclose(mean.numpy(), toy_gpr.predict(z).numpy(), rtol=0, atol=1e-9)

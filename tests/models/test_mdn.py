@@ -6,6 +6,7 @@ import torch
 
 from bodyschema.models.mdn import MDNModel
 from tests.models.contract import SensoryModelContract
+from tests.models.test_pixel import one_thread
 from tests.toy_models import ToyPlanarArm
 
 TINY = dict(hidden=(16, 16), n_components=2, epochs=25, batch_size=64, lr=1e-2, patience=100)
@@ -25,7 +26,8 @@ def tiny_mdn(**overrides) -> MDNModel:
 class TestMDN(SensoryModelContract):
     def make_model(self, seed):
         q, x = toy_data(256, seed=0)
-        return tiny_mdn().fit(q, x, seed=seed, progress=False)
+        with one_thread():
+            return tiny_mdn().fit(q, x, seed=seed, progress=False)
 
     def make_inputs(self, n, dtype=torch.float64):
         return toy_data(n, seed=100 + n)[0].to(dtype)
@@ -34,6 +36,13 @@ class TestMDN(SensoryModelContract):
         return tiny_mdn()
 
 
+@pytest.fixture
+def tiny_threads():
+    with one_thread():
+        yield
+
+
+@pytest.mark.usefixtures("tiny_threads")
 def test_training_reduces_loss_and_fits_the_arm():
     q, x = toy_data(512, seed=0)
     q_val, x_val = toy_data(128, seed=1)
@@ -47,13 +56,22 @@ def test_training_reduces_loss_and_fits_the_arm():
     assert err.pow(2).mean() < 0.1 * baseline.pow(2).mean(), "R² on held-out poses should exceed 0.9"
 
 
+@pytest.mark.usefixtures("tiny_threads")
 def test_max_mode_predicts_a_component_mean_and_precision_is_positive():
     q, x = toy_data(256, seed=0)
     model = tiny_mdn(mode="max", epochs=5).fit(q, x, progress=False)
     z = toy_data(4, seed=3)[0].double()
     assert model.predict(z).shape == (4, 3) and (model.precision(z) > 0).all()
+    logits, means, _ = model._net(z.dtype)(model.body.to_unit(z))
+    chosen = means[torch.arange(4), logits.argmax(-1)] * model.x_scale_.double() + model.x_mean_.double()
+    torch.testing.assert_close(model.predict(z), chosen)
+    step = torch.zeros_like(z)
+    step[:, 0] = 1e-6
+    fd = (model.predict(z + step) - model.predict(z - step)) / 2e-6     # (4, 3): column 0 of the Jacobian
+    torch.testing.assert_close(model.jacobian(z)[..., 0], fd, rtol=1e-4, atol=1e-6)
 
 
+@pytest.mark.usefixtures("tiny_threads")
 def test_killed_run_resumes_to_the_same_weights(tmp_path):
     q, x = toy_data(128, seed=0)
     full = tiny_mdn(epochs=3).fit(q, x, seed=7, progress=False)
@@ -73,6 +91,7 @@ def test_killed_run_resumes_to_the_same_weights(tmp_path):
         torch.testing.assert_close(a, b, rtol=0, atol=0, msg=f"weight {name} differs after resume")
 
 
+@pytest.mark.usefixtures("tiny_threads")
 def test_checkpoint_from_other_settings_is_refused(tmp_path):
     q, x = toy_data(64, seed=0)
     tiny_mdn(epochs=1).fit(q, x, progress=False, checkpoint=tmp_path / "c.pt")

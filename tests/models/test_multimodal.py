@@ -7,7 +7,7 @@ import torch
 from bodyschema.models import load_model
 from bodyschema.models.multimodal import MultimodalMember, MultimodalModel
 from tests.models.contract import SensoryModelContract
-from tests.models.test_pixel import blob_images, joint_angles
+from tests.models.test_pixel import blob_images, joint_angles, one_thread
 from tests.toy_models import ToyPlanarArm
 
 BODY = ToyPlanarArm().body
@@ -23,8 +23,9 @@ def toy_modalities(q: torch.Tensor) -> dict[str, torch.Tensor]:
 class TestMultimodalMember(SensoryModelContract):
     def make_model(self, seed):
         q = joint_angles(128, seed=0)
-        return MultimodalMember(BODY, "ee_xyz", (3,), **TINY).fit(q, toy_modalities(q)["ee_xyz"], seed=seed,
-                                                                  progress=False)
+        with one_thread():
+            return MultimodalMember(BODY, "ee_xyz", (3,), **TINY).fit(q, toy_modalities(q)["ee_xyz"], seed=seed,
+                                                                      progress=False)
 
     def make_inputs(self, n, dtype=torch.float64):
         return joint_angles(n, seed=100 + n).to(dtype)
@@ -38,17 +39,34 @@ class TestMultimodalImageMember(TestMultimodalMember):
 
     def make_model(self, seed):
         q = joint_angles(96, seed=0)
-        return MultimodalMember(BODY, "image", (8, 12), **{**TINY, "epochs": 8}).fit(q, blob_images(q), seed=seed,
-                                                                                     progress=False)
+        with one_thread():
+            return MultimodalMember(BODY, "image", (8, 12), **{**TINY, "epochs": 8}).fit(q, blob_images(q),
+                                                                                         seed=seed, progress=False)
+
+    def test_save_then_load_in_fresh_process_gives_identical_outputs(self, model, tmp_path):
+        # The fresh-process check runs for TestMultimodalMember (same save/load code); here in-process,
+        # which exercises the pixel decoder's restore and saves a ~15 s interpreter start on a loaded machine.
+        model.save(tmp_path / "m")
+        z = self.make_inputs(self.batch)
+        loaded = load_model(tmp_path / "m")
+        torch.testing.assert_close(loaded.predict(z), model.predict(z), rtol=0, atol=0)
+        torch.testing.assert_close(loaded.precision(z), model.precision(z), rtol=0, atol=0)
+
+
+@pytest.fixture
+def tiny_threads():
+    with one_thread():
+        yield
 
 
 @pytest.fixture(scope="module")
 def fitted():
     q, q_val = joint_angles(256, seed=0), joint_angles(64, seed=1)
     history = []
-    model = MultimodalModel(BODY, SHAPES, precisions={"joints": 1e4}, **{**TINY, "epochs": 40})
-    model.fit(q, toy_modalities(q), val=(q_val, toy_modalities(q_val)), progress=False,
-              on_epoch=lambda e, m: history.append(m))
+    model = MultimodalModel(BODY, SHAPES, precisions={"joints": 1e4}, **{**TINY, "epochs": 30})
+    with one_thread():
+        model.fit(q, toy_modalities(q), val=(q_val, toy_modalities(q_val)), progress=False,
+                  on_epoch=lambda e, m: history.append(m))
     return model, history, q_val
 
 
@@ -82,8 +100,32 @@ def test_separate_fit_trains_every_member():
     seen = []
     model = MultimodalModel(BODY, {"ee_xyz": (3,), "joints": (2,)}, joint=False, **{**TINY, "epochs": 2})
     xs = {k: v for k, v in toy_modalities(q).items() if k != "image"}
-    model.fit(q, xs, progress=False, on_epoch=lambda e, m: seen.extend(m))
+    with one_thread():
+        model.fit(q, xs, progress=False, on_epoch=lambda e, m: seen.extend(m))
     assert model.is_fitted and {"ee_xyz/train_loss", "joints/train_loss"} <= set(seen)
+
+
+@pytest.mark.usefixtures("tiny_threads")
+def test_killed_joint_run_resumes_to_the_same_weights(tmp_path):
+    q = joint_angles(64, seed=0)
+    xs = {k: v for k, v in toy_modalities(q).items() if k != "joints"}
+
+    def make():
+        return MultimodalModel(BODY, {"ee_xyz": (3,), "image": (8, 12)}, **{**TINY, "epochs": 3})
+
+    full = make().fit(q, xs, seed=3, progress=False)
+
+    def kill(epoch, metrics):
+        if epoch == 1:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        make().fit(q, xs, seed=3, progress=False, checkpoint=tmp_path / "c.pt", on_epoch=kill)
+    resumed = make().fit(q, xs, seed=3, progress=False, checkpoint=tmp_path / "c.pt")
+    for m in full.members:
+        for (name, a), b in zip(full.members[m].net_.state_dict().items(),
+                                resumed.members[m].net_.state_dict().values()):
+            torch.testing.assert_close(a, b, rtol=0, atol=0, msg=f"{m}: weight {name} differs after resume")
 
 
 def test_fit_rejects_bad_modalities_lengths_and_nan():

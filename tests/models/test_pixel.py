@@ -1,5 +1,7 @@
 """The pixel decoder under the shared contract on tiny blob images, plus its training and its layout."""
 
+from contextlib import contextmanager
+
 import pytest
 import torch
 
@@ -25,6 +27,23 @@ def blob_images(q: torch.Tensor, shape=HW, width_px: float = 1.5) -> torch.Tenso
     return img.float()
 
 
+@contextmanager
+def one_thread():
+    """Tiny fits are all per-op overhead; a second thread only adds contention on a shared 2-core machine."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(threads)
+
+
+def peak_px(images: torch.Tensor) -> torch.Tensor:
+    """(row, col) of the brightest pixel. (N, H, W) → (N, 2)"""
+    idx = images.reshape(len(images), -1).argmax(1)
+    return torch.stack([idx // images.shape[2], idx % images.shape[2]], -1).double()
+
+
 def joint_angles(n: int, seed: int) -> torch.Tensor:
     gen = torch.Generator().manual_seed(seed)
     return (torch.rand(n, 2, generator=gen, dtype=torch.float64) * 4 - 2).float()   # (n, 2) rad
@@ -39,10 +58,61 @@ class TestPixelDecoder(SensoryModelContract):
 
     def make_model(self, seed):
         q = joint_angles(128, seed=0)
-        return tiny_decoder().fit(q, blob_images(q), seed=seed, progress=False)
+        with one_thread():
+            return tiny_decoder().fit(q, blob_images(q), seed=seed, progress=False)
 
     def make_inputs(self, n, dtype=torch.float64):
         return joint_angles(n, seed=100 + n).to(dtype)
 
     def make_unfitted_model(self):
         return tiny_decoder()
+
+
+@pytest.fixture
+def tiny_threads():
+    with one_thread():
+        yield
+
+
+@pytest.mark.usefixtures("tiny_threads")
+def test_training_reduces_loss_and_puts_the_blob_in_place():
+    q, q_val = joint_angles(256, seed=0), joint_angles(64, seed=1)
+    x_val = blob_images(q_val)
+    losses = []
+    model = tiny_decoder(epochs=40).fit(q, blob_images(q), val=(q_val, x_val), progress=False,
+                                        on_epoch=lambda e, m: losses.append(m["val_loss"]))
+    assert losses[-1] < 0.3 * losses[0]
+    pred = model.predict(q_val.double())                                 # (64, 8, 12)
+    assert (peak_px(pred) - peak_px(x_val)).norm(dim=1).median() <= 1.5, "blob peak should be within ~1 px"
+    mse = (pred - x_val.double()).pow(2).mean()
+    assert model.precision_ == pytest.approx(1 / float(mse), rel=1e-3), "precision = 1 / validation residual MSE"
+
+
+@pytest.mark.usefixtures("tiny_threads")
+def test_colour_images_uint8_input_and_fixed_precision():
+    q = joint_angles(64, seed=0)
+    x = (blob_images(q, (7, 9, 3)) * 255).round().to(torch.uint8).numpy()
+    model = tiny_decoder((7, 9, 3), epochs=2, precision=50.0).fit(q.numpy(), x, progress=False)
+    z = joint_angles(3, seed=2).double()
+    out = model.predict(z)
+    assert out.shape == (3, 7, 9, 3) and ((out > 0) & (out < 1)).all()
+    assert (model.precision(z) == 50.0).all()
+    assert model.jacobian(z).shape == (3, 7 * 9 * 3, 2)
+
+
+def test_loaded_decoder_keeps_the_fast_layout(tmp_path):
+    model = TestPixelDecoder().make_model(seed=0)
+    model.save(tmp_path / "m")
+    loaded = PixelDecoder.load(tmp_path / "m")
+    assert all(m.weight.is_contiguous(memory_format=torch.channels_last)
+               for m in loaded.net_.modules() if isinstance(m, torch.nn.ConvTranspose2d))
+
+
+def test_bad_images_and_shapes_raise():
+    q = joint_angles(16, seed=0)
+    with pytest.raises(ValueError, match=r"x must be of shape \(N, 8, 12\)"):
+        tiny_decoder().fit(q, blob_images(q, (8, 10)), progress=False)
+    with pytest.raises(ValueError, match="output_shape must be"):
+        tiny_decoder((96,))
+    with pytest.raises(ValueError, match="precision must be > 0"):
+        tiny_decoder(precision=0.0)

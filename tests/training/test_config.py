@@ -22,6 +22,9 @@ def test_every_problem_is_reported_at_once():
 
 def test_defaults_and_hyper_parsing():
     assert TrainConfig(model="pixel", data="d").modality == "image"
+    assert TrainConfig(model="multimodal", data="d").modalities == ("ee_xyz", "image")
+    with pytest.raises(ValueError, match="Several modalities .* need --model multimodal"):
+        TrainConfig(model="mdn", data="d", modality="ee_xyz,image")
     config = TrainConfig(model="mdn", data="d", hyper={"epochs": "5", "lr": "1e-3", "hidden": "[32, 32]",
                                                         "mode": "max"})
     assert config.modality == "ee_xyz"
@@ -41,8 +44,8 @@ def test_run_identity_ignores_where_results_go_but_not_what_is_trained(tmp_path)
 
 def test_factory_builds_known_kinds_and_names_wrong_hyper_parameters(tiny_kind):
     body = BodySpec("r", ("a", "b"), (-1.0, -1.0), (1.0, 1.0))
-    model = build_model("tiny", body, "ee_xyz", (3,), {"epochs": 2})
+    model = build_model("tiny", body, {"ee_xyz": (3,)}, {"epochs": 2})
     assert isinstance(model, tiny_kind) and model.epochs == 2 and model.output_shape == (3,)
     with pytest.raises(ValueError, match=r"hyper must be names accepted by TinyModel: \['epochs', 'lr'\]"):
-        build_model("tiny", body, "ee_xyz", (3,), {"epoch": 2})
+        build_model("tiny", body, {"ee_xyz": (3,)}, {"epoch": 2})
     assert {"gpr", "sklearn-gpr", "mdn", "pixel", "multimodal"} <= set(MODEL_KINDS)

@@ -18,7 +18,7 @@ def test_loads_kinematic_store_with_seeded_random_split(kin_store):
     assert set(a.train.rows).isdisjoint(a.val.rows) and len(set(a.train.rows) | set(a.val.rows)) == 400
     np.testing.assert_array_equal(a.val.rows, b.val.rows)
     np.testing.assert_array_equal(a.train.x, np.asarray(root["ee_xyz"][:])[a.train.rows])
-    assert a.train.q.dtype == np.float32 and a.output_shape == (3,)
+    assert a.train.q.dtype == np.float32 and a.output_shape("ee_xyz") == (3,)
     assert a.body.robot == "planar2" and a.body.q_low == (-2.5, -2.5) and a.sha256 == b.sha256
     c = load_dataset(kin_store, "ee_xyz", val_fraction=0.25, seed=4)
     assert not np.array_equal(a.val.rows, c.val.rows), "another seed must give another split"
@@ -30,7 +30,7 @@ def test_babbling_store_holds_out_whole_episodes_and_keeps_images_uint8(image_st
     assert data.split_by == "episode"
     assert set(episode[data.train.rows]).isdisjoint(episode[data.val.rows])
     assert 0.15 <= len(data.val) / len(episode) <= 0.45
-    assert data.is_image and data.train.x.dtype == np.uint8 and data.output_shape == (16, 16)
+    assert data.is_image("image") and data.train.x.dtype == np.uint8 and data.output_shape("image") == (16, 16)
     batch = as_float(data.train.x[:4])
     assert batch.dtype == torch.float32 and 0 <= batch.min() and batch.max() <= 1
     torch.testing.assert_close(batch * 255, torch.as_tensor(data.train.x[:4]).float())
@@ -67,3 +67,13 @@ def test_incomplete_store_is_refused_with_every_problem(kin_store, tmp_path):
 def test_missing_store_names_the_fix(tmp_path):
     with pytest.raises(ValueError, match="Zarr v3 dataset store"):
         load_dataset(tmp_path / "nowhere.zarr", "ee_xyz")
+
+
+def test_several_modalities_share_rows_and_split(image_store):
+    data = load_dataset(image_store, "ee_xyz,image", seed=1)
+    assert data.modalities == ("ee_xyz", "image") and set(data.val.xs) == {"ee_xyz", "image"}
+    root = zarr.open_group(str(image_store), mode="r")
+    np.testing.assert_array_equal(data.val.xs["image"], np.asarray(root["image"][:])[data.val.rows])
+    np.testing.assert_array_equal(data.val.xs["ee_xyz"], np.asarray(root["ee_xyz"][:])[data.val.rows])
+    with pytest.raises(ValueError, match="exactly one"):
+        data.train.x

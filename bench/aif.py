@@ -1,0 +1,122 @@
+"""Benchmark of the AIF perception update (a script, not a test): `python bench/aif.py [--quick] [--model SPEC ...]`.
+
+Prints, measured in the same run:
+  1. batched update of N trials vs a per-trial loop of the same math (wall time, ratio, max |Δμ|);
+  2. model evaluations per trial to reach the final joint error of the plain protocol (Euler, Δt 0.1, k_z 1,
+     5000 steps; Pixel-AIF) vs the default update (local linearization, Gauss–Newton curvature), both on the
+     same F (unit precisions, so that the plain protocol is stable where it can be);
+  3. wall time and results of the full levels benchmark (levels 1–3 and 3 with multi-start, N trials × runs) for
+     analytic oracles on planar2 and nao_arm, and for any extra model given with --model (e.g. a pixel decoder
+     "models:/bodyschema-nao_arm-image-pixel@champion" or a saved model directory).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from bodyschema.aif.perception import Perception, PerceptionConfig
+from bodyschema.evaluation.level_report import markdown
+from bodyschema.evaluation.levels import LevelsConfig, load_robot, resolve_model, run_levels
+from bodyschema.evaluation.targets import eval_rng, initial_beliefs, make_targets
+
+PLAIN = PerceptionConfig(integrator="euler", dt=0.1, k_z=1.0, max_steps=5000, tol=0.0, max_step=None, record=True)
+SIGMA = {"ee_xyz": 1e-3, "ee_pixel": 1.0, "joints": math.radians(2.0)}   # m, px, rad: noise = 1/√precision
+COLUMNS = ("joint_err_deg", "joint_err_median_deg", "ee_err_mm", "success", "steps", "evaluations_per_trial",
+           "diverged", "wall_s")
+
+
+def problem(robot_name: str, modalities, n: int, level: int = 2, seed: int = 0):
+    models = [resolve_model(f"analytic:{robot_name}:{m}") for m in modalities]
+    robot = load_robot(models)
+    noise = {m: SIGMA[m] for m in modalities if m == "joints"}
+    targets = make_targets(robot, n, eval_rng(seed, 0, "targets"), noise=noise, noise_rng=eval_rng(seed, 0, "noise"))
+    mu0 = torch.from_numpy(initial_beliefs(level, targets.q, robot.sampling_ranges, eval_rng(seed, 0, "beliefs", 2)))
+    precisions = {m: SIGMA[m] ** -2 for m in modalities}
+    return models, targets, mu0, precisions
+
+
+def batched_vs_loop(robot_name, modalities, n):
+    models, targets, mu0, precisions = problem(robot_name, modalities, n)
+    perception = Perception(models, PerceptionConfig(), precisions)
+    obs = targets.tensors(modalities)
+    t = time.perf_counter()
+    batched = perception.infer(obs, mu0)
+    t_batch = time.perf_counter() - t
+    t = time.perf_counter()
+    singles = [perception.infer({k: v[i:i + 1] for k, v in obs.items()}, mu0[i:i + 1]).mu for i in range(n)]
+    t_loop = time.perf_counter() - t
+    diff = (torch.cat(singles) - batched.mu).abs().max().item()
+    print(f"[1] {robot_name} {'+'.join(modalities)}, {n} trials: batched {t_batch:.3f} s, per-trial loop {t_loop:.3f} s "
+          f"→ ×{t_loop / t_batch:.1f}; max |Δμ| batched vs loop {diff:.2e} rad; mean steps {batched.steps.float().mean():.1f}")
+
+
+def evaluations_to_plain_error(robot_name, modalities, n):
+    models, targets, mu0, precisions = problem(robot_name, modalities, n)
+    obs = targets.tensors(modalities)
+    truth = torch.from_numpy(targets.q)
+    t = time.perf_counter()
+    plain = Perception(models, PLAIN, {m: 1.0 for m in modalities}).infer(obs, mu0)
+    t_plain = time.perf_counter() - t
+    t = time.perf_counter()
+    ours = Perception(models, PerceptionConfig(record=True), {m: 1.0 for m in modalities}).infer(obs, mu0)
+    t_ours = time.perf_counter() - t
+    target = (plain.mu - truth).abs().mean(-1)                             # (N,) rad, plain protocol's final error
+    print(f"[2] {robot_name} {'+'.join(modalities)}, {n} trials (level 2), unit precisions for both (same F): "
+          f"plain diverged {plain.n_diverged}; plain protocol final mean joint error "
+          f"{np.rad2deg(target.mean().item()):.4g}°, ours {np.rad2deg((ours.mu - truth).abs().mean().item()):.4g}°")
+    for name, res, wall in (("plain (Euler Δt 0.1)", plain, t_plain), ("ours (local-linear GN)", ours, t_ours)):
+        err = (res.trajectory["mu"][:, :, 0] - truth).abs().mean(-1)       # (T, N) rad; NaN once stopped
+        err = torch.where(torch.isnan(err), torch.inf, err)
+        reached = err <= target * 1.0001 + 1e-12
+        first = torch.where(reached.any(0), reached.float().argmax(0), torch.full_like(target, -1, dtype=torch.long))
+        got = first[first >= 0].double() + 1                               # evaluations = steps (1 round per step)
+        print(f"    {name:24s}: evaluations to reach it median {got.median():.0f}, max {got.max():.0f} "
+              f"({(first >= 0).float().mean() * 100:.0f}% of trials reach it); total evaluations/trial "
+              f"{res.evaluations / n:.0f}; wall {wall:.2f} s")
+
+
+def full_levels(models_spec, n, runs, out, label, precisions=(), noise=()):
+    config = LevelsConfig(models=tuple(models_spec), trials=n, runs=runs, out=out / label, mlflow=False,
+                          noise=tuple(noise), perception=PerceptionConfig(record=True, precisions=tuple(precisions)))
+    t = time.perf_counter()
+    summary = run_levels(config)
+    wall = time.perf_counter() - t
+    print(f"[3] {label}: full levels benchmark ({n} trials × {runs} runs, levels 1, 2, 3, 3+multi-start) "
+          f"wall {wall:.1f} s (incl. simulator targets and plots)")
+    print(markdown(summary.table, COLUMNS))
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="100 trials, 1 run, 1000 plain steps")
+    parser.add_argument("--model", action="append", default=[], help="extra model spec(s) for section 3")
+    parser.add_argument("--out", type=Path, default=Path("results/bench_aif"))
+    args = parser.parse_args()
+    n, runs = (100, 1) if args.quick else (500, 5)
+    global PLAIN
+    if args.quick:
+        PLAIN = replace(PLAIN, max_steps=1000)
+    torch.set_num_threads(1)
+    nao = ("ee_xyz", "ee_pixel", "joints")
+    batched_vs_loop("planar2", ("ee_xyz",), n)
+    batched_vs_loop("nao_arm", nao, n)
+    evaluations_to_plain_error("planar2", ("ee_xyz",), n)
+    evaluations_to_plain_error("nao_arm", ("ee_xyz", "joints"), n)
+    evaluations_to_plain_error("nao_arm", nao, n)          # px with unit precision: Euler Δt 0.1 is unstable
+    full_levels(["analytic:planar2:ee_xyz"], n, runs, args.out, "planar2 ee_xyz")
+    full_levels(["analytic:nao_arm:ee_xyz"], n, runs, args.out, "nao_arm ee_xyz")
+    full_levels([f"analytic:nao_arm:{m}" for m in nao], n, runs, args.out, "nao_arm ee_xyz+ee_pixel+joints(σ 2°)",
+                precisions=[(m, SIGMA[m] ** -2) for m in nao], noise=[("joints", SIGMA["joints"])])
+    if args.model:
+        full_levels(args.model, n, runs, args.out, "+".join(args.model))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,118 @@
+"""`bodyschema <stage> ...`: one CLI over the pipeline's frozen dataclass configs (tyro).
+
+    bodyschema datagen --robot nao_arm --n 2000 --sampler babble --workers 2 --out data/nao.zarr
+    bodyschema validate data/nao.zarr
+    bodyschema train --model gpr --data data/nao.zarr --modality ee_xyz
+    bodyschema registry list | bodyschema registry promote NAME VERSION
+    bodyschema evaluate levels --models models:/bodyschema-nao_arm-ee_xyz-gpr@champion --levels 1 2 3
+    bodyschema demo
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Union
+
+import tyro
+
+from bodyschema.datagen.config import DatagenConfig
+from bodyschema.demo import DemoConfig
+from bodyschema.evaluation.levels import LevelsConfig
+from bodyschema.training.config import TrainConfig
+
+
+@dataclass(frozen=True)
+class ValidateArgs:
+    """Check a dataset store against the schema; exit 0 when valid, else list every problem."""
+
+    path: tyro.conf.Positional[Path]  # the .zarr store
+
+
+@dataclass(frozen=True)
+class RegistryList:
+    """List every registered bodyschema model version with its validation metric and aliases."""
+
+    tracking_uri: str | None = None  # None: $MLFLOW_TRACKING_URI, else sqlite:///<cwd>/mlflow.db
+
+
+@dataclass(frozen=True)
+class RegistryPromote:
+    """Move the `champion` alias to NAME's VERSION by hand."""
+
+    name: tyro.conf.Positional[str]
+    version: tyro.conf.Positional[int]
+    tracking_uri: str | None = None
+
+
+def _group(description: str, **members):
+    choices = tuple(Annotated[cls, tyro.conf.subcommand(name)] for name, cls in members.items())
+    return Annotated[Union[choices], tyro.conf.arg(help=description)]  # noqa: UP007 (tyro needs a Union)
+
+
+COMMANDS = {
+    "datagen": Annotated[DatagenConfig, tyro.conf.arg(help="Generate a motor-babbling dataset (Zarr v3).")],
+    "validate": ValidateArgs,
+    "train": Annotated[TrainConfig, tyro.conf.arg(help="Fit one sensory model, log it to MLflow, register it.")],
+    "registry": _group("Inspect and manage the MLflow model registry.", list=RegistryList, promote=RegistryPromote),
+    "evaluate": _group("Run an evaluation benchmark.", levels=LevelsConfig),
+    "demo": Annotated[DemoConfig, tyro.conf.arg(help="The end-to-end demo: babble, fit, register, evaluate.")],
+}
+
+
+def run(config) -> int:
+    """Run the stage a parsed config stands for; returns the process exit code."""
+    if isinstance(config, DatagenConfig):
+        from bodyschema.datagen.generate import generate
+        from bodyschema.datagen.validate import summarize_store
+
+        print(summarize_store(generate(config)))
+    elif isinstance(config, ValidateArgs):
+        from bodyschema.datagen.validate import validate_store
+
+        problems = validate_store(config.path)
+        for problem in problems:
+            print(f"- {problem}", file=sys.stderr)
+        print(f"{config.path}: {'valid' if not problems else f'{len(problems)} problem(s)'}")
+        return 1 if problems else 0
+    elif isinstance(config, TrainConfig):
+        from bodyschema.training.train import train
+
+        print(train(config))
+    elif isinstance(config, RegistryList):
+        from bodyschema.training.registry import list_models
+
+        rows = list_models(tracking=config.tracking_uri)
+        print("\n".join(map(str, rows)) if rows else "no registered bodyschema models")
+    elif isinstance(config, RegistryPromote):
+        from bodyschema.training.registry import promote
+
+        promote(config.name, config.version, tracking=config.tracking_uri)
+        print(f"{config.name} v{config.version} is now @champion")
+    elif isinstance(config, LevelsConfig):
+        from bodyschema.evaluation.levels import run_levels
+
+        summary = run_levels(config)
+        print("\n".join(f"{k}: {v}" for k, v in summary.paths.items()))
+    elif isinstance(config, DemoConfig):
+        from bodyschema.demo import run_demo
+
+        run_demo(config)
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    config = tyro.extras.subcommand_cli_from_dict(COMMANDS, prog="bodyschema", args=argv,
+                                                  description="A robot learns its body by motor babbling and "
+                                                              "perceives it by active inference.")
+    try:
+        return run(config)
+    except (ValueError, FileNotFoundError, FileExistsError, PermissionError, OSError) as error:
+        # User-facing errors are already in the house form; no traceback for them.
+        print(f"error: {error}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,139 @@
+"""Tables and plots of the levels benchmark: per-run CSV, per-level summary (CSV + Markdown), box plots of the
+per-trial joint error, free-energy curves, and error-vs-noise / broken-sensor plots of the robustness sweeps."""
+
+from __future__ import annotations
+
+import csv
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+MAIN_COLUMNS = ("joint_err_deg", "ee_err_mm", "success", "steps", "converged", "diverged", "wall_s")
+
+
+def aggregate(rows: Sequence[Mapping]) -> list[dict]:
+    """One row per level: the mean over runs of every numeric metric, and its std as `<metric>_std`."""
+    table = []
+    for level in dict.fromkeys(r["level"] for r in rows):
+        mine = [r for r in rows if r["level"] == level]
+        out = {"level": level, "runs": len(mine)}
+        for key in mine[0]:
+            if key in ("level", "run") or not isinstance(mine[0][key], (int, float)):
+                continue
+            values = np.array([r[key] for r in mine], dtype=float)
+            out[key] = float(values.mean())
+            if key in MAIN_COLUMNS and len(mine) > 1:
+                out[f"{key}_std"] = float(values.std(ddof=1))
+        table.append(out)
+    return table
+
+
+def write_csv(rows: Sequence[Mapping], path: Path) -> Path:
+    keys = list(dict.fromkeys(k for r in rows for k in r))
+    with open(path, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=keys)
+        writer.writeheader()
+        writer.writerows(rows)
+    return path
+
+
+def markdown(table: Sequence[Mapping], columns: Sequence[str] = MAIN_COLUMNS) -> str:
+    """A Markdown table of the main metrics, mean ± std over runs."""
+    head = "| level | " + " | ".join(columns) + " |"
+    lines = [head, "|" + "---|" * (len(columns) + 1)]
+    for row in table:
+        cells = []
+        for c in columns:
+            if c not in row:
+                cells.append("–")
+                continue
+            std = row.get(f"{c}_std")
+            cells.append(f"{row[c]:.4g} ± {std:.2g}" if std is not None else f"{row[c]:.4g}")
+        lines.append(f"| {row['level']} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def plot_boxes(per_trial: Mapping[str, np.ndarray], path: Path) -> Path:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(1.6 + 1.2 * len(per_trial), 4))
+    labels = list(per_trial)
+    ax.boxplot([np.maximum(per_trial[k], 1e-9) for k in labels], showfliers=True)
+    ax.set_xticks(range(1, len(labels) + 1), [f"level {k}" for k in labels])
+    ax.set_yscale("log")
+    ax.axhline(1.0, color="grey", ls="--", lw=0.8, label="success threshold (1°)")
+    ax.set_ylabel("final mean |joint error| (deg)")
+    ax.legend(loc="upper left", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def plot_curves(curves: Mapping[str, np.ndarray], path: Path) -> Path:
+    """Median and inter-quartile band of F(t) − F_final per level (trials that stopped hold their last F)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for level, f in curves.items():                                       # (T, N), NaN once a trial stopped
+        held = _hold_last(f)
+        gap = np.maximum(held - held[-1], 1e-12)
+        q25, q50, q75 = np.percentile(gap, [25, 50, 75], axis=1)
+        steps = np.arange(len(q50))
+        ax.plot(steps, q50, label=f"level {level}")
+        ax.fill_between(steps, q25, q75, alpha=0.2)
+    ax.set_yscale("log")
+    ax.set_xlabel("update step")
+    ax.set_ylabel("F − F_final (median, IQR)")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def plot_sweep(rows: Sequence[Mapping], x: str, path: Path, y: str = "joint_err_deg") -> Path:
+    """Error vs a swept quantity (noise σ), or a bar per case (broken sensor) when x is not numeric."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(5, 3.5))
+    xs = [r[x] for r in rows]
+    ys = [r[y] for r in rows]
+    if all(isinstance(v, (int, float)) for v in xs):
+        ax.plot(xs, ys, "o-")
+        ax.set_xlabel(f"{x} ({rows[0].get('modality', '')})")
+    else:
+        ax.bar([str(v) for v in xs], ys)
+        ax.set_xlabel(x)
+    ax.set_yscale("log")
+    ax.set_ylabel(y)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def write_all(summary, curves: Mapping[str, np.ndarray], out: Path, plots: bool = True) -> dict[str, Path]:
+    out.mkdir(parents=True, exist_ok=True)
+    paths = {"runs_csv": write_csv(summary.rows, out / "levels_runs.csv"),
+             "summary_csv": write_csv(summary.table, out / "levels_summary.csv")}
+    paths["summary_md"] = out / "levels_summary.md"
+    paths["summary_md"].write_text(markdown(summary.table))
+    if plots:
+        paths["boxplot"] = plot_boxes(summary.per_trial, out / "levels_boxplot.png")
+        if curves:
+            paths["free_energy"] = plot_curves(curves, out / "levels_free_energy.png")
+    return paths
+
+
+def _hold_last(f: np.ndarray) -> np.ndarray:
+    """Fill NaNs (a stopped trial) with the trial's last finite value. (T, N) → (T, N)"""
+    held = f.copy()
+    for t in range(1, len(held)):
+        gone = np.isnan(held[t])
+        held[t, gone] = held[t - 1, gone]
+    return held
