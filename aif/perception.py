@@ -8,7 +8,7 @@ Integration: "local_linear" (default) takes Ozaki's step Δt φ₁(Δt 𝓙) u̇
 tuning of Δt to the sensory precision — and converges in tens of steps; "implicit" is the linearly implicit
 Euler step (same limits, a solve instead of an exponential); "euler" is the plain Δt·u̇ of the Pixel-AIF protocol. A step of the joints is capped at `max_step` rad (trust region), the belief is clamped
 to the joint limits, and every trial stops on its own: trials that converged (moved < tol) or diverged (F
-or the step not finite, a raw step > divergence_step rad, or the precision-weighted prediction error E = F + ½ln|Π|
+or the step not finite, an Euler step > divergence_step rad, or the precision-weighted prediction error E = F + ½ln|Π|
 grown above divergence_ratio · max(E at the start, 1) — an unstable update bouncing between the joint limits)
 leave the active batch and are never evaluated again. Batched and per-trial runs perform the same arithmetic row by row.
 """
@@ -16,7 +16,7 @@ leave the active batch and are never evaluated again. Batched and per-trial runs
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import torch
 
@@ -41,7 +41,7 @@ class PerceptionConfig:
     attractor_gain: float = 1.0    # β in f(μ) = β Jᵀ (x_d − g(μ))
     integrator: str = "local_linear"
     max_step: float | None = 0.2   # rad; trust region on one step of the joints (None: off)
-    divergence_step: float = 1e3   # rad; a raw step larger than this marks the trial diverged
+    divergence_step: float = 1e3   # rad; an Euler step larger than this marks the trial diverged
     divergence_ratio: float | None = 100.0   # E growing this much above max(E_start, 1) marks it diverged
     precisions: tuple[tuple[str, float], ...] = ()   # per-modality overrides, e.g. (("ee_xyz", 1e4),)
     precision_update: str = "step"  # "step": Π from model.precision(μ) at every step; "initial": at μ0 only
@@ -90,7 +90,6 @@ class _Sensors:                    # what one run needs about its observations, 
     observations: dict[str, torch.Tensor]
     fixed: dict[str, torch.Tensor]            # modality → (B, *out) precision held fixed
     goal: tuple[object, torch.Tensor] | None = None
-    extra: dict = field(default_factory=dict)
 
 
 class Perception:
@@ -166,8 +165,10 @@ class Perception:
             else:
                 du = cfg.dt * flow
             raw = du.abs().amax(dim=(1, 2))                                # (b_a,)
-            bad = ~torch.isfinite(f_a) | ~torch.isfinite(raw) | (raw > cfg.divergence_step)
-            if cfg.divergence_ratio is not None:
+            bad = ~torch.isfinite(f_a) | ~torch.isfinite(raw)
+            if not need_h:                                                 # explicit Euler: a huge step is the
+                bad |= raw > cfg.divergence_step                           # instability; a Newton-like step near
+            if cfg.divergence_ratio is not None:                           # a singular pose is not (trust region)
                 bad |= energy > cfg.divergence_ratio * start_error[active].clamp_min(1.0)
             if cfg.max_step is not None:
                 scale = (cfg.max_step / du[:, 0].abs().amax(-1).clamp_min(1e-300)).clamp(max=1.0)

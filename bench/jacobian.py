@@ -33,14 +33,16 @@ def load_robot() -> Robot:
         return Robot.load("planar2")
 
 
-def median_time(fn, repeats: int) -> tuple[float, torch.Tensor]:
-    out = fn()                                                   # warm-up (and the result to compare)
-    times = []
+def interleaved_medians(fns: dict, repeats: int) -> tuple[dict[str, float], dict[str, torch.Tensor]]:
+    """Median seconds of each function, timed in turn within each repeat (fair under a varying machine load)."""
+    outputs = {name: fn() for name, fn in fns.items()}            # warm-up, and the results to compare
+    times = {name: [] for name in fns}
     for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times), out
+        for name, fn in fns.items():
+            start = time.perf_counter()
+            fn()
+            times[name].append(time.perf_counter() - start)
+    return {name: statistics.median(t) for name, t in times.items()}, outputs
 
 
 def main() -> None:
@@ -77,9 +79,10 @@ def main() -> None:
         rows = [torch.autograd.grad(mean[:, o].sum(), zz, retain_graph=o < n_out - 1)[0] for o in range(n_out)]
         return torch.stack(rows, 1)                                             # (B, O, Dz)
 
-    t_closed, j_closed = median_time(lambda: model.jacobian(z), args.repeats)
-    t_gpytorch, j_gpytorch = median_time(gpytorch_autograd, args.repeats)
-    t_own, j_own = median_time(own_mean_autograd, args.repeats)
+    t, j = interleaved_medians({"closed": lambda: model.jacobian(z), "gpytorch": gpytorch_autograd,
+                                "own": own_mean_autograd}, args.repeats)
+    t_closed, t_gpytorch, t_own = t["closed"], t["gpytorch"], t["own"]
+    j_closed, j_gpytorch, j_own = j["closed"], j["gpytorch"], j["own"]
 
     print(f"robot {robot.name}, {model.train_u_.shape[0]} training points, {args.n_query} queries, "
           f"torch threads {torch.get_num_threads()}, median of {args.repeats}")

@@ -77,7 +77,12 @@ def main() -> None:
             zz = BODY.to_unit(z).requires_grad_(True)
             torch.autograd.grad(reference(zz), zz, v[:, None])
 
+    def forward_then_vjp():   # what an AIF step needs: the prediction (for the error) and Jᵀ(Π ε)
+        x_hat, vjp = model.predict_and_vjp(z)
+        vjp(v)
+
     t_batched = seconds(lambda: model.vjp(z, v), args.repeats)
+    t_step = seconds(forward_then_vjp, args.repeats)
     t_forward = seconds(lambda: model.predict(z), args.repeats)
     t_loop = seconds(per_sample, 1, warmup=0)   # 500 calls: warm after the first few
     t_jac = seconds(via_jacobian, max(1, args.repeats // 5))
@@ -89,6 +94,8 @@ def main() -> None:
           f"{n_params} params), batch {b}, {args.threads} threads")
     print(f"  batched vjp (forward + backward) : {t_batched * 1e3:8.1f} ms/batch  "
           f"{t_batched * us:7.1f} µs/sample-step")
+    print(f"  predict_and_vjp (one forward)    : {t_step * 1e3:8.1f} ms/batch  {t_step * us:7.1f} µs/sample-step "
+          f"(vs predict + vjp: {(t_forward + t_batched) * us:.1f})")
     print(f"  forward only (predict)           : {t_forward * 1e3:8.1f} ms/batch  {t_forward * us:7.1f} µs/sample")
     print(f"  per-sample vjp loop              : {t_loop * 1e3:8.1f} ms/batch  {t_loop * us:7.1f} µs/sample-step")
     print(f"  Jacobian (B, 4480, 4) then Jᵀv   : {t_jac * 1e3:8.1f} ms/batch  {t_jac * us:7.1f} µs/sample-step")

@@ -20,6 +20,7 @@ import tyro
 from bodyschema.datagen.config import DatagenConfig
 from bodyschema.demo import DemoConfig
 from bodyschema.evaluation.levels import LevelsConfig
+from bodyschema.evaluation.robustness import RobustnessConfig
 from bodyschema.training.config import TrainConfig
 
 
@@ -46,19 +47,26 @@ class RegistryPromote:
     tracking_uri: str | None = None
 
 
-def _group(description: str, **members):
-    choices = tuple(Annotated[cls, tyro.conf.subcommand(name)] for name, cls in members.items())
-    return Annotated[Union[choices], tyro.conf.arg(help=description)]  # noqa: UP007 (tyro needs a Union)
+def _command(name: str, kind, description: str):
+    return Annotated[kind, tyro.conf.subcommand(name, description=description)]
 
 
-COMMANDS = {
-    "datagen": Annotated[DatagenConfig, tyro.conf.arg(help="Generate a motor-babbling dataset (Zarr v3).")],
-    "validate": ValidateArgs,
-    "train": Annotated[TrainConfig, tyro.conf.arg(help="Fit one sensory model, log it to MLflow, register it.")],
-    "registry": _group("Inspect and manage the MLflow model registry.", list=RegistryList, promote=RegistryPromote),
-    "evaluate": _group("Run an evaluation benchmark.", levels=LevelsConfig),
-    "demo": Annotated[DemoConfig, tyro.conf.arg(help="The end-to-end demo: babble, fit, register, evaluate.")],
-}
+def _group(name: str, description: str, *members):
+    return _command(name, Union[tuple(_command(*m) for m in members)], description)  # noqa: UP007 (tyro: Union)
+
+
+COMMANDS = Union[(  # noqa: UP007
+    _command("datagen", DatagenConfig, "Generate a motor-babbling dataset (Zarr v3)."),
+    _command("validate", ValidateArgs, "Check a dataset store; exit 0 when valid, else list every problem."),
+    _command("train", TrainConfig, "Fit one sensory model on a dataset, log it to MLflow and register it."),
+    _group("registry", "Inspect and manage the MLflow model registry.",
+           ("list", RegistryList, "List registered model versions, metrics and aliases."),
+           ("promote", RegistryPromote, "Move the `champion` alias to NAME's VERSION.")),
+    _group("evaluate", "Run an evaluation benchmark.",
+           ("levels", LevelsConfig, "Estimation levels 1–3: where is my body? (AIF perception)"),
+           ("robustness", RobustnessConfig, "Joint error vs observation noise and with a broken sensor.")),
+    _command("demo", DemoConfig, "The end-to-end demo: babble, fit, register, evaluate."),
+)]
 
 
 def run(config) -> int:
@@ -95,6 +103,10 @@ def run(config) -> int:
 
         summary = run_levels(config)
         print("\n".join(f"{k}: {v}" for k, v in summary.paths.items()))
+    elif isinstance(config, RobustnessConfig):
+        from bodyschema.evaluation.robustness import run_robustness
+
+        print("\n".join(f"{k}: {v}" for k, v in run_robustness(config).items()))
     elif isinstance(config, DemoConfig):
         from bodyschema.demo import run_demo
 
@@ -103,10 +115,9 @@ def run(config) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    config = tyro.extras.subcommand_cli_from_dict(COMMANDS, prog="bodyschema", args=argv,
-                                                  description="A robot learns its body by motor babbling and "
-                                                              "perceives it by active inference.")
     try:
+        config = tyro.cli(COMMANDS, prog="bodyschema", args=argv,
+                          description="A robot learns its body by motor babbling and perceives it by active inference.")
         return run(config)
     except (ValueError, FileNotFoundError, FileExistsError, PermissionError, OSError) as error:
         # User-facing errors are already in the house form; no traceback for them.

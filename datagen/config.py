@@ -28,24 +28,24 @@ EXECUTION_FIELDS = ("workers", "backend", "out", "overwrite")  # how, not what: 
 class DatagenConfig:
     """One dataset: which robot, how many samples, how they are drawn, and where they go."""
 
-    robot: Literal["planar2", "nao_arm", "panda"] = "planar2"  # planar2: the 2-DoF toy, seconds to generate
+    robot: Literal["planar2", "nao_arm", "panda"] = "planar2"  # which arm; planar2 (2-DoF toy): seconds to make
     n: int = 10_000  # samples; 10k fits a GPR on ee_xyz and an MDN on pixels within minutes
-    sampler: Literal["uniform", "gaussian", "babble"] = "uniform"  # uniform covers the joint box evenly
-    image_size: tuple[int, int] | None = None  # (H, W) px; None: the robot's default camera size
-    rgb: bool = False  # grayscale is what the pixel decoder of the seed paper learns from
-    images: bool = True  # False: kinematics only (q, ee_xyz, ee_pixel, jacobian), ~100x faster: no rendering
-    workers: int = 1  # processes; the data do not depend on it
+    sampler: Literal["uniform", "gaussian", "babble"] = "uniform"  # how q is drawn; uniform covers the box evenly
+    image_size: tuple[int, int] | None = None  # (H, W) px; None: the robot's camera default (nao_arm 56 x 80)
+    rgb: bool = False  # colour images; grayscale by default, what the seed paper's pixel decoder learns from
+    images: bool = True  # render camera images; --no-images: kinematics only, ~100x faster
+    workers: int = 1  # parallel processes; 1 by default, the data do not depend on it
     backend: Literal["loky", "ray"] = "loky"  # loky: local cores, no server; ray: a cluster (RAY_ADDRESS)
     seed: int = 0  # shard i draws from SeedSequence([seed, i]); same seed -> byte-identical arrays
-    out: Path | None = None  # the .zarr store; None: data/<robot>_<sampler>_<n>.zarr
-    overwrite: bool = False  # an existing store with another config is refused unless this is set
-    ranges: tuple[tuple[float, float], ...] | None = None  # rad (lo, hi) per joint; None: robot's sampling ranges
+    out: Path | None = None  # the .zarr store to write; None: data/<robot>_<sampler>_<n>.zarr
+    overwrite: bool = False  # replace an existing store made with another config (refused otherwise)
+    ranges: tuple[tuple[float, float], ...] | None = None  # (lo, hi) rad per joint; None: the robot's own ranges
     gravity: float | None = None  # m/s^2 magnitude, pointing down; None: 9.81 (0 or 3.7 for adaptation studies)
     shard_size: int | None = None  # samples per shard = Zarr chunk rows; None: 512 with images, 16384 without
     # (~1-3 MB chunks: small enough for progress and resume, large enough that Zarr calls cost nothing)
-    hold_s: tuple[float, float] = (0.2, 1.0)  # babble: each random target is held this long (s), uniform
-    record_hz: float = 20.0  # babble: sampling rate of the recorded trajectory (Hz), ~ a camera frame rate
-    episode_s: float = 10.0  # babble: each episode restarts from a random pose at rest after this long (s)
+    hold_s: tuple[float, float] = (0.2, 1.0)  # babble: each random target is held U(min, max) s, a human-like pace
+    record_hz: float = 20.0  # babble: recording rate (Hz), ~ a camera frame rate
+    episode_s: float = 10.0  # babble: episode length (s); each starts at rest from a random pose
 
     def __post_init__(self) -> None:
         def fix(name: str, value: Any) -> None:

@@ -102,7 +102,8 @@ def run_shard(path: str, config_dict: dict, shard: Shard) -> int:
         arrays = {"q": sample_kinematic(config.sampler, rng, ranges, robot.joint_limits, shard.stop - shard.start)}
     else:
         arrays = babbler.episodes(rng, ranges, list(shard.episode_lengths), shard.first_episode)
-    arrays.update(robot.observe(arrays["q"].astype(np.float64), image=config.images))  # q as stored (float32)
+    observed = robot.observe(arrays["q"].astype(np.float64), image=config.images)  # q as stored (float32)
+    arrays.update({k: v for k, v in observed.items() if k not in arrays})  # babbling keeps its simulated touch
     try:
         root = open_store(Path(path), mode="r+")
         write_shard(root, shard.start, arrays)
@@ -115,17 +116,18 @@ def run_shard(path: str, config_dict: dict, shard: Shard) -> int:
 # ---- the job --------------------------------------------------------------------------------------------------
 def _attrs(config: DatagenConfig, robot: Robot, ranges: np.ndarray, shards: list[Shard], feats: dict) -> dict:
     if config.sampler == "uniform":
-        params = {"low": ranges[:, 0].tolist(), "high": ranges[:, 1].tolist()}
+        params = {"low": ranges[:, 0].tolist(), "high": ranges[:, 1].tolist(), "touch": "at rest at q"}
     elif config.sampler == "gaussian":
         params = {"mean": ranges.mean(axis=1).tolist(), "std": (np.diff(ranges, axis=1)[:, 0] / 6).tolist(),
-                  "clip": ranges.tolist()}
+                  "clip": ranges.tolist(), "touch": "at rest at q"}
     else:
         b = Babbler(robot.model, list(robot.joint_names), robot.joint_limits, config.record_hz, config.hold_s)
         params = {"targets": "uniform in sampling_ranges", "hold_s": list(config.hold_s),
                   "record_hz": config.record_hz, "rate_hz": b.rate_hz, "stride_steps": b.stride,
                   "timestep_s": float(robot.model.opt.timestep), "episode_len": config.episode_len(),
                   "n_episodes": sum(len(s.episode_lengths) for s in shards), "actuators": "position",
-                  "gravity_m_s2": float(-robot.model.opt.gravity[2]), "start": "at rest, uniform in sampling_ranges"}
+                  "gravity_m_s2": float(-robot.model.opt.gravity[2]), "start": "at rest, uniform in sampling_ranges",
+                  "touch": "simulated contact force at the recorded instant"}
     return {"schema_version": SCHEMA_VERSION, "robot": robot.name, "mjcf_sha256": robot.mjcf_sha256,
             "dq": robot.dq, "joint_names": list(robot.joint_names), "joint_limits": robot.joint_limits.tolist(),
             "sampling_ranges": ranges.tolist(), "camera_name": robot.camera_name,

@@ -26,6 +26,7 @@ ACTUATOR_KINDS = ("position", "torque")
 IMAGE_SIZE_RANGE = (8, 1024)   # px, per side; the MJCF offscreen buffers are 1024 × 1024
 LIMIT_TOLERANCE = 0.05         # rad; the simulator's soft joint limits let recorded q overshoot a little
 GRAVITY = 9.81                 # m/s², default magnitude (downward, −z)
+VECTORIZE_FROM = 32            # poses; smaller batches call MuJoCo per pose (numpy's per-op cost dominates)
 
 # Per robot: camera, default image (H, W), default babbling ranges in rad (inside the MJCF limits).
 _PANDA_LIMITS = np.array([[-2.8973, 2.8973], [-1.7628, 1.7628], [-2.8973, 2.8973], [-3.0718, -0.0698],
@@ -75,6 +76,7 @@ class Robot:
         self.check_ranges(sampling_ranges)
         self.sampling_ranges = np.array(sampling_ranges, dtype=np.float64)         # (Dq, 2) rad
         self._renderer = None
+        self._chain = _HingeChain(model, self._site)
         self._camera_pose()
 
     # ---- construction --------------------------------------------------------------------------------
@@ -176,10 +178,14 @@ class Robot:
         return out
 
     def _jacobian(self, q: np.ndarray) -> np.ndarray:
-        return self._fk_and_jacobian(q)[1]
+        return self._mj_fk_and_jacobian(q)[1]
 
     def _fk_and_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Unchecked (any finite q, limits not enforced): (N, 3) m and (N, 3, Dq) m/rad in one pass."""
+        """Unchecked (any finite q, limits not enforced): (N, 3) m and (N, 3, Dq) m/rad, the fastest way."""
+        return self._chain(q) if q.shape[0] >= VECTORIZE_FROM else self._mj_fk_and_jacobian(q)
+
+    def _mj_fk_and_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The reference: mj_kinematics + mj_comPos + mj_jacSite per pose."""
         m, d, qpos, ee, site = self.model, self._kin, self._qpos, self._ee, self._site
         kinematics, com_pos, jac_site = mujoco.mj_kinematics, mujoco.mj_comPos, mujoco.mj_jacSite
         xyz, jac = np.empty((q.shape[0], 3)), np.empty((q.shape[0], 3, self.dq))
@@ -303,3 +309,57 @@ def _check_image_size(size) -> tuple[int, int]:
     if not ok:
         raise ValueError(must_be("image_size", f"(H, W) with each side an integer in [{lo}, {hi}] px", size))
     return h, w
+
+
+class _HingeChain:
+    """mj_kinematics' recursion for the hinge chain from the world to the `ee` site, vectorized over poses.
+
+    Per body (parents first): x_b = x_parent + R_parent·body_pos, R_b = R_parent·R(body_quat); each hinge j
+    then turns the body frame by (q_j − qpos0_j) about its local axis, keeping the anchor
+    p_j = x_b + R_b·jnt_pos fixed (MuJoCo engine_core_smooth.c, mj_kinematics). The site Jacobian column is
+    a_j × (x_ee − p_j) with the world axis a_j = R_b·axis_j, as mj_jacSite gives for hinges.
+    Equal to the per-pose MuJoCo calls to ~1e-14 (tested).
+    """
+
+    def __init__(self, model: mujoco.MjModel, site: int):
+        body, path = int(model.site_bodyid[site]), []
+        while body != 0:
+            path.append(body)
+            body = int(model.body_parentid[body])
+        self.path = path[::-1]                                                  # world's child first
+        self.body_pos = np.array(model.body_pos)                                # (nbody, 3) m
+        self.body_rot = np.array([_quat_to_mat(quat) for quat in model.body_quat])   # (nbody, 3, 3)
+        self.joints = {b: np.nonzero(model.jnt_bodyid == b)[0] for b in self.path}
+        self.jnt_pos, self.jnt_axis = np.array(model.jnt_pos), np.array(model.jnt_axis)
+        self.qpos0, self.qadr = np.array(model.qpos0), np.array(model.jnt_qposadr)
+        self.site_pos = np.array(model.site_pos[site])
+        self.dq = model.njnt
+        # Rodrigues about the local axis a: R(θ) = I + sin θ·[a]× + (1 − cos θ)·[a]×²   (constant [a]×, [a]×²)
+        self.skew = np.array([-np.cross(np.eye(3), axis).T for axis in self.jnt_axis])  # (Dq, 3, 3): [a]×v = a × v
+        self.skew2 = self.skew @ self.skew
+
+    def __call__(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        n = q.shape[0]
+        pos, rot = np.zeros((n, 3)), np.broadcast_to(np.eye(3), (n, 3, 3))     # (N, 3) m, (N, 3, 3)
+        anchors, axes = np.zeros((self.dq, n, 3)), np.zeros((self.dq, n, 3))
+        for b in self.path:
+            pos = pos + np.einsum("nij,j->ni", rot, self.body_pos[b])
+            rot = rot @ self.body_rot[b]
+            for j in self.joints[b]:
+                anchors[j] = pos + np.einsum("nij,j->ni", rot, self.jnt_pos[j])
+                axes[j] = np.einsum("nij,j->ni", rot, self.jnt_axis[j])
+                angle = q[:, self.qadr[j]] - self.qpos0[self.qadr[j]]                  # (N,) rad
+                turn = np.eye(3) + np.sin(angle)[:, None, None] * self.skew[j] \
+                    + (1.0 - np.cos(angle))[:, None, None] * self.skew2[j]             # (N, 3, 3)
+                rot = rot @ turn
+                if self.jnt_pos[j].any():                                               # off-centre hinge
+                    pos = anchors[j] - np.einsum("nij,j->ni", rot, self.jnt_pos[j])
+        xyz = pos + np.einsum("nij,j->ni", rot, self.site_pos)                  # (N, 3) m
+        jac = np.cross(axes, xyz[None] - anchors)                               # (Dq, N, 3) m/rad
+        return xyz, jac.transpose(1, 2, 0)                                      # (N, 3), (N, 3, Dq)
+
+
+def _quat_to_mat(quat: np.ndarray) -> np.ndarray:
+    mat = np.empty(9)
+    mujoco.mju_quat2Mat(mat, np.asarray(quat, dtype=np.float64))
+    return mat.reshape(3, 3)

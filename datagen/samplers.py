@@ -67,6 +67,8 @@ class Babbler:
         self.stride = max(1, round(1.0 / (record_hz * dt)))  # physics steps between recorded samples
         self.rate_hz = 1.0 / (self.stride * dt)
         self.hold_steps = (max(1, round(hold_s[0] / dt)), max(1, round(hold_s[1] / dt)))
+        touch = [s for s in range(model.nsensor) if model.sensor_type[s] == mujoco.mjtSensor.mjSENS_TOUCH]
+        self.touch_adr = int(model.sensor_adr[touch[0]]) if touch else None  # contact force (N) during babbling
 
     def _position_actuator(self, joint_id: int, name: str) -> int:
         m = self.model
@@ -80,7 +82,8 @@ class Babbler:
     def episode(self, rng: np.random.Generator, ranges: np.ndarray, n: int) -> dict[str, np.ndarray]:
         """One episode of n recorded samples, starting at rest from a random pose in `ranges` (Dq, 2) rad.
 
-        Returns q (n, Dq) float32 rad, qvel (n, Dq) float32 rad/s, t (n,) float32 s since the episode start.
+        Returns q (n, Dq) float32 rad, qvel (n, Dq) float32 rad/s, t (n,) float32 s since the episode start, and
+        touch (n, 1) float32 N, the simulated contact force at that instant, when the robot has a touch sensor.
         """
         m, d = self.model, self.data
         lo, hi = ranges[:, 0], ranges[:, 1]
@@ -91,10 +94,13 @@ class Babbler:
         mujoco.mj_forward(m, d)
         q = np.empty((n, len(lo)))
         qvel = np.empty((n, len(lo)))
-        t = np.empty(n)
+        t, touch = np.empty(n), np.empty((n, 1))
         step, next_switch = 0, 0
         for k in range(n):
             q[k], qvel[k], t[k] = d.qpos[self.qadr], d.qvel[self.dadr], d.time
+            if self.touch_adr is not None:
+                mujoco.mj_forward(m, d)  # sensors of the current state (mj_step leaves the pre-step values)
+                touch[k, 0] = d.sensordata[self.touch_adr]
             record_at = step + self.stride
             while step < record_at:  # advance to the next recording, switching targets on the way
                 if step >= next_switch:
@@ -103,12 +109,15 @@ class Babbler:
                 nstep = min(record_at, next_switch) - step
                 mujoco.mj_step(m, d, nstep)
                 step += nstep
-        return {"q": to_stored_q(q, self.limits), "qvel": qvel.astype(np.float32), "t": t.astype(np.float32)}
+        out = {"q": to_stored_q(q, self.limits), "qvel": qvel.astype(np.float32), "t": t.astype(np.float32)}
+        if self.touch_adr is not None:
+            out["touch"] = touch.astype(np.float32)
+        return out
 
     def episodes(self, rng: np.random.Generator, ranges: np.ndarray, lengths: list[int],
                  first_episode: int) -> dict[str, np.ndarray]:
         """Consecutive episodes of the given lengths; adds `episode` (int32 global index) to the arrays."""
         parts = [self.episode(rng, np.asarray(ranges, float), n) for n in lengths]
-        out = {key: np.concatenate([p[key] for p in parts]) for key in ("q", "qvel", "t")}
+        out = {key: np.concatenate([p[key] for p in parts]) for key in parts[0]}
         out["episode"] = np.repeat(np.arange(first_episode, first_episode + len(lengths), dtype=np.int32), lengths)
         return out

@@ -2,7 +2,8 @@
 
 Layout of one store (a directory `*.zarr`), all data arrays sharing the first (sample) axis N:
     q (N, Dq) f32 rad · ee_xyz (N, 3) f32 m · ee_pixel (N, 2) f32 px · jacobian (N, 3, Dq) f32 m/rad
-    image (N, H, W[, 3]) u8 (when rendered) · touch (N, 1) f32 · qvel (N, Dq) f32 rad/s · episode (N,) i32 · t (N,) f32 s
+    image (N, H, W[, 3]) u8 (when rendered) · touch (N, 1) f32 N (robots with a touch sensor)
+    babbling only: qvel (N, Dq) f32 rad/s · episode (N,) i32 · t (N,) f32 s since the episode start
     shard_done (n_shards,) u8 — bookkeeping, one chunk per shard, 1 once that shard's data are written.
 The sample-axis chunk length equals the shard length, so each worker writes whole chunks of its own: no locks.
 Root attrs hold the metadata (robot, camera, sampler, seed, config, versions); `complete=True` is written last.

@@ -31,8 +31,11 @@ def project(K: np.ndarray, world_to_cam: np.ndarray, xyz: np.ndarray) -> np.ndar
 def _expected_features(attrs: dict) -> dict[str, dict]:
     if isinstance(attrs.get("features"), dict):
         return attrs["features"]
-    dq = len(attrs.get("joint_names", [])) or int(attrs.get("dq", 0))
-    return features(dq, None, False, attrs.get("sampler") == "babble")  # best effort without the schema
+    dq = len(attrs.get("joint_names", [])) or int(attrs.get("dq", 0))  # best effort without the schema attr
+    image = None
+    if attrs.get("images") and "image_size" in attrs:
+        image = (*attrs["image_size"], 3) if attrs.get("channels") == 3 else tuple(attrs["image_size"])
+    return features(dq, image, False, attrs.get("sampler") == "babble")
 
 
 def _check_layout(root: zarr.Group, attrs: dict, problems: list[str]) -> dict[str, zarr.Array]:

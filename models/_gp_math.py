@@ -74,9 +74,9 @@ def mean_and_jacobian(u: torch.Tensor, x: torch.Tensor, k: torch.Tensor, alpha: 
                       lengthscale: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """m and ∂m/∂u in closed form from one kernel matrix.
     u (B, D), x (n, D), k (Ok, B, n), alpha (O, n), lengthscale (Ok, D) → m (O, B), ∂m/∂u (B, O, D)."""
-    w = k * alpha[:, None, :]                                               # (O, B, n)
+    # Σ_i w_i [x_i, 1] with w = α ⊙ k, computed as k @ (α ⊙ [X, 1]): no pass over an (O, B, n) product.
     x1 = torch.cat([x, torch.ones_like(x[:, :1])], -1)                      # (n, D+1)
-    moments = w @ x1                                                        # (O, B, D+1): Σ w x, Σ w
+    moments = k @ (alpha[:, :, None] * x1)                                  # (O, B, D+1): Σ w x, Σ w
     mean = moments[..., -1]                                                 # (O, B): Σ_i α_i k_i = m
     jac = -(u[None] * mean[..., None] - moments[..., :-1]) / lengthscale.pow(2)[:, None, :]   # (O, B, D)
     return mean, jac.transpose(0, 1)                                        # (O, B), (B, O, D)

@@ -122,7 +122,8 @@ class TrainSettings:
 
     def __post_init__(self):
         if min(self.epochs, self.batch_size, self.patience) < 1 or not self.lr > 0 or self.weight_decay < 0:
-            raise ValueError(must_be("epochs, batch_size, patience, lr, weight_decay", "≥ 1, ≥ 1, ≥ 1, > 0, ≥ 0",
+            raise ValueError(must_be("(epochs, batch_size, patience, lr, weight_decay)",
+                                     "(≥ 1, ≥ 1, ≥ 1, > 0, ≥ 0)",
                                      (self.epochs, self.batch_size, self.patience, self.lr, self.weight_decay)))
 
 
@@ -256,6 +257,20 @@ class NetModel:
             z = z.detach().requires_grad_(True)
             (grad,) = torch.autograd.grad(self._g(z), z, v)
         return grad   # (B, Dz)
+
+    def predict_and_vjp(self, z: torch.Tensor):
+        """g(z) and v ↦ Jᵀv from that same forward pass: an AIF step needs both, so one forward instead of two.
+        # (B, Dz) → (B, *out), fn((B, *out)) → (B, Dz)"""
+        z = self._check_z(z)
+        with torch.enable_grad():
+            leaf = z.detach().requires_grad_(True)
+            out = self._g(leaf)
+
+        def vjp(v: torch.Tensor) -> torch.Tensor:
+            (grad,) = torch.autograd.grad(out, leaf, self._check_v(v, z), retain_graph=True)
+            return grad
+
+        return out.detach(), vjp
 
     def _state(self) -> dict[str, torch.Tensor]:
         return {f"net.{k}": v for k, v in self.net_.state_dict().items()}

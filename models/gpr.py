@@ -7,11 +7,14 @@ Fitting (`fit`):
 1. at most `max_points` samples are kept (a seeded uniform random subset beyond that);
 2. hyper-parameters maximize the exact marginal likelihood (Adam, then L-BFGS) on a seeded random subset of
    `hyper_points` samples, with gpytorch forced to Cholesky (it silently switches to approximate CG solves
-   above `max_cholesky_size` = 800 points, measured ~1000× worse mean error on arm kinematics);
+   above `max_cholesky_size` = 800 points: measured 55 mm instead of 0.003 mm mean error on nao_arm, 2000 poses);
 3. the GP is conditioned on all kept samples with our own Cholesky: α = (K + σ²I)⁻¹ y (see `_gp_math.py`).
+   `condition(q, x)` re-does only this step on new data.
 
 Prediction, Jacobian (no autograd) and variance are closed form from the cached α (`_gp_math.py`), then
-chained through the target de-standardization and the latent scaling rad → [-1, 1].
+chained through the target de-standardization and the latent scaling rad → [-1, 1]; `predict_with_jacobian`
+shares one kernel matrix between both. Saved state: hyper-parameters, scaled training inputs, α and the target
+scaling; the Cholesky factor (only the precision needs it) is recomputed on first use after a load.
 """
 
 from __future__ import annotations
@@ -91,7 +94,12 @@ class GPRModel(BaseSensoryModel):
     # ---- fitting ------------------------------------------------------------------------------------
     def fit(self, q, x, *, seed: int = 0, val=None, on_epoch: Callable[[int, dict[str, float]], None] | None = None,
             progress: bool = True) -> "GPRModel":
-        """Fit on joint angles q (N, Dz) rad and observations x (N, *output_shape). Returns self."""
+        """Fit on joint angles q (N, Dz) rad and observations x (N, *output_shape) (numpy or torch). Returns self.
+
+        seed: the random subsets (max_points, hyper_points). val = (q_val, x_val): evaluated once after fitting.
+        on_epoch(step, metrics): every marginal-likelihood evaluation {"train_neg_mll"} (−MLL per point, summed
+        over outputs), then {"val_mean_error", "val_rmse"} (Euclidean, output units) when val is given.
+        """
         q, y = _gp_data.check_training_data(q, x, self.body, self.output_shape)        # (N, Dz), (N, O)
         if val is not None:
             val = _gp_data.check_training_data(*val, self.body, self.output_shape, prefix="val ")

@@ -67,6 +67,7 @@ class MDNModel(NetModel, BaseSensoryModel):
 
     # ---- fit ------------------------------------------------------------------------------------------
     def fit(self, q, x, *, seed: int = 0, val=None, on_epoch=None, progress: bool = True, checkpoint=None):
+        """Train on q (N, Dz) rad, x (N, *output_shape) by the NLL (`_nn_fit.train`); self."""
         q, x = check_fit_data(q, x, self.latent_dim, self.output_shape)     # (N, Dz), (N, *out)
         val = check_val(val, self.latent_dim, self.output_shape)
         self.x_mean_, self.x_scale_ = output_standardizer(x)             # (O,), (O,)

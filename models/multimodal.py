@@ -64,6 +64,7 @@ class MultimodalMember(NetModel, BaseSensoryModel):
         self.fit_info_: dict = {}
 
     def fit(self, q, x, *, seed: int = 0, val=None, on_epoch=None, progress: bool = True, checkpoint=None):
+        """Train on q (N, Dz) rad, x (N, *output_shape) by the Gaussian NLL with its λ (`_nn_fit.train`); self."""
         val = None if val is None else (val[0], {self.modality: val[1]}) if isinstance(val, (tuple, list)) else val
         fit_jointly({self.modality: self}, q, {self.modality: x}, seed=seed, val=val, on_epoch=on_epoch,
                     progress=progress, checkpoint=checkpoint, settings=self.settings)

@@ -89,6 +89,7 @@ class PixelDecoder(NetModel, BaseSensoryModel):
 
     # ---- fit ------------------------------------------------------------------------------------------
     def fit(self, q, x, *, seed: int = 0, val=None, on_epoch=None, progress: bool = True, checkpoint=None):
+        """Train on q (N, Dz) rad, x (N, *output_shape) by the per-pixel squared error (`_nn_fit.train`); self."""
         q, x = check_fit_data(q, x, self.latent_dim, self.output_shape)     # (N, Dz), (N, *out) in [0, 1]
         val = check_val(val, self.latent_dim, self.output_shape)
         gen = torch.Generator().manual_seed(seed)

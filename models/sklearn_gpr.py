@@ -70,7 +70,12 @@ class SklearnGPRModel(BaseSensoryModel):
     # ---- fitting ------------------------------------------------------------------------------------
     def fit(self, q, x, *, seed: int = 0, val=None, on_epoch: Callable[[int, dict[str, float]], None] | None = None,
             progress: bool = True) -> "SklearnGPRModel":
-        """Fit on joint angles q (N, Dz) rad and observations x (N, *output_shape). Returns self."""
+        """Fit on joint angles q (N, Dz) rad and observations x (N, *output_shape) (numpy or torch). Returns self.
+
+        seed: the random subsets. val = (q_val, x_val): evaluated once after fitting. on_epoch(step, metrics):
+        every log-marginal-likelihood evaluation {"train_neg_lml"} (total, scikit-learn's objective), then
+        {"val_mean_error", "val_rmse"} (Euclidean, output units) when val is given.
+        """
         q, y = _gp_data.check_training_data(q, x, self.body, self.output_shape)        # (N, Dz), (N, O)
         if val is not None:
             val = _gp_data.check_training_data(*val, self.body, self.output_shape, prefix="val ")

@@ -47,7 +47,7 @@ class TrainConfig:
     seed: int = 0  # split and model init; same seed and data -> same model
     val_fraction: float = 0.2  # held-out share (whole episodes when the store has `episode`)
     max_train: int | None = None  # cap on training samples (GPs are O(N^3)); None: all of them
-    hyper: dict[str, str] = field(default_factory=dict)  # model hyper-parameters, e.g. {"epochs": "50"}; values parsed as JSON
+    hyper: dict[str, str] = field(default_factory=dict)  # model hyper-parameters: --hyper epochs 50 hidden [64,64] (JSON values)
     experiment: str = "bodyschema"  # MLflow experiment; one for the whole project keeps runs comparable
     tracking_uri: str | None = None  # None: $MLFLOW_TRACKING_URI, else sqlite:///<cwd>/mlflow.db (no server)
     run_root: Path = Path("runs")  # checkpoints, saved model and plots, in <run_root>/<kind>-<modality>-<hash>
@@ -97,9 +97,9 @@ class TrainConfig:
         return json.loads(json.dumps(dataclasses.asdict(self), default=str))
 
     def identity(self, dataset_sha256: str) -> dict[str, Any]:
-        """What determines the trained model: the identity fields plus the data's content digest."""
-        values = {k: v for k, v in self.to_dict().items() if k not in NON_IDENTITY_FIELDS}
-        values["data"] = str(self.data.resolve())
+        """What determines the trained model: the identity fields and the data's content digest (not its path:
+        a moved or copied store with the same content is the same data)."""
+        values = {k: v for k, v in self.to_dict().items() if k not in (*NON_IDENTITY_FIELDS, "data")}
         values["hyper"] = self.hyper_values()
         values["dataset_sha256"] = dataset_sha256
         return values

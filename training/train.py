@@ -4,7 +4,8 @@ One call is one MLflow run. Steps: resolve tracking; load, validate and split th
 from the kind table; fit it with a checkpoint in `<run_root>/<kind>-<modality>-<config hash>/` (a killed run
 started again with the same config resumes there, and continues the same MLflow run); score it on the
 held-out split (`val_rmse` in output units decides the champion); save, plot, log, register.
-An exception anywhere before registration ends the run FAILED and registers nothing.
+An exception anywhere before registration ends the run FAILED and registers nothing; Ctrl-C ends it KILLED.
+A multimodal model registers one SensoryModel per modality, `bodyschema-{robot}-{modality}-multimodal`.
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from mlflow.data.meta_dataset import MetaDataset
 from mlflow.exceptions import MlflowException
 
 from bodyschema.training import plots
-from bodyschema.training.config import TrainConfig, build_model
+from bodyschema.training.config import NON_IDENTITY_FIELDS, TrainConfig, build_model
 from bodyschema.training.data import Dataset, Split, as_float, load_dataset
 from bodyschema.training.mlflow_model import DIGEST_TAG, log_sensory_model
 from bodyschema.training.registry import (METRIC, ensure_experiment, registered_name, update_champion,
@@ -109,7 +110,11 @@ def train(config: TrainConfig) -> TrainResult:
         if "checkpoint" in inspect.signature(model.fit).parameters:
             fit_kwargs["checkpoint"] = run_dir / "checkpoint.pt"
         t0 = time.perf_counter()
-        model.fit(data.train.q, train_x, **fit_kwargs)
+        try:
+            model.fit(data.train.q, train_x, **fit_kwargs)
+        except KeyboardInterrupt:
+            mlflow.end_run("KILLED")         # not FAILED: the same config started again continues this run
+            raise
         metrics = {"fit_seconds": time.perf_counter() - t0}
 
         made, model_dirs, val_preds = {}, {}, {}
@@ -181,13 +186,13 @@ def _log_inputs(config: TrainConfig, data: Dataset, run_name: str) -> None:
     identity = config.identity(data.sha256)
     params = {k: v for k, v in identity.items() if k not in ("hyper", "dataset_sha256")}
     params.update({f"hyper.{k}": v for k, v in identity["hyper"].items()})
-    params.update(n_train=len(data.train), n_val=len(data.val), split_by=data.split_by,
+    params.update(data=str(Path(data.path).resolve()), n_train=len(data.train), n_val=len(data.val), split_by=data.split_by,
                   output_shape={m: list(data.output_shape(m)) for m in data.modalities}, joint_names=",".join(data.body.joint_names))
     mlflow.log_params({k: str(v) for k, v in params.items()})
     tags = {"robot": data.body.robot, "mjcf_sha256": str(data.attrs.get("mjcf_sha256", "")),
             "dataset_sha256": data.sha256, "modality": config.modality, "kind": config.model,
             "config_hash": run_name.rsplit("-", 1)[-1], "python": platform.python_version(),
-            "run_root": str(config.run_root)}
+            **{f"config.{k}": str(getattr(config, k)) for k in NON_IDENTITY_FIELDS}}
     for lib in LIBRARIES:
         try:
             tags[f"version.{lib}"] = importlib.metadata.version(lib)
@@ -213,7 +218,8 @@ def _prediction_plot(data: Dataset, modality: str, val_pred: np.ndarray, out: Pa
 
 
 def _resumable_run(client, run_dir: Path) -> str | None:
-    """The MLflow run of an interrupted earlier attempt at this config (not FINISHED), else None."""
+    """The MLflow run of an interrupted attempt at this config (KILLED by Ctrl-C, or still RUNNING after a hard
+    kill), else None. A FAILED run (an exception) is not continued: a new run starts, from the checkpoint."""
     marker = run_dir / "mlflow_run_id"
     if not marker.is_file():
         return None
@@ -221,7 +227,7 @@ def _resumable_run(client, run_dir: Path) -> str | None:
         run = client.get_run(marker.read_text().strip())
     except MlflowException:
         return None                 # another tracking store, or the run was deleted
-    return run.info.run_id if run.info.status != "FINISHED" and run.info.lifecycle_stage == "active" else None
+    return run.info.run_id if run.info.status in ("RUNNING", "KILLED") and run.info.lifecycle_stage == "active" else None
 
 
 class _History:

@@ -81,3 +81,14 @@ def test_babbling_needs_position_servos():
     robot = Robot.load("planar2", actuators="torque")
     with pytest.raises(ValueError, match="actuators='position'"):
         Babbler(robot.model, list(robot.joint_names), robot.joint_limits, 20.0, (0.2, 0.5))
+
+
+def test_babbling_records_the_simulated_touch_when_the_robot_has_a_sensor():
+    robot = Robot.load("panda")
+    babbler = Babbler(robot.model, list(robot.joint_names), robot.joint_limits, 20.0, (0.2, 0.5))
+    assert babbler.touch_adr is not None
+    ep = babbler.episode(np.random.default_rng(0), robot.sampling_ranges, 40)
+    assert ep["touch"].shape == (40, 1) and ep["touch"].dtype == np.float32 and (ep["touch"] >= 0).all()
+    planar = Robot.load("planar2")
+    assert "touch" not in Babbler(planar.model, list(planar.joint_names), planar.joint_limits, 20.0,
+                                  (0.2, 0.5)).episode(np.random.default_rng(0), planar.sampling_ranges, 5)

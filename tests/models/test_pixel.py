@@ -116,3 +116,15 @@ def test_bad_images_and_shapes_raise():
         tiny_decoder((96,))
     with pytest.raises(ValueError, match="precision must be > 0"):
         tiny_decoder(precision=0.0)
+
+
+def test_predict_and_vjp_reuses_one_forward_and_matches_the_separate_calls():
+    model = TestPixelDecoder().make_model(seed=0)
+    z = joint_angles(3, seed=4).double()
+    v = torch.randn(3, *HW, generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    x_hat, vjp = model.predict_and_vjp(z)
+    torch.testing.assert_close(x_hat, model.predict(z), rtol=0, atol=0)
+    torch.testing.assert_close(vjp(v), model.vjp(z, v))
+    torch.testing.assert_close(vjp(2 * v), 2 * model.vjp(z, v))   # callable more than once
+    with pytest.raises(ValueError, match="v must be"):
+        vjp(v[:2])

@@ -37,6 +37,8 @@ def test_run_identity_ignores_where_results_go_but_not_what_is_trained(tmp_path)
                     experiment="other", register=False)
     assert a.run_dir("x") == b.run_dir("x")
     assert a.run_dir("x") != a.run_dir("y"), "other data content → another run"
+    assert a.run_dir("x") == TrainConfig(model="mdn", data="moved/d", run_root=tmp_path).run_dir("x"), \
+        "the same content elsewhere is the same data"
     assert a.run_dir("x") != TrainConfig(model="mdn", data="d", run_root=tmp_path, seed=1).run_dir("x")
     assert a.run_dir("x") != TrainConfig(model="mdn", data="d", run_root=tmp_path,
                                          hyper={"epochs": "3"}).run_dir("x")

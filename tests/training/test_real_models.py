@@ -19,7 +19,10 @@ CASES = {   # kind: (store fixture, modality, hyper-parameters that keep the fit
 }
 
 
-@pytest.mark.parametrize("kind", list(CASES))
+SLOW = {"sklearn-gpr"}   # same path through `train` as gpr (no checkpoint, vector output)
+
+
+@pytest.mark.parametrize("kind", [pytest.param(k, marks=pytest.mark.slow) if k in SLOW else k for k in CASES])
 def test_kind_trains_registers_and_loads_back(kind, workdir, request):
     store_fixture, modality, hyper = CASES[kind]
     store = request.getfixturevalue(store_fixture)

@@ -9,6 +9,7 @@ import torch
 from mlflow import MlflowClient
 
 from bodyschema.models import BodySpec
+from bodyschema.training.mlflow_model import DIGEST_TAG
 from bodyschema.training.registry import _artifact_dir, list_models, load, promote, tracking_uri
 from bodyschema.training.train import train
 from tests.training.tiny_model import tiny_config
@@ -84,3 +85,14 @@ def test_load_refuses_artifacts_that_changed_after_logging(registered):
     finally:
         state.write_bytes(original)
     load(f"models:/{NAME}/1", tracking=registered)       # restored: loads again
+
+
+def test_load_refuses_a_version_without_a_recorded_digest(registered):
+    client = MlflowClient(registered)
+    digest = client.get_model_version(NAME, "1").tags[DIGEST_TAG]
+    client.delete_model_version_tag(NAME, "1", DIGEST_TAG)
+    try:
+        with pytest.raises(ValueError, match="has no recorded bodyschema.model_sha256"):
+            load(f"models:/{NAME}/1", tracking=registered)
+    finally:
+        client.set_model_version_tag(NAME, "1", DIGEST_TAG, digest)
