@@ -153,7 +153,7 @@ class Perception:
                 break
             ua = u[active]                                                 # (b_a, K, Dz)
             f_a, grad, hess, errors = self._terms(sensors, ua, active, need_h)
-            energy = sum(errors.values(), torch.zeros_like(f_a))               # (b_a,) E = Σ ½ εᵀΠε
+            energy = sum(errors.values(), torch.zeros_like(f_a))           # (b_a,) E = Σ ½ εᵀΠε
             if t == 0:
                 start_error[active] = energy
             evaluations += active.numel()
@@ -165,10 +165,12 @@ class Perception:
             else:
                 du = cfg.dt * flow
             raw = du.abs().amax(dim=(1, 2))                                # (b_a,)
+            # Divergence. Only for Euler is a huge step the instability itself; a Newton-like step near a singular
+            # pose is legitimate and is cut by the trust region below.
             bad = ~torch.isfinite(f_a) | ~torch.isfinite(raw)
-            if not need_h:                                                 # explicit Euler: a huge step is the
-                bad |= raw > cfg.divergence_step                           # instability; a Newton-like step near
-            if cfg.divergence_ratio is not None:                           # a singular pose is not (trust region)
+            if not need_h:
+                bad |= raw > cfg.divergence_step
+            if cfg.divergence_ratio is not None:
                 bad |= energy > cfg.divergence_ratio * start_error[active].clamp_min(1.0)
             if cfg.max_step is not None:
                 scale = (cfg.max_step / du[:, 0].abs().amax(-1).clamp_min(1e-300)).clamp(max=1.0)

@@ -158,6 +158,7 @@ def main():
                     precisions=[(m, SIGMA[m] ** -2) for m in nao], noise=[("joints", SIGMA["joints"])])
     if args.train_pixel:
         pixel = train_pixel("planar2", args.train_pixel, (32, 32), args.pixel_epochs)
+        pixel.save(args.out / "pixel_decoder")                       # reuse: --model <out>/pixel_decoder
         pixel_levels(pixel, n, runs, args.out, "planar2 pixel decoder (image)")
     if args.model:
         full_levels(args.model, n, runs, args.out, "+".join(args.model))

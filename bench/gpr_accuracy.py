@@ -36,7 +36,8 @@ def evaluate(model, q_test: torch.Tensor, x_test: torch.Tensor, j_test: torch.Te
 
 
 def report(name: str, seconds: float, cpu: float, metrics: dict[str, float]) -> None:
-    print(f"  {name:26s} train {seconds:6.1f} s wall {cpu:6.1f} s CPU   mean err {metrics['mean_mm']:.4f} mm   max {metrics['max_mm']:.3f} mm"
+    print(f"  {name:26s} train {seconds:6.1f} s wall {cpu:6.1f} s CPU   mean err {metrics['mean_mm']:.4f} mm"
+          f"   max {metrics['max_mm']:.3f} mm"
           f"   J RMSE {metrics['jac_rmse']:.2e} m/rad   pred. std {metrics['std_mm']:.4f} mm")
 
 

@@ -4,7 +4,7 @@ Both train the same `PixelDecoderNet` (same init, batch size, Adam, lr) for the 
 training rows, in this one process. The bare loop has the data as in-memory float tensors and does nothing
 else; `train` reads the Zarr store, validates each epoch, checkpoints, logs to MLflow (a fresh sqlite store in a
 temp dir), plots, logs and registers the model. Reported (images/s = epochs × training images / seconds):
-    fit    — `train`'s fit phase (per-epoch validation, checkpoint and metric logging included) vs bare: target ≥ 90 %
+    fit    — `train`'s fit phase (per-epoch validation, checkpoint, metric logging included) vs bare: target ≥ 90 %
     total  — the whole `train` call, fixed costs (store read, MLflow, plots, registration) included
 The bare loop runs before and after `train`; its mean is the baseline. Wall-clock and process CPU seconds are
 both reported: on a shared machine the CPU-time ratio is the steadier of the two.

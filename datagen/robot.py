@@ -5,6 +5,8 @@ All arrays are numpy float64 and batched over N poses; q is in rad, positions in
 Kinematic queries (fk, jacobian, render, observe, touch) run on a private MjData, so a caller stepping
 dynamics on `robot.data` keeps its state. The renderer is created lazily (first render), so a `Robot` is
 cheap to build in a worker process and its GL context belongs to the process that renders.
+`fk`/`jacobian` call MuJoCo per pose (the reference); `observe` and the analytic model use the same hinge
+recursion vectorized over the batch (`_HingeChain`, equal to 1e-12) when the batch is large.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ ACTUATOR_KINDS = ("position", "torque")
 IMAGE_SIZE_RANGE = (8, 1024)   # px, per side; the MJCF offscreen buffers are 1024 × 1024
 LIMIT_TOLERANCE = 0.05         # rad; the simulator's soft joint limits let recorded q overshoot a little
 GRAVITY = 9.81                 # m/s², default magnitude (downward, −z)
-VECTORIZE_FROM = 32            # poses; smaller batches call MuJoCo per pose (numpy's per-op cost dominates)
+VECTORIZE_FROM = 256           # poses; smaller batches call MuJoCo per pose (numpy's per-op cost dominates)
 
 # Per robot: camera, default image (H, W), default babbling ranges in rad (inside the MJCF limits).
 _PANDA_LIMITS = np.array([[-2.8973, 2.8973], [-1.7628, 1.7628], [-2.8973, 2.8973], [-3.0718, -0.0698],
@@ -90,8 +92,8 @@ class Robot:
         image_size = _check_image_size(defaults["image_size"] if image_size is None else image_size)
         if actuators not in ACTUATOR_KINDS:
             raise ValueError(must_be("actuators", f"one of {ACTUATOR_KINDS}", actuators))
-        gravity = GRAVITY if gravity is None else gravity
-        if not (isinstance(gravity, (int, float)) and np.isfinite(gravity) and gravity >= 0):
+        gravity = GRAVITY if gravity is None else _finite_float(gravity)
+        if not (gravity is not None and gravity >= 0):
             raise ValueError(must_be("gravity", "a finite magnitude >= 0 in m/s^2", gravity,
                                      "Pass 0 for no gravity; it always points down (-z)."))
         text = _mjcf_text(name)
@@ -108,10 +110,13 @@ class Robot:
 
     def check_ranges(self, ranges) -> None:
         """Raise the house ValueError unless `ranges` (Dq, 2) rad are ordered and inside the joint limits."""
-        r = np.asarray(ranges, dtype=np.float64)
-        if r.shape != (self.dq, 2) or not np.isfinite(r).all():
-            raise ValueError(must_be("sampling ranges", f"a finite array of shape ({self.dq}, 2) in rad",
-                                     r.tolist(), f"One [low, high] per joint of {list(self.joint_names)}."))
+        try:
+            r = np.asarray(ranges, dtype=np.float64)
+        except (TypeError, ValueError):
+            r = None
+        if r is None or r.shape != (self.dq, 2) or not np.isfinite(r).all():
+            raise ValueError(must_be("sampling ranges", f"a finite array of shape ({self.dq}, 2) in rad", ranges,
+                                     f"One [low, high] per joint of {list(self.joint_names)}."))
         for j, (lo, hi) in enumerate(r):
             jlo, jhi = self.joint_limits[j]
             if not (jlo <= lo < hi <= jhi):
@@ -229,6 +234,11 @@ class Robot:
         d.qvel[:] = 0.0
         for i in range(q.shape[0]):
             d.qpos[:] = q[i]
+            mujoco.mj_kinematics(m, d)
+            mujoco.mj_collision(m, d)                     # cheap pre-check: no contact → no touch
+            if d.ncon == 0:
+                out[i, 0] = 0.0
+                continue
             d.ctrl[:] = q[i] if self._position_actuated else 0.0    # position servos hold the pose
             mujoco.mj_forward(m, d)
             out[i, 0] = d.sensordata[self._touch_adr]
@@ -297,6 +307,14 @@ class Robot:
         if xyz.ndim != 2 or xyz.shape[1] != 3 or not np.isfinite(xyz).all():
             raise ValueError(must_be("xyz", "a finite array of shape (N, 3) in m", xyz.shape))
         return xyz
+
+
+def _finite_float(x) -> float | None:
+    try:
+        x = float(x)
+    except (TypeError, ValueError):
+        return None
+    return x if np.isfinite(x) else None
 
 
 def _check_image_size(size) -> tuple[int, int]:

@@ -30,24 +30,24 @@ _INIT_LAYERS = (nn.Linear, nn.Conv2d, nn.ConvTranspose2d)
 
 
 # ---- data at the fit edge ---------------------------------------------------------------------------
-def check_fit_data(q, x, latent_dim: int, output_shape: tuple[int, ...], name: str = "x"
+def check_fit_data(q, x, latent_dim: int, output_shape: tuple[int, ...], name: str = "x", q_name: str = "q"
                    ) -> tuple[torch.Tensor, torch.Tensor]:
     """(N, Dz) rad and (N, *output_shape) → float32 tensors; uint8 x is divided by 255. Raises the house errors."""
-    q = _as_float_tensor("q", q)
-    x_raw = x.numpy() if isinstance(x, torch.Tensor) and x.dtype == torch.uint8 else x
-    is_uint8 = isinstance(x_raw, np.ndarray) and x_raw.dtype == np.uint8
-    x = _as_float_tensor(name, x)
+    q, x = _as_tensor(q_name, q), _as_tensor(name, x)
+    is_uint8 = x.dtype == torch.uint8
+    q, x = _finite_float(q_name, q), _finite_float(name, x)
     if is_uint8:
         x = x / 255.0
     if q.ndim != 2 or q.shape[1] != latent_dim:
-        raise ValueError(must_be("q", f"of shape (N, {latent_dim}) joint angles in rad", tuple(q.shape)))
-    if tuple(x.shape[1:]) != tuple(output_shape):
+        raise ValueError(must_be(q_name, f"of shape (N, {latent_dim}) joint angles in rad", tuple(q.shape)))
+    if tuple(x.shape[1:]) != tuple(output_shape) or x.ndim != len(output_shape) + 1:
         raise ValueError(must_be(name, f"of shape (N, {', '.join(map(str, output_shape))})", tuple(x.shape),
                                  "The model's output_shape must match the data."))
     if x.shape[0] != q.shape[0]:
-        raise ValueError(must_be(f"len({name})", f"equal to len(q) = {q.shape[0]} (one row per pose)", x.shape[0]))
+        raise ValueError(must_be(f"len({name})", f"equal to len({q_name}) = {q.shape[0]} (one row per pose)",
+                                 x.shape[0]))
     if q.shape[0] < 2:
-        raise ValueError(must_be("len(q)", "at least 2 samples", q.shape[0]))
+        raise ValueError(must_be(f"len({q_name})", "at least 2 samples", q.shape[0]))
     return q, x
 
 
@@ -57,7 +57,7 @@ def check_val(val, latent_dim: int, output_shape: tuple[int, ...]) -> tuple[torc
         return None
     if not isinstance(val, (tuple, list)) or len(val) != 2:
         raise TypeError(must_be("val", "a pair (q_val, x_val) or None", type(val).__name__))
-    return check_fit_data(val[0], val[1], latent_dim, output_shape, name="x_val")
+    return check_fit_data(val[0], val[1], latent_dim, output_shape, name="x_val", q_name="q_val")
 
 
 def output_standardizer(x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -67,14 +67,20 @@ def output_standardizer(x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     return flat.mean(0), torch.where(std > 1e-8, std, torch.ones_like(std))
 
 
-def _as_float_tensor(name: str, a) -> torch.Tensor:
-    if isinstance(a, np.ndarray):
-        a = torch.from_numpy(np.ascontiguousarray(a))
-    if not isinstance(a, torch.Tensor):
-        raise TypeError(must_be(name, "a numpy array or torch.Tensor", type(a).__name__))
-    if not (a.dtype.is_floating_point or a.dtype in (torch.uint8, torch.int32, torch.int64, torch.bool)):
-        raise TypeError(must_be(f"{name}.dtype", "a float or uint8 type", a.dtype))
-    a = a.detach().to(torch.float32)
+def _as_tensor(name: str, a) -> torch.Tensor:
+    """torch, numpy or any array-like (zarr, lists) → a tensor of its own dtype."""
+    if isinstance(a, torch.Tensor):
+        return a.detach()
+    arr = np.asarray(a)
+    if arr.dtype == object or not (np.issubdtype(arr.dtype, np.number) or arr.dtype == bool):
+        raise TypeError(must_be(name, "a numeric numpy array or torch.Tensor", f"{type(a).__name__} of {arr.dtype}"))
+    return torch.from_numpy(np.ascontiguousarray(arr))
+
+
+def _finite_float(name: str, a: torch.Tensor) -> torch.Tensor:
+    if a.is_complex():
+        raise TypeError(must_be(f"{name}.dtype", "a real (float or uint8) type", a.dtype))
+    a = a.to(torch.float32)
     if not torch.isfinite(a).all():
         bad = int((~torch.isfinite(a)).reshape(a.shape[0], -1).any(1).sum()) if a.ndim else 1
         raise ValueError(must_be(name, "finite", f"{bad} rows with NaN or inf", "Drop or repair those samples."))

@@ -1,7 +1,8 @@
 """`AnalyticModel`: the robot's exact MuJoCo forward kinematics as a SensoryModel — the oracle.
 
 x = g(z) for z = joint angles (rad): the `ee` site position (ee_xyz, m), its camera projection (ee_pixel, px)
-or the joints themselves (joints, rad, identity). The Jacobian is closed-form: mj_jacSite, chained with
+or the joints themselves (joints, rad, identity). The Jacobian is closed-form: mj_jacSite (its hinge
+recursion vectorized over the batch for large B, equal to 1e-12), chained with
 the pinhole projection Jacobian for ee_pixel. Precision is fixed. Nothing is learned, so saving stores the
 config only and loading rebuilds the robot from the shipped MJCF (a changed MJCF is reported on load).
 The FK is evaluated for any finite z, also outside the joint limits, since inference may probe there.

@@ -43,11 +43,11 @@ class TrainConfig:
 
     model: str  # model kind: gpr | sklearn-gpr | mdn | pixel | multimodal
     data: Path  # the Zarr store written by `bodyschema datagen`
-    modality: str | None = None  # what g predicts; None: "image" for pixel, "ee_xyz,image" for multimodal (comma-separated), else "ee_xyz"
+    modality: str | None = None  # what g predicts; None: "image" (pixel), "ee_xyz,image" (multimodal), else "ee_xyz"
     seed: int = 0  # split and model init; same seed and data -> same model
     val_fraction: float = 0.2  # held-out share (whole episodes when the store has `episode`)
     max_train: int | None = None  # cap on training samples (GPs are O(N^3)); None: all of them
-    hyper: dict[str, str] = field(default_factory=dict)  # model hyper-parameters: --hyper epochs 50 hidden [64,64] (JSON values)
+    hyper: dict[str, str] = field(default_factory=dict)  # model hyper-parameters: --hyper epochs 50 hidden [64,64]
     experiment: str = "bodyschema"  # MLflow experiment; one for the whole project keeps runs comparable
     tracking_uri: str | None = None  # None: $MLFLOW_TRACKING_URI, else sqlite:///<cwd>/mlflow.db (no server)
     run_root: Path = Path("runs")  # checkpoints, saved model and plots, in <run_root>/<kind>-<modality>-<hash>

@@ -58,7 +58,7 @@ class SensoryModelPyfunc(PythonModel):
         verify_directory(model_dir, (context.model_config or {}).get("model_sha256"), "this pyfunc model")
         self.model = load_model(model_dir)
 
-    def predict(self, context, model_input: np.ndarray, params=None) -> np.ndarray:   # ndarray: no MLflow type validation
+    def predict(self, context, model_input: np.ndarray, params=None) -> np.ndarray:   # ndarray: no type validation
         z = torch.as_tensor(np.asarray(model_input, dtype=np.float64))      # (B, Dz) rad
         with torch.no_grad():
             return self.model.predict(z).numpy()                           # (B, *output_shape)
@@ -78,7 +78,7 @@ def log_sensory_model(model_dir: str | Path, model, *, registered_name: str | No
             requirements.append(f"{lib}=={version(lib)}")
         except PackageNotFoundError:
             requirements.append(lib)
-    with warnings.catch_warnings():     # MLflow nags for predict type hints and an input example: the signature is explicit
+    with warnings.catch_warnings():     # MLflow asks for an input example: the signature is explicit
         warnings.filterwarnings("ignore", message=".*(type hints|input example).*", category=UserWarning)
         info = mlflow.pyfunc.log_model(
             name=name, python_model=Path(__file__), artifacts={ARTIFACT_KEY: str(model_dir)},

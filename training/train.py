@@ -1,4 +1,4 @@
-"""`train(config)`: dataset → fit → validation metrics and plots → MLflow run → registered model (maybe champion).
+"""`train(config)`: dataset → fit → validation metrics, plots → MLflow run → registered model (maybe champion).
 
 One call is one MLflow run. Steps: resolve tracking; load, validate and split the dataset; build the model
 from the kind table; fit it with a checkpoint in `<run_root>/<kind>-<modality>-<config hash>/` (a killed run
@@ -117,52 +117,75 @@ def train(config: TrainConfig) -> TrainResult:
             raise
         metrics = {"fit_seconds": time.perf_counter() - t0}
 
-        made, model_dirs, val_preds = {}, {}, {}
+        made = {}
         curves = plots.loss_curves(history.epochs, run_dir / "plots" / "loss_curves.png", run_dir.name)
         if curves is not None:
             made["loss_curves"] = curves
-        sub = _subset(data.train, 2000, config.seed)
+        model_dirs = {}
         for m, member in members.items():
             prefix = f"{m}/" if multi else ""
-            val_preds[m] = predict_batched(member, data.val.q)
-            scores = {**score(val_preds[m], as_float(data.val.xs[m]).numpy(), "val"),
-                      **score(predict_batched(member, sub.q), as_float(sub.xs[m]).numpy(), "train")}
-            if not math.isfinite(scores[METRIC]):
-                raise FloatingPointError(f"{prefix}{METRIC} is {scores[METRIC]}: the fit diverged; "
-                                         "nothing is registered.")
+            scores, plot = _score_and_plot(member, data, m, config.seed, run_dir / "plots", prefix)
             metrics.update({prefix + k: v for k, v in scores.items()})
+            made.update(plot)
             model_dirs[m] = run_dir / ("model" if not multi else f"model-{m}")
             shutil.rmtree(model_dirs[m], ignore_errors=True)    # stale files would change the digest
             member.save(model_dirs[m])
-            made.update(_prediction_plot(data, m, val_preds[m], run_dir / "plots", f"{run_dir.name} {m}", prefix))
         mlflow.log_metrics(metrics)
         for path in made.values():
             mlflow.log_artifact(str(path), artifact_path="plots")
 
-        registered = []
-        for m, member in members.items():               # registration last: a failure above registers nothing
-            name = registered_name(data.body.robot, m, config.model) if config.register else None
-            info, digest = log_sensory_model(model_dirs[m], member, registered_name=name,
-                                             name="model" if not multi else f"model-{m}")
-            mlflow.set_tag(DIGEST_TAG + ("" if not multi else f".{m}"), digest)
-            if name is None:
-                continue
-            version = str(info.registered_model_version)
-            val_rmse = metrics[(f"{m}/" if multi else "") + METRIC]
-            tags = {DIGEST_TAG: digest, METRIC: repr(val_rmse), "robot": data.body.robot, "modality": m,
-                    "kind": config.model, "joint_names": ",".join(data.body.joint_names),
-                    "dataset_sha256": data.sha256, "mjcf_sha256": str(data.attrs.get("mjcf_sha256", ""))}
-            for key, value in tags.items():
-                client.set_model_version_tag(name, version, key, value)
-            is_champion = update_champion(client, name, version, val_rmse)
-            registered.append(Registered(m, name, version, is_champion, digest))
+        registered = []                                  # registration last: a failure above registers nothing
+        for m, member in members.items():
+            prefix = f"{m}/" if multi else ""
+            entry = _log_and_register(client, member, model_dirs[m], config, data, metrics[prefix + METRIC], multi)
+            if entry is not None:
+                registered.append(entry)
         mlflow.set_tag("bodyschema.champion", ",".join(r.name for r in registered if r.champion) or "none")
     return TrainResult(run.info.run_id, tuple(registered), {**history.last(), **metrics}, made, model_dirs, run_dir)
 
 
-def predict_batched(model, q: np.ndarray, batch: int = PREDICT_BATCH) -> np.ndarray:
-    """g(q) for a whole split, in batches, as float32 numpy. # (N, Dz) → (N, *out)"""
-    z = torch.as_tensor(q, dtype=torch.float32)
+def _score_and_plot(member, data: Dataset, modality: str, seed: int, out: Path,
+                    prefix: str) -> tuple[dict[str, float], dict[str, Path]]:
+    """Held-out and (a subset of) training scores of one member, and its prediction plot."""
+    image = data.is_image(modality)
+    dtype = torch.float32 if image else torch.float64       # GP means in float64; images: float32 is plenty
+    val_pred = predict_batched(member, data.val.q, dtype=dtype)
+    sub = _subset(data.train, 2000, seed)
+    scores = {**score(val_pred, as_float(data.val.xs[modality]).numpy(), "val"),
+              **score(predict_batched(member, sub.q, dtype=dtype), as_float(sub.xs[modality]).numpy(), "train")}
+    if not math.isfinite(scores[METRIC]):
+        raise FloatingPointError(f"{prefix}{METRIC} is {scores[METRIC]}: the fit diverged; nothing is registered.")
+    target, stem = as_float(data.val.xs[modality]).numpy(), prefix.replace("/", "_")
+    title = f"{out.parent.name} {modality}"
+    if image:
+        plot = {f"{prefix}val_images": plots.image_grid(target, val_pred, out / f"{stem}val_images.png", title)}
+    else:
+        plot = {f"{prefix}val_scatter": plots.prediction_scatter(target, val_pred, out / f"{stem}val_scatter.png",
+                                                                 UNITS.get(modality, "?"), title)}
+    return scores, plot
+
+
+def _log_and_register(client, member, model_dir: Path, config: TrainConfig, data: Dataset, val_rmse: float,
+                      multi: bool) -> Registered | None:
+    """Log one member as a pyfunc; register it (unless config.register is False) and maybe make it champion."""
+    m = member.modality
+    name = registered_name(data.body.robot, m, config.model) if config.register else None
+    info, digest = log_sensory_model(model_dir, member, registered_name=name, name=f"model-{m}" if multi else "model")
+    mlflow.set_tag(DIGEST_TAG + (f".{m}" if multi else ""), digest)
+    if name is None:
+        return None
+    version = str(info.registered_model_version)
+    tags = {DIGEST_TAG: digest, METRIC: repr(val_rmse), "robot": data.body.robot, "modality": m,
+            "kind": config.model, "joint_names": ",".join(data.body.joint_names),
+            "dataset_sha256": data.sha256, "mjcf_sha256": str(data.attrs.get("mjcf_sha256", ""))}
+    for key, value in tags.items():
+        client.set_model_version_tag(name, version, key, value)
+    return Registered(m, name, version, update_champion(client, name, version, val_rmse), digest)
+
+
+def predict_batched(model, q: np.ndarray, batch: int = PREDICT_BATCH, dtype=torch.float32) -> np.ndarray:
+    """g(q) for a whole split, in batches, as numpy. # (N, Dz) → (N, *out)"""
+    z = torch.as_tensor(q, dtype=dtype)
     with torch.no_grad():
         return torch.cat([model.predict(z[i:i + batch]) for i in range(0, len(z), batch)]).numpy()
 
@@ -175,10 +198,10 @@ def score(pred: np.ndarray, target: np.ndarray, prefix: str) -> dict[str, float]
 
 
 def _subset(split: Split, n: int, seed: int) -> Split:
+    """At most `n` rows of a split (seeded), for the training-set score."""
     if len(split) <= n:
         return split
-    rows = np.sort(np.random.default_rng(seed).choice(len(split), n, replace=False))
-    return Split(split.q[rows], split.x[rows], split.rows[rows])
+    return split.take(np.sort(np.random.default_rng(seed).choice(len(split), n, replace=False)))
 
 
 def _log_inputs(config: TrainConfig, data: Dataset, run_name: str) -> None:
@@ -186,8 +209,9 @@ def _log_inputs(config: TrainConfig, data: Dataset, run_name: str) -> None:
     identity = config.identity(data.sha256)
     params = {k: v for k, v in identity.items() if k not in ("hyper", "dataset_sha256")}
     params.update({f"hyper.{k}": v for k, v in identity["hyper"].items()})
-    params.update(data=str(Path(data.path).resolve()), n_train=len(data.train), n_val=len(data.val), split_by=data.split_by,
-                  output_shape={m: list(data.output_shape(m)) for m in data.modalities}, joint_names=",".join(data.body.joint_names))
+    params.update(data=str(Path(data.path).resolve()), n_train=len(data.train), n_val=len(data.val),
+                  split_by=data.split_by, output_shape={m: list(data.output_shape(m)) for m in data.modalities},
+                  joint_names=",".join(data.body.joint_names))
     mlflow.log_params({k: str(v) for k, v in params.items()})
     tags = {"robot": data.body.robot, "mjcf_sha256": str(data.attrs.get("mjcf_sha256", "")),
             "dataset_sha256": data.sha256, "modality": config.modality, "kind": config.model,
@@ -207,16 +231,6 @@ def _log_inputs(config: TrainConfig, data: Dataset, run_name: str) -> None:
                                                          "modality": config.modality})
 
 
-def _prediction_plot(data: Dataset, modality: str, val_pred: np.ndarray, out: Path, title: str,
-                     prefix: str) -> dict[str, Path]:
-    target = as_float(data.val.xs[modality]).numpy()
-    stem = prefix.replace("/", "_")
-    if data.is_image(modality):
-        return {f"{prefix}val_images": plots.image_grid(target, val_pred, out / f"{stem}val_images.png", title)}
-    return {f"{prefix}val_scatter": plots.prediction_scatter(target, val_pred, out / f"{stem}val_scatter.png",
-                                                             UNITS.get(modality, "?"), title)}
-
-
 def _resumable_run(client, run_dir: Path) -> str | None:
     """The MLflow run of an interrupted attempt at this config (KILLED by Ctrl-C, or still RUNNING after a hard
     kill), else None. A FAILED run (an exception) is not continued: a new run starts, from the checkpoint."""
@@ -227,7 +241,8 @@ def _resumable_run(client, run_dir: Path) -> str | None:
         run = client.get_run(marker.read_text().strip())
     except MlflowException:
         return None                 # another tracking store, or the run was deleted
-    return run.info.run_id if run.info.status in ("RUNNING", "KILLED") and run.info.lifecycle_stage == "active" else None
+    resumable = run.info.status in ("RUNNING", "KILLED") and run.info.lifecycle_stage == "active"
+    return run.info.run_id if resumable else None
 
 
 class _History:

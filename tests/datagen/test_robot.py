@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bodyschema.datagen.robot import LIMIT_TOLERANCE, ROBOT_NAMES, Robot
+from bodyschema.datagen.robot import LIMIT_TOLERANCE, ROBOT_NAMES, VECTORIZE_FROM, Robot
 
 FD_STEP = 1e-6          # rad
 TEST_SIZES = {"planar2": (128, 128), "nao_arm": (56, 80), "panda": (192, 192)}   # (H, W) px
@@ -107,6 +107,19 @@ def test_jacobian_equals_central_finite_differences_of_fk(name):
     assert "image" not in obs and obs["jacobian"].dtype == np.float32
     np.testing.assert_allclose(obs["jacobian"], fd, atol=1e-6)
     np.testing.assert_allclose(obs["ee_xyz"], r.fk(q), atol=1e-6)
+
+
+@pytest.mark.parametrize("name", ROBOT_NAMES)
+def test_vectorized_chain_equals_the_mujoco_calls(name):
+    r = robot(name)
+    q = random_q(r, 2 * VECTORIZE_FROM, seed=9)
+    obs = r.observe(q, image=False)                                            # batch ≥ VECTORIZE_FROM: numpy chain
+    xyz, jac = r._fk_and_jacobian(q)
+    np.testing.assert_allclose(xyz, r.fk(q), atol=1e-12)                      # fk: mj_kinematics per pose
+    np.testing.assert_allclose(jac, r.jacobian(q), atol=1e-12)                # jacobian: mj_jacSite per pose
+    np.testing.assert_allclose(obs["ee_xyz"], xyz.astype(np.float32))
+    np.testing.assert_allclose(obs["jacobian"], jac.astype(np.float32))
+    np.testing.assert_allclose(obs["ee_pixel"], r.project(xyz).astype(np.float32))
 
 
 def modified_dh_chain(q: np.ndarray) -> np.ndarray:
@@ -218,6 +231,8 @@ def test_bad_actuators_or_gravity_raise():
         Robot.load("planar2", actuators="muscle")
     with pytest.raises(ValueError, match=r"gravity must be"):
         Robot.load("planar2", gravity=float("nan"))
+    with pytest.raises(ValueError, match=r"gravity must be"):
+        Robot.load("planar2", gravity="down")
 
 
 def test_bad_q_raises():
@@ -242,6 +257,8 @@ def test_check_ranges_rejects_a_range_outside_the_limits():
         r.check_ranges(bad)
     with pytest.raises(ValueError, match=r"sampling ranges must be a finite array of shape \(4, 2\)"):
         r.check_ranges(bad[:3])
+    with pytest.raises(ValueError, match=r"sampling ranges must be"):
+        r.check_ranges([[0.0, 1.0], [0.0]])                                   # ragged
     for name in ROBOT_NAMES:
         other = robot(name) if name != "nao_arm" else r
         assert ((other.sampling_ranges[:, 0] >= other.joint_limits[:, 0])

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from bodyschema.datagen.robot import Robot
+from bodyschema.datagen.robot import VECTORIZE_FROM, Robot
 from bodyschema.models import load_model
 from bodyschema.models.analytic import DEFAULT_PRECISION, AnalyticModel
 from tests.models.contract import SensoryModelContract
@@ -50,13 +50,16 @@ def nao():
     return Robot.load(ROBOT)
 
 
-def test_predictions_equal_the_robot_kinematics_and_camera(nao):
-    q = np.random.default_rng(0).uniform(*nao.sampling_ranges.T, size=(6, nao.dq))
+@pytest.mark.parametrize("batch", [6, VECTORIZE_FROM + 1])                     # per-pose MuJoCo / numpy chain
+def test_predictions_equal_the_robot_kinematics_and_camera(nao, batch):
+    q = np.random.default_rng(0).uniform(*nao.sampling_ranges.T, size=(batch, nao.dq))
     z = torch.from_numpy(q)
     np.testing.assert_allclose(AnalyticModel(ROBOT, "ee_xyz").predict(z).numpy(), nao.fk(q), atol=1e-12)
     np.testing.assert_allclose(AnalyticModel(ROBOT, "ee_pixel").predict(z).numpy(), nao.project(nao.fk(q)),
                                atol=1e-9)
     np.testing.assert_allclose(AnalyticModel(ROBOT, "ee_xyz").jacobian(z).numpy(), nao.jacobian(q), atol=1e-12)
+    pixel_jac = np.einsum("nij,njk->nik", nao.project_jacobian(nao.fk(q)), nao.jacobian(q))
+    np.testing.assert_allclose(AnalyticModel(ROBOT, "ee_pixel").jacobian(z).numpy(), pixel_jac, atol=1e-9)
     torch.testing.assert_close(AnalyticModel(ROBOT, "joints").predict(z), z)
 
 

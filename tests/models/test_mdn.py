@@ -113,3 +113,6 @@ def test_fit_rejects_mismatched_lengths_nan_and_bad_shapes():
         tiny_mdn().fit(q, x, val=q, progress=False)
     with pytest.raises(ValueError, match="mode must be one of"):
         tiny_mdn(mode="median")
+    with pytest.raises(TypeError, match="q must be a numeric numpy array"):
+        tiny_mdn().fit(np.array([["a", "b"]] * 32), x, progress=False)
+    assert tiny_mdn(epochs=1).fit(q.tolist(), x.tolist(), progress=False).is_fitted   # array-likes (zarr) are fine

@@ -1,4 +1,4 @@
-"""Dataset loading for training: validation refuses bad stores, splits are disjoint and seeded, the digest is content."""
+"""Training data: bad stores are refused, splits are disjoint and seeded, the digest follows the content."""
 
 import shutil
 

@@ -11,7 +11,7 @@ from mlflow import MlflowClient
 from bodyschema.training.data import load_dataset
 from bodyschema.training.mlflow_model import DIGEST_TAG, directory_sha256
 from bodyschema.training.registry import load
-from bodyschema.training.train import train
+from bodyschema.training.train import _subset, train
 from tests.training.tiny_model import Boom, tiny_config
 
 
@@ -111,3 +111,12 @@ def test_image_run_logs_a_target_vs_prediction_grid(workdir, image_store, tiny_k
     assert 0 < result.metrics["val_rmse"] < 1, "image errors are in [0, 1] intensity units"
     logged = {f.path for f in _client(workdir).list_artifacts(result.run_id, "plots")}
     assert "plots/val_images.png" in logged
+
+
+def test_training_score_subset_keeps_rows_aligned(kin_store):
+    split = load_dataset(kin_store, "ee_xyz").train
+    sub = _subset(split, 7, seed=0)
+    assert len(sub) == 7 and set(sub.rows) <= set(split.rows)
+    index = {row: i for i, row in enumerate(split.rows)}
+    np.testing.assert_array_equal(sub.xs["ee_xyz"], split.x[[index[r] for r in sub.rows]])
+    np.testing.assert_array_equal(sub.q, split.q[[index[r] for r in sub.rows]])
