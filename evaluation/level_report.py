@@ -102,7 +102,7 @@ def plot_sweep(rows: Sequence[Mapping], x: str, path: Path, y: str = "joint_err_
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(5, 3.5))
     xs = [r[x] for r in rows]
-    ys = [r[y] for r in rows]
+    ys = np.maximum([r[y] for r in rows], 1e-9)                           # log axis: an exact 0 shows at 1e-9
     if all(isinstance(v, (int, float)) for v in xs):
         ax.plot(xs, ys, "o-")
         ax.set_xlabel(f"{x} ({rows[0].get('modality', '')})")

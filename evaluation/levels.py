@@ -172,7 +172,7 @@ def run_levels(config: LevelsConfig = LevelsConfig(), models: Sequence | None = 
                                             config.screen_steps, config.keep)
         rows.append({"run": run, **row})
         per_trial.setdefault(row["level"], []).append(trial["mean_err_deg"])
-        if result.trajectory is not None and row["level"] not in curves:
+        if result.trajectory is not None and not ms and row["level"] not in curves:   # ms: refinement only
             curves[row["level"]] = result.trajectory["F"].numpy()          # (T, N), first run
     summary = LevelsSummary(rows, level_report.aggregate(rows), {k: np.concatenate(v) for k, v in per_trial.items()})
     summary.paths = level_report.write_all(summary, curves, Path(config.out), plots=config.plots)

@@ -66,7 +66,7 @@ class SensoryModelPyfunc(PythonModel):
 
 def log_sensory_model(model_dir: str | Path, model, *, registered_name: str | None = None,
                       name: str = "model"):
-    """Log the saved model directory as a pyfunc (from code) in the active run; returns MLflow's ModelInfo."""
+    """Log the saved model directory as a pyfunc (from code) in the active run. → (ModelInfo, directory sha256)"""
     from importlib.metadata import PackageNotFoundError, version
 
     digest = directory_sha256(model_dir)

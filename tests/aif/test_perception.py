@@ -20,9 +20,10 @@ def arm():
 
 
 @pytest.mark.parametrize("config", [PerceptionConfig(), PerceptionConfig(order=1, prior="damping"),
-                                    PerceptionConfig(order=2, prior="damping")], ids=["n0", "n1-damping", "n2-damping"])
+                                    PerceptionConfig(order=2, prior="damping"), PerceptionConfig(integrator="implicit")],
+                         ids=["n0", "n1-damping", "n2-damping", "n0-implicit"])
 def test_recovers_true_joints_from_perturbed_belief(arm, config):
-    q = planar_poses(200, seed=0)
+    q = planar_poses(100, seed=0)
     result = Perception([arm], config).infer({"ee_xyz": arm.predict(q)}, perturb(q, seed=1))
     error_deg = (result.mu - q).abs().max() / DEG
     assert error_deg < 0.1, f"max joint error {error_deg:.3g}°"

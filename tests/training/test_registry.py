@@ -1,5 +1,6 @@
 """The registry: champion moves only on improvement, promote/list, and `load` refuses what it must refuse."""
 
+import os
 import shutil
 from pathlib import Path
 
@@ -43,14 +44,17 @@ def registered(tmp_path_factory, kin_store, empty_db):
     root = tmp_path_factory.mktemp("registry")
     shutil.copy(empty_db, root / "mlflow.db")
     uri = f"sqlite:///{root / 'mlflow.db'}"
-    kinds = dict(config_module.MODEL_KINDS)
+    kinds, cwd = dict(config_module.MODEL_KINDS), os.getcwd()
     config_module.MODEL_KINDS["tiny"] = ("tests.training.tiny_model", "TinyModel")
+    os.chdir(root)                   # the experiment's artifacts go under the working directory: keep them in tmp
     try:
         train(tiny_config(kin_store, hyper={"epochs": "3"}, tracking_uri=uri, run_root=root / "runs",
                           experiment="registry-tests"))
     finally:
+        os.chdir(cwd)
         config_module.MODEL_KINDS.clear()
         config_module.MODEL_KINDS.update(kinds)
+    assert (root / "mlartifacts").is_dir()
     return uri
 
 
