@@ -3,9 +3,11 @@
 The AIF benchmark updates every trial every step with forward + VJP of the image decoder, so its budget is
 µs per sample-step for a batch of 500 on this machine's CPU cores. Measured in the same run:
   * our 56×80 grayscale `PixelDecoder` with default hyper-parameters: batched `vjp` over 500 latents,
-    the same 500 one at a time, and the Jacobian route (build (B, 4480, Dz), then Jᵀv) it avoids;
+    `predict_and_vjp` (prediction and VJP from one forward, what an AIF step needs), the same 500 VJPs one
+    at a time, and the Jacobian route (build (B, 4480, Dz), then Jᵀv) it avoids;
   * a Pixel-AIF-style reference decoder (reconstructed pattern: FC 4→512→8×7×10, then three ×2 transposed
     convolutions each followed by a 3×3 convolution, 16/64 channels, ReLU, NCHW) with the same batched VJP.
+Times are the minimum over repeats (the least disturbed run on a shared machine).
 Run: `.venv/bin/python bench/pixel_vjp.py [--batch 500] [--repeats 10] [--threads N]`.
 """
 

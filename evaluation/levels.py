@@ -183,8 +183,8 @@ def run_levels(config: LevelsConfig = LevelsConfig(), models: Sequence | None = 
 
 def noise_sweep(config: LevelsConfig, modality: str, sigmas: Sequence[float], level: int = 2,
                 models: Sequence | None = None) -> list[dict]:
-    """Mean joint error vs observation noise σ on one modality (precisions unchanged: a mis-specified Π).
-    Writes <out>/noise_sweep_<modality>.csv and .png; returns one row per σ."""
+    """Mean joint error vs observation noise σ on one modality (precisions unchanged: a mis-specified Π); one row
+    per σ. Plot with `level_report.plot_sweep(rows, "sigma", path)` (evaluation/robustness.py does)."""
     out = []
     for sigma in sigmas:
         noise = tuple((m, s) for m, s in config.noise if m != modality) + ((modality, float(sigma)),)
@@ -192,13 +192,12 @@ def noise_sweep(config: LevelsConfig, modality: str, sigmas: Sequence[float], le
                       perception=replace(config.perception, record=False), out=Path(config.out) / f"noise_{sigma:g}")
         table = run_levels(cfg, models).table
         out.append({"modality": modality, "sigma": float(sigma), **table[0]})
-    _write_sweep(out, "sigma", Path(config.out) / f"noise_sweep_{modality}", config.plots)
     return out
 
 
 def broken_sweep(config: LevelsConfig, models: Sequence | None = None, level: int = 2) -> list[dict]:
-    """One row per modality set to precision 0 (a dead sensor), plus the intact baseline.
-    Writes <out>/broken_sweep.csv and .png."""
+    """One row per modality set to precision 0 (a dead sensor), plus the intact baseline; plot with
+    `level_report.plot_sweep(rows, "broken", path)`."""
     models = [resolve_model(s) for s in config.models] if models is None else list(models)
     out = []
     for dead in (None, *[m.modality for m in models]):
@@ -207,15 +206,7 @@ def broken_sweep(config: LevelsConfig, models: Sequence | None = None, level: in
         cfg = replace(config, levels=(level,), multistart=0, perception=pcfg, mlflow=False, plots=False,
                       out=Path(config.out) / f"broken_{dead or 'none'}")
         out.append({"broken": dead or "none", **run_levels(cfg, models).table[0]})
-    _write_sweep(out, "broken", Path(config.out) / "broken_sweep", config.plots)
     return out
-
-
-def _write_sweep(rows: list[dict], x: str, stem: Path, plots: bool) -> None:
-    stem.parent.mkdir(parents=True, exist_ok=True)
-    level_report.write_csv(rows, stem.with_suffix(".csv"))
-    if plots:
-        level_report.plot_sweep(rows, x, stem.with_suffix(".png"))
 
 
 def _log_mlflow(config: LevelsConfig, models: Sequence, summary: LevelsSummary) -> str:

@@ -76,6 +76,17 @@ class TrainResult:
     def model_dir(self) -> Path | None:
         return next(iter(self.model_dirs.values())) if len(self.model_dirs) == 1 else None
 
+    def __str__(self) -> str:
+        """What `bodyschema train` prints: the run, each registered version, the held-out scores, the plots."""
+        lines = [f"MLflow run {self.run_id} (run directory {self.run_dir})"]
+        for r in self.registered:
+            lines.append(f"registered models:/{r.name}/{r.version}" + ("  → now @champion" if r.champion else
+                                                                        "  (champion unchanged: not better)"))
+        scores = {k: v for k, v in self.metrics.items() if "val_" in k and not k.startswith("fit_")}
+        lines.append("held-out: " + ", ".join(f"{k}={v:.4g}" for k, v in sorted(scores.items())))
+        lines += [f"plot: {p}" for p in self.plots.values()]
+        return "\n".join(lines)
+
 
 def train(config: TrainConfig) -> TrainResult:
     """Train, evaluate, log and (unless `config.register` is False) register one model. See the module doc."""

@@ -41,6 +41,7 @@ def test_a_run_logs_config_epochs_dataset_versions_plots_and_registers(workdir, 
 
     assert result.registered_name == "bodyschema-planar2-ee_xyz-tiny" and result.model_version == "1"
     assert result.champion
+    assert f"registered models:/{result.registered_name}/1  → now @champion" in str(result)
     version = client.get_model_version(result.registered_name, "1")
     assert version.tags[DIGEST_TAG] == directory_sha256(result.model_dir) == run.data.tags[DIGEST_TAG]
     assert float(version.tags["val_rmse"]) == result.metrics["val_rmse"]
