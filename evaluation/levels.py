@@ -68,8 +68,8 @@ class LevelsSummary:
 
 
 # ---- models and robot -----------------------------------------------------------------------------------
-def resolve_model(spec: str):
-    """"analytic:<robot>:<modality>" | "models:/…" (registry) | a local model directory → SensoryModel."""
+def resolve_model(spec: str, tracking_uri: str | None = None):
+    """"analytic:<robot>:<modality>" | "models:/…" (registry at `tracking_uri`) | a model directory → SensoryModel."""
     if spec.startswith("analytic:"):
         parts = spec.split(":")
         if len(parts) != 3:
@@ -78,7 +78,7 @@ def resolve_model(spec: str):
         return AnalyticModel(parts[1], parts[2])
     if spec.startswith("models:/"):
         from bodyschema.training.registry import load
-        return load(spec)
+        return load(spec, tracking=tracking_uri)
     if Path(spec).is_dir():
         from bodyschema.models import load_model
         return load_model(spec)
@@ -155,7 +155,7 @@ def _broken(perception: Perception) -> set[str]:
 def run_levels(config: LevelsConfig = LevelsConfig(), models: Sequence | None = None) -> LevelsSummary:
     """Levels × runs on held-out targets; writes tables and plots to config.out and logs one MLflow run."""
     from tqdm import tqdm
-    models = [resolve_model(s) for s in config.models] if models is None else list(models)
+    models = [resolve_model(s, config.tracking_uri) for s in config.models] if models is None else list(models)
     robot = load_robot(models, config.image_size)
     perception = Perception(models, config.perception)
     has_image = any(m.modality == "image" for m in models)
@@ -198,7 +198,7 @@ def noise_sweep(config: LevelsConfig, modality: str, sigmas: Sequence[float], le
 def broken_sweep(config: LevelsConfig, models: Sequence | None = None, level: int = 2) -> list[dict]:
     """One row per modality set to precision 0 (a dead sensor), plus the intact baseline; plot with
     `level_report.plot_sweep(rows, "broken", path)`."""
-    models = [resolve_model(s) for s in config.models] if models is None else list(models)
+    models = [resolve_model(s, config.tracking_uri) for s in config.models] if models is None else list(models)
     out = []
     for dead in (None, *[m.modality for m in models]):
         pcfg = replace(config.perception, record=False,

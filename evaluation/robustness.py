@@ -25,7 +25,7 @@ class RobustnessConfig:
 
 
 def run_robustness(config: RobustnessConfig, models=None) -> dict[str, Path]:
-    models = [resolve_model(s) for s in config.levels.models] if models is None else list(models)
+    models = [resolve_model(s, config.levels.tracking_uri) for s in config.levels.models] if models is None else list(models)
     levels = replace(config.levels, out=config.out)
     config.out.mkdir(parents=True, exist_ok=True)
     noise = noise_sweep(levels, config.modality, config.sigmas, level=config.level, models=models)
