@@ -89,4 +89,5 @@ def _evaluate(config: DemoConfig, gpr_uri: str) -> None:
     levels = LevelsConfig(models=(gpr_uri,), trials=config.trials, runs=config.runs, seed=config.seed,
                           out=config.out / "levels", tracking_uri=config.tracking_uri)
     summary = run_levels(levels)
-    print(summary.paths.get("markdown", "").read_text() if "markdown" in summary.paths else summary.table)
+    print(summary.paths["summary_md"].read_text())
+    print("plots:", ", ".join(str(p) for k, p in summary.paths.items() if str(p).endswith(".png")))
