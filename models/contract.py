@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import importlib
 import json
-import pkgutil
 from pathlib import Path
 from typing import ClassVar, Protocol, runtime_checkable
 
@@ -22,6 +21,8 @@ from bodyschema.models.scaling import BodySpec
 FLOAT_DTYPES = (torch.float32, torch.float64)
 FORMAT_VERSION = 1
 MODEL_KINDS: dict[str, type["BaseSensoryModel"]] = {}
+SHIPPED_KINDS = {"analytic": "analytic", "gpr": "gpr", "sklearn_gpr": "sklearn_gpr", "mdn": "mdn",  # kind → module
+                 "pixel": "pixel", "mm_member": "multimodal"}
 
 
 @runtime_checkable
@@ -154,17 +155,17 @@ def load_model(path: str | Path) -> BaseSensoryModel:
     meta = json.loads(meta_file.read_text())
     if meta.get("format_version") != FORMAT_VERSION:
         raise ValueError(must_be("format_version", str(FORMAT_VERSION), meta.get("format_version")))
-    _import_all_kinds()
+    _import_kind(meta["kind"])
     if meta["kind"] not in MODEL_KINDS:
-        raise ValueError(must_be("model kind", f"one of {sorted(MODEL_KINDS)}", meta["kind"]))
+        raise ValueError(must_be("model kind", f"one of {sorted(set(MODEL_KINDS) | set(SHIPPED_KINDS))}",
+                                 meta["kind"]))
     state = torch.load(path / "state.pt", weights_only=True)
     return MODEL_KINDS[meta["kind"]]._from_saved(BodySpec.from_dict(meta["body"]), meta["modality"],
                                                  tuple(meta["output_shape"]), meta["config"], state)
 
 
-def _import_all_kinds() -> None:
-    # Each model module registers its kind when imported; import them all so any saved kind loads.
-    import bodyschema.models as package
-
-    for module in pkgutil.iter_modules(package.__path__):
-        importlib.import_module(f"{package.__name__}.{module.name}")
+def _import_kind(kind: str) -> None:
+    # Import only the module that registers `kind` (importing all would pull in gpytorch and sklearn).
+    module = SHIPPED_KINDS.get(kind)
+    if module is not None and kind not in MODEL_KINDS:
+        importlib.import_module(f"bodyschema.models.{module}")
