@@ -49,7 +49,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n-train", type=int, default=1000)
     parser.add_argument("--n-query", type=int, default=500)
-    parser.add_argument("--threads", type=int, default=1, help="torch threads (1: see the report on OpenMP)")
+    parser.add_argument("--threads", type=int, default=1,
+                        help="torch threads (default 1: OpenMP threads stall on a loaded machine)")
     parser.add_argument("--repeats", type=int, default=20)
     args = parser.parse_args()
     torch.set_num_threads(args.threads)

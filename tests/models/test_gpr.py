@@ -22,9 +22,9 @@ THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
 def single_thread():
     """One BLAS/OpenMP thread, here and in the contract's fresh-process reload (which inherits the env vars).
 
-    Small GP matrices: OpenMP wake-ups dominate with several threads on this VM (a 3×200² Cholesky took 31 ms
-    with 2 threads vs 0.35 ms with 1). And a reload is bit-identical only under the same thread counts, since
-    BLAS rounding depends on how a product is split over threads.
+    Small GP matrices: with other processes busy on the 2-core dev VM, 2 OpenMP threads made a 3×200² Cholesky
+    take 31 ms instead of 0.35 ms (threads wait for descheduled peers). And a reload is bit-identical only under
+    the same thread counts, since BLAS rounding depends on how a product is split over threads.
     """
     saved = {name: os.environ.get(name) for name in THREAD_VARS}
     threads = torch.get_num_threads()
