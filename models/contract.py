@@ -85,7 +85,8 @@ class BaseSensoryModel:
 
     def _vjp(self, z: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
         # Jᵀv; models with large outputs (images) override this to avoid building J.
-        return torch.einsum("bod,bo->bd", self._jacobian(z), v.reshape(v.shape[0], -1).to(z.dtype))
+        jac = self._jacobian(z).to(z.dtype)                              # (B, O, Dz)
+        return torch.einsum("bod,bo->bd", jac, v.reshape(v.shape[0], -1))
 
     def _precision(self, z: torch.Tensor) -> torch.Tensor:
         raise NotImplementedError

@@ -12,9 +12,8 @@ from bodyschema.evaluation.level_report import plot_sweep
 from bodyschema.evaluation.levels import (LevelsConfig, broken_sweep, evaluate_level, load_robot, noise_sweep,
                                           run_levels)
 from bodyschema.evaluation.targets import OFFSET_DEG, eval_rng, initial_beliefs, make_targets
+from bodyschema.models import analytic
 from tests.toy_models import ToyPlanarArm
-
-analytic = pytest.importorskip("bodyschema.models.analytic")
 
 
 @pytest.fixture(scope="module")
