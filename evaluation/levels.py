@@ -17,9 +17,11 @@ import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
+from typing import Annotated
 
 import numpy as np
 import torch
+import tyro
 
 from bodyschema.aif.multistart import infer_multistart
 from bodyschema.aif.perception import Perception, PerceptionConfig
@@ -28,10 +30,15 @@ from bodyschema.evaluation import level_report
 from bodyschema.evaluation.targets import eval_rng, initial_beliefs, make_targets, sample_poses
 
 
+MODELS_HELP = ('"models:/<name>@<alias>" (registry), a saved model directory, or "analytic:<robot>:<modality>"; '
+               'several models of one body are fused')
+
+
 @dataclass(frozen=True)
 class LevelsConfig:
-    models: tuple[str, ...] = ("analytic:planar2:ee_xyz",)   # specs; ignored when models are passed in
-    levels: tuple[int, ...] = (1, 2, 3)
+    models: Annotated[tuple[str, ...], tyro.conf.arg(aliases=("--model",), help=MODELS_HELP)] = (
+        "analytic:planar2:ee_xyz",)
+    levels: tuple[int, ...] = (1, 2, 3)  # 1: one joint off 5–10°, 2: all joints off, 3: another target's pose
     trials: int = 500                  # per run, as in Pixel-AIF
     runs: int = 5                      # runs with different target seeds
     seed: int = 0
