@@ -62,3 +62,13 @@ def standardize(y: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tens
     std = y.std(0, correction=0)                                            # (O,)
     std = torch.where(std > STD_FLOOR, std, torch.ones_like(std))
     return ((y - mean) / std).T.contiguous(), mean, std
+
+
+def restore_state(model, state: dict[str, torch.Tensor], keys: tuple[str, ...]) -> None:
+    """Set the fitted `<key>_` attributes (float64) of a GP model from its saved tensors."""
+    missing = [key for key in keys if key not in state]
+    if missing:
+        raise ValueError(must_be("state.pt", f"a {model.kind} state with tensors {list(keys)}", f"missing {missing}",
+                                 "The saved model is incomplete: save it again."))
+    for key in keys:
+        setattr(model, f"{key}_", state[key].to(torch.float64))

@@ -164,11 +164,6 @@ class SklearnGPRModel(BaseSensoryModel):
     @classmethod
     def _from_saved(cls, body, modality, output_shape, config, state):
         model = cls(body, modality, output_shape, **config)
-        missing = [key for key in STATE_KEYS if key not in state]
-        if missing:
-            raise ValueError(must_be("state.pt", f"an sklearn_gpr state with tensors {list(STATE_KEYS)}",
-                                     f"missing {missing}"))
-        for key in STATE_KEYS:
-            setattr(model, f"{key}_", state[key].to(torch.float64))
+        _gp_data.restore_state(model, state, STATE_KEYS)
         model._condition()
         return model
