@@ -6,7 +6,7 @@ Kinematic queries (fk, jacobian, render, observe, touch) run on a private MjData
 dynamics on `robot.data` keeps its state. The renderer is created lazily (first render), so a `Robot` is
 cheap to build in a worker process and its GL context belongs to the process that renders.
 `fk`/`jacobian` call MuJoCo per pose (the reference); `observe` and the analytic model use the same hinge
-recursion vectorized over the batch (`_HingeChain`, equal to 1e-12) when the batch is large.
+recursion vectorized over the batch (`chain.HingeChain`, equal to 1e-12) when the batch is large.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ import cv2  # noqa: E402
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
+from bodyschema.datagen.chain import HingeChain  # noqa: E402
 from bodyschema.errors import must_be  # noqa: E402
 
 ROBOT_NAMES = ("planar2", "nao_arm", "panda")
@@ -78,7 +79,7 @@ class Robot:
         self.check_ranges(sampling_ranges)
         self.sampling_ranges = np.array(sampling_ranges, dtype=np.float64)         # (Dq, 2) rad
         self._renderer = None
-        self._chain = _HingeChain(model, self._site)
+        self._chain = HingeChain(model, self._site)
         self._camera_pose()
 
     # ---- construction --------------------------------------------------------------------------------
@@ -327,57 +328,3 @@ def _check_image_size(size) -> tuple[int, int]:
     if not ok:
         raise ValueError(must_be("image_size", f"(H, W) with each side an integer in [{lo}, {hi}] px", size))
     return h, w
-
-
-class _HingeChain:
-    """mj_kinematics' recursion for the hinge chain from the world to the `ee` site, vectorized over poses.
-
-    Per body (parents first): x_b = x_parent + R_parent·body_pos, R_b = R_parent·R(body_quat); each hinge j
-    then turns the body frame by (q_j − qpos0_j) about its local axis, keeping the anchor
-    p_j = x_b + R_b·jnt_pos fixed (MuJoCo engine_core_smooth.c, mj_kinematics). The site Jacobian column is
-    a_j × (x_ee − p_j) with the world axis a_j = R_b·axis_j, as mj_jacSite gives for hinges.
-    Equal to the per-pose MuJoCo calls to ~1e-14 (tested).
-    """
-
-    def __init__(self, model: mujoco.MjModel, site: int):
-        body, path = int(model.site_bodyid[site]), []
-        while body != 0:
-            path.append(body)
-            body = int(model.body_parentid[body])
-        self.path = path[::-1]                                                  # world's child first
-        self.body_pos = np.array(model.body_pos)                                # (nbody, 3) m
-        self.body_rot = np.array([_quat_to_mat(quat) for quat in model.body_quat])   # (nbody, 3, 3)
-        self.joints = {b: np.nonzero(model.jnt_bodyid == b)[0] for b in self.path}
-        self.jnt_pos, self.jnt_axis = np.array(model.jnt_pos), np.array(model.jnt_axis)
-        self.qpos0, self.qadr = np.array(model.qpos0), np.array(model.jnt_qposadr)
-        self.site_pos = np.array(model.site_pos[site])
-        self.dq = model.njnt
-        # Rodrigues about the local axis a: R(θ) = I + sin θ·[a]× + (1 − cos θ)·[a]×²   (constant [a]×, [a]×²)
-        self.skew = np.array([-np.cross(np.eye(3), axis).T for axis in self.jnt_axis])  # (Dq, 3, 3): [a]×v = a × v
-        self.skew2 = self.skew @ self.skew
-
-    def __call__(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        n = q.shape[0]
-        pos, rot = np.zeros((n, 3)), np.broadcast_to(np.eye(3), (n, 3, 3))     # (N, 3) m, (N, 3, 3)
-        anchors, axes = np.zeros((self.dq, n, 3)), np.zeros((self.dq, n, 3))
-        for b in self.path:
-            pos = pos + np.einsum("nij,j->ni", rot, self.body_pos[b])
-            rot = rot @ self.body_rot[b]
-            for j in self.joints[b]:
-                anchors[j] = pos + np.einsum("nij,j->ni", rot, self.jnt_pos[j])
-                axes[j] = np.einsum("nij,j->ni", rot, self.jnt_axis[j])
-                angle = q[:, self.qadr[j]] - self.qpos0[self.qadr[j]]                  # (N,) rad
-                turn = np.eye(3) + np.sin(angle)[:, None, None] * self.skew[j] \
-                    + (1.0 - np.cos(angle))[:, None, None] * self.skew2[j]             # (N, 3, 3)
-                rot = rot @ turn
-                if self.jnt_pos[j].any():                                               # off-centre hinge
-                    pos = anchors[j] - np.einsum("nij,j->ni", rot, self.jnt_pos[j])
-        xyz = pos + np.einsum("nij,j->ni", rot, self.site_pos)                  # (N, 3) m
-        jac = np.cross(axes, xyz[None] - anchors)                               # (Dq, N, 3) m/rad
-        return xyz, jac.transpose(1, 2, 0)                                      # (N, 3), (N, 3, Dq)
-
-
-def _quat_to_mat(quat: np.ndarray) -> np.ndarray:
-    mat = np.empty(9)
-    mujoco.mju_quat2Mat(mat, np.asarray(quat, dtype=np.float64))
-    return mat.reshape(3, 3)
