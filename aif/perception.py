@@ -35,7 +35,8 @@ class PerceptionConfig:
     k_z: float = 1.0               # gain on ∂F/∂μ̃
     order: int = 0                 # n: generalized coordinates μ, μ', …, μ^(n); n ∈ {0, 1, 2}
     max_steps: int = 300           # per trial
-    tol: float = 1e-7              # rad; a trial has converged when no coordinate moves more than this in a step
+    tol: float = 1e-5              # rad (6e-4°); converged when no coordinate moves more in a step: float32
+                                   # decoders jitter near 1e-6 rad, so a tighter tol never stops them
     prior: str = "none"            # "none" | "damping" | "attractor" (priors.py)
     prior_precision: float = 1.0   # Π_z, same for every joint and order
     attractor_gain: float = 1.0    # β in f(μ) = β Jᵀ (x_d − g(μ))
