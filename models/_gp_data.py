@@ -72,3 +72,12 @@ def restore_state(model, state: dict[str, torch.Tensor], keys: tuple[str, ...]) 
                                  "The saved model is incomplete: save it again."))
     for key in keys:
         setattr(model, f"{key}_", state[key].to(torch.float64))
+
+
+def check_gp_hyper(hyper_points, max_points, noise_floor) -> None:
+    """The hyper-parameters both GP kinds share: subset sizes ≥ 2 and a positive noise floor."""
+    for name, value in (("hyper_points", hyper_points), ("max_points", max_points)):
+        if int(value) < 2:
+            raise ValueError(must_be(name, "an integer ≥ 2", value))
+    if not noise_floor > 0:
+        raise ValueError(must_be("noise_floor", "> 0 (standardized target units)", noise_floor))

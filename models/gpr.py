@@ -25,7 +25,6 @@ import gpytorch
 import torch
 from tqdm.auto import tqdm
 
-from bodyschema.errors import must_be
 from bodyschema.models import _gp_data, _gp_math
 from bodyschema.models.contract import BaseSensoryModel, register_kind
 from bodyschema.models.scaling import BodySpec
@@ -77,11 +76,7 @@ class GPRModel(BaseSensoryModel):
                  lr: float = 0.05,            # Adam step on the raw (softplus⁻¹) hyper-parameters
                  noise_floor: float = 1e-7):  # on standardized targets; a 1e-4 floor (gpytorch's) costs accuracy
         super().__init__(body, modality, output_shape)
-        for name, value in (("hyper_points", hyper_points), ("max_points", max_points)):
-            if int(value) < 2:
-                raise ValueError(must_be(name, "an integer ≥ 2", value))
-        if not noise_floor > 0:
-            raise ValueError(must_be("noise_floor", "> 0 (standardized target units)", noise_floor))
+        _gp_data.check_gp_hyper(hyper_points, max_points, noise_floor)
         self.hyper_points, self.max_points = int(hyper_points), int(max_points)
         self.adam_steps, self.lbfgs_steps, self.lr = int(adam_steps), int(lbfgs_steps), float(lr)
         self.noise_floor = float(noise_floor)

@@ -27,7 +27,6 @@ from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import RBF, ConstantKernel, WhiteKernel
 from tqdm.auto import tqdm
 
-from bodyschema.errors import must_be
 from bodyschema.models import _gp_data, _gp_math
 from bodyschema.models.contract import BaseSensoryModel, register_kind
 from bodyschema.models.scaling import BodySpec
@@ -55,11 +54,7 @@ class SklearnGPRModel(BaseSensoryModel):
                  max_iter: int = 500,         # L-BFGS-B iterations
                  noise_floor: float = 1e-7):  # lower bound of the white noise on standardized targets (as `gpr`)
         super().__init__(body, modality, output_shape)
-        for name, value in (("hyper_points", hyper_points), ("max_points", max_points)):
-            if int(value) < 2:
-                raise ValueError(must_be(name, "an integer ≥ 2", value))
-        if not noise_floor > 0:
-            raise ValueError(must_be("noise_floor", "> 0 (standardized target units)", noise_floor))
+        _gp_data.check_gp_hyper(hyper_points, max_points, noise_floor)
         self.hyper_points, self.max_points = int(hyper_points), int(max_points)
         self.max_iter, self.noise_floor = int(max_iter), float(noise_floor)
 
