@@ -5,9 +5,10 @@
     ∂F_x/∂μ = −Σ_m J_mᵀ Π_m ε_m                                        (J_m = ∂g_m/∂μ)
     H_x     =  Σ_m J_mᵀ Π_m J_m                                        (Gauss–Newton curvature)
 Constants (2π) are dropped. Π_m is diagonal; entries with Π = 0 (a broken sensor) leave F, its gradient and
-its log-determinant. Low-dimensional outputs use `model.jacobian` once for both gradient and curvature;
-large outputs (images) take the gradient through `model.vjp` and build the curvature, when the integrator
-needs it, from `model.jacobian` over chunks of the batch so that memory stays bounded.
+its log-determinant. Low-dimensional outputs use `model.jacobian` once for both gradient and curvature.
+Large outputs (images) take the gradient through `model.vjp` when no curvature is needed; when the integrator
+needs the curvature, the Jacobian is built over chunks of the batch (bounded memory) and serves the gradient
+too, so no VJP is spent on top of it.
 """
 
 from __future__ import annotations
@@ -31,7 +32,6 @@ class SensoryTerms:
     grad: torch.Tensor                     # (B, Dz) ∂F_x/∂μ
     hessian: torch.Tensor | None           # (B, Dz, Dz) Gauss–Newton, when asked for
     weighted: dict[str, torch.Tensor]      # modality → (B,) ½ εᵀΠε
-    mse: dict[str, torch.Tensor]           # modality → (B,) mean ε² (unweighted, in the modality's units²)
 
 
 def check_models(models: Sequence[SensoryModel]) -> BodySpec:
@@ -92,7 +92,7 @@ def sensory_terms(models: Sequence[SensoryModel], observations: Mapping[str, tor
     free = torch.zeros(b, dtype=mu.dtype)
     grad = torch.zeros(b, dz, dtype=mu.dtype)
     hess = torch.zeros(b, dz, dz, dtype=mu.dtype) if need_hessian else None
-    weighted, mse = {}, {}
+    weighted = {}
     for m in models:
         if m.modality not in observations:
             continue
@@ -105,28 +105,32 @@ def sensory_terms(models: Sequence[SensoryModel], observations: Mapping[str, tor
         eps = (x - m.predict(mu)).reshape(b, n_out)                        # (B, O) ε = x − g(μ)
         pi = pi.reshape(b, n_out)
         pe = pi * eps                                                      # (B, O) Π ε
-        if need_grad and small:
-            grad -= torch.einsum("bod,bo->bd", jac, pe)                    # −Jᵀ Π ε
-        elif need_grad:
-            grad -= m.vjp(mu, pe.reshape(x.shape))
+        jt_pe = None                                                       # (B, Dz) Jᵀ Π ε
+        if need_hessian:
+            curvature, jt_pe = _gauss_newton(m, mu, pi, pe, jac)
+            hess += curvature
+        if need_grad:
+            if jt_pe is None:
+                jt_pe = torch.einsum("bod,bo->bd", jac, pe) if small else m.vjp(mu, pe.reshape(x.shape))
+            grad -= jt_pe                                                  # −Jᵀ Π ε
         term = 0.5 * (pe * eps).sum(-1)
         logdet = torch.where(pi > 0, pi.clamp_min(1e-300).log(), torch.zeros_like(pi)).sum(-1)
         free += term - 0.5 * logdet
         weighted[m.modality] = term
-        mse[m.modality] = eps.pow(2).mean(-1)
-        if need_hessian:
-            hess += _gauss_newton(m, mu, pi, jac)
-    return SensoryTerms(free, grad, hess, weighted, mse)
+    return SensoryTerms(free, grad, hess, weighted)
 
 
-def _gauss_newton(model: SensoryModel, mu: torch.Tensor, pi: torch.Tensor, jac: torch.Tensor | None) -> torch.Tensor:
-    """Jᵀ Π J per trial. pi (B, O); jac (B, O, Dz) or None to build it chunk by chunk. → (B, Dz, Dz)"""
+def _gauss_newton(model: SensoryModel, mu: torch.Tensor, pi: torch.Tensor, pe: torch.Tensor,
+                  jac: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor]:
+    """Jᵀ Π J and Jᵀ Π ε per trial from one Jacobian. pi, pe (B, O); jac (B, O, Dz), or None to build it
+    chunk by chunk. → (B, Dz, Dz), (B, Dz)"""
     if jac is not None:
-        return torch.einsum("bod,bo,boe->bde", jac, pi, jac)
+        return torch.einsum("bod,bo,boe->bde", jac, pi, jac), torch.einsum("bod,bo->bd", jac, pe)
     b, n_out = pi.shape
     step = max(1, CHUNK_ELEMENTS // (n_out * mu.shape[1]))
-    parts = []
+    curvature, gradient = [], []
     for s in range(0, b, step):
         j = model.jacobian(mu[s:s + step])                                 # (b_chunk, O, Dz)
-        parts.append(torch.einsum("bod,bo,boe->bde", j, pi[s:s + step], j))
-    return torch.cat(parts)
+        curvature.append(torch.einsum("bod,bo,boe->bde", j, pi[s:s + step], j))
+        gradient.append(torch.einsum("bod,bo->bd", j, pe[s:s + step]))
+    return torch.cat(curvature), torch.cat(gradient)
