@@ -21,6 +21,7 @@ import cv2  # noqa: E402
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
+from bodyschema.datagen.camera import project  # noqa: E402
 from bodyschema.datagen.chain import HingeChain  # noqa: E402
 from bodyschema.errors import must_be  # noqa: E402
 
@@ -149,10 +150,7 @@ class Robot:
 
     def project(self, xyz) -> np.ndarray:
         """(N, 3) m world → (N, 2) px (u = column, v = row)."""
-        xyz = self._check_points(xyz)
-        cam = xyz @ self._rot.T + self._trans                            # (N, 3) camera frame, m
-        f, cx, cy = self._K[0, 0], self._K[0, 2], self._K[1, 2]
-        return np.stack([f * cam[:, 0] / cam[:, 2] + cx, f * cam[:, 1] / cam[:, 2] + cy], axis=1)
+        return project(self._K, self.extrinsics(), self._check_points(xyz))
 
     def project_jacobian(self, xyz) -> np.ndarray:
         """(N, 3) m → (N, 2, 3) d px / d m of `project`."""

@@ -13,19 +13,13 @@ from pathlib import Path
 import numpy as np
 import zarr
 
+from bodyschema.datagen.camera import project
 from bodyschema.datagen.store import DONE, REQUIRED_ATTRS, features, open_store
 from bodyschema.errors import must_be
 
 PIXEL_TOL = 0.05  # px; float32 storage of ee_xyz/ee_pixel gives ~1e-4 px, a real shift is >= 0.1 px
 RANGE_TOL = 1e-5  # rad; float32 rounding of the range ends
 RESUME_HINT = "Rerun the same `bodyschema datagen` command to resume it."
-
-
-def project(K: np.ndarray, world_to_cam: np.ndarray, xyz: np.ndarray) -> np.ndarray:
-    """(N, 3) m world -> (N, 2) px through K (3, 3) and a (4, 4) world->camera pose (OpenCV: z forward)."""
-    cam = xyz @ world_to_cam[:3, :3].T + world_to_cam[:3, 3]  # (N, 3) camera frame, m
-    uvw = cam @ K.T  # (N, 3)
-    return uvw[:, :2] / uvw[:, 2:3]
 
 
 def _expected_features(attrs: dict) -> dict[str, dict]:

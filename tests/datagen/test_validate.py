@@ -11,7 +11,8 @@ import zarr
 from bodyschema.datagen.config import DatagenConfig
 from bodyschema.datagen.contact_sheet import write_contact_sheet
 from bodyschema.datagen.generate import generate
-from bodyschema.datagen.validate import project, summarize_store, validate_store
+from bodyschema.datagen.camera import project
+from bodyschema.datagen.validate import summarize_store, validate_store
 
 
 @pytest.fixture(scope="module")
