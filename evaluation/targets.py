@@ -18,11 +18,11 @@ import numpy as np
 import torch
 
 from bodyschema.errors import must_be
+from bodyschema.models.scaling import IMAGE_SCALE
 
 EVAL_STREAM = 0xB0D7_E7A1          # first entropy word of every evaluation seed sequence
 PURPOSE = {"targets": 0, "beliefs": 1, "noise": 2, "starts": 3}
 OFFSET_DEG = (5.0, 10.0)           # level 1–2 belief offsets, uniform in magnitude
-IMAGE_SCALE = 255.0                # uint8 image → intensity in [0, 1], the pixel decoder's output range
 
 
 def eval_rng(seed: int, run: int, purpose: str, *keys: int) -> np.random.Generator:

@@ -25,6 +25,7 @@ from torch import nn
 from tqdm.auto import tqdm
 
 from bodyschema.errors import must_be
+from bodyschema.models.scaling import IMAGE_SCALE
 
 _INIT_LAYERS = (nn.Linear, nn.Conv2d, nn.ConvTranspose2d)
 
@@ -37,7 +38,7 @@ def check_fit_data(q, x, latent_dim: int, output_shape: tuple[int, ...], name: s
     is_uint8 = x.dtype == torch.uint8
     q, x = _finite_float(q_name, q), _finite_float(name, x)
     if is_uint8:
-        x = x / 255.0
+        x = x / IMAGE_SCALE
     if q.ndim != 2 or q.shape[1] != latent_dim:
         raise ValueError(must_be(q_name, f"of shape (N, {latent_dim}) joint angles in rad", tuple(q.shape)))
     if tuple(x.shape[1:]) != tuple(output_shape) or x.ndim != len(output_shape) + 1:

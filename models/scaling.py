@@ -12,6 +12,8 @@ import torch
 
 from bodyschema.errors import must_be
 
+IMAGE_SCALE = 255.0   # images are stored uint8; every image model sees intensity x / IMAGE_SCALE in [0, 1]
+
 
 @dataclass(frozen=True)
 class BodySpec:

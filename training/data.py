@@ -22,7 +22,7 @@ import zarr
 from tqdm.auto import tqdm
 
 from bodyschema.errors import must_be
-from bodyschema.models.scaling import BodySpec
+from bodyschema.models.scaling import IMAGE_SCALE, BodySpec
 
 DATA_ARRAYS = ("q", "ee_xyz", "ee_pixel", "image", "jacobian", "qvel", "touch")  # not bookkeeping (shard_done)
 
@@ -68,7 +68,7 @@ class Dataset:
 def as_float(x: np.ndarray | torch.Tensor) -> torch.Tensor:
     """A batch as float32 tensor: uint8 images → [0, 1], everything else unchanged in value."""
     t = torch.as_tensor(x)
-    return t.float().div_(255.0) if t.dtype == torch.uint8 else t.float()
+    return t.float().div_(IMAGE_SCALE) if t.dtype == torch.uint8 else t.float()
 
 
 def store_problems(path: Path, modalities: tuple[str, ...]) -> list[str]:
