@@ -55,9 +55,7 @@ def markdown(table: Sequence[Mapping], columns: Sequence[str] = MAIN_COLUMNS) ->
 
 
 def plot_boxes(per_trial: Mapping[str, np.ndarray], path: Path) -> Path:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from bodyschema.training.plots import plt, save_figure   # matplotlib only when plotting
     fig, ax = plt.subplots(figsize=(1.6 + 1.2 * len(per_trial), 4))
     labels = list(per_trial)
     ax.boxplot([np.maximum(per_trial[k], 1e-9) for k in labels], showfliers=True)
@@ -66,17 +64,12 @@ def plot_boxes(per_trial: Mapping[str, np.ndarray], path: Path) -> Path:
     ax.axhline(1.0, color="grey", ls="--", lw=0.8, label="success threshold (1°)")
     ax.set_ylabel("final mean |joint error| (deg)")
     ax.legend(loc="upper left", fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=120)
 
 
 def plot_curves(curves: Mapping[str, np.ndarray], path: Path) -> Path:
     """Median and inter-quartile band of F(t) − F_final per level (trials that stopped hold their last F)."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from bodyschema.training.plots import plt, save_figure   # matplotlib only when plotting
     fig, ax = plt.subplots(figsize=(6, 4))
     for level, f in curves.items():                                       # (T, N), NaN once a trial stopped
         held = _hold_last(f)
@@ -89,17 +82,12 @@ def plot_curves(curves: Mapping[str, np.ndarray], path: Path) -> Path:
     ax.set_xlabel("update step")
     ax.set_ylabel("F − F_final (median, IQR)")
     ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=120)
 
 
 def plot_sweep(rows: Sequence[Mapping], x: str, path: Path, y: str = "joint_err_deg") -> Path:
     """Error vs a swept quantity (noise σ), or a bar per case (broken sensor) when x is not numeric."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from bodyschema.training.plots import plt, save_figure   # matplotlib only when plotting
     fig, ax = plt.subplots(figsize=(5, 3.5))
     xs = [r[x] for r in rows]
     ys = np.maximum([r[y] for r in rows], 1e-9)                           # log axis: an exact 0 shows at 1e-9
@@ -111,10 +99,7 @@ def plot_sweep(rows: Sequence[Mapping], x: str, path: Path, y: str = "joint_err_
         ax.set_xlabel(x)
     ax.set_yscale("log")
     ax.set_ylabel(y)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=120)
 
 
 def write_all(summary, curves: Mapping[str, np.ndarray], out: Path, plots: bool = True) -> dict[str, Path]:

@@ -29,7 +29,7 @@ def loss_curves(history: dict[int, dict[str, float]], path: Path, title: str) ->
     ax.set(xlabel="epoch", ylabel="loss / metric", title=title)
     ax.grid(alpha=0.3)
     ax.legend()
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def prediction_scatter(target: np.ndarray, pred: np.ndarray, path: Path, unit: str, title: str) -> Path:
@@ -48,7 +48,7 @@ def prediction_scatter(target: np.ndarray, pred: np.ndarray, path: Path, unit: s
         ax.plot([lo, hi], [lo, hi], "k--", lw=0.8)
         ax.set(xlabel=f"target [{unit}]", ylabel=f"predicted [{unit}]", title=f"output {i}")
     fig.suptitle(title)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def image_grid(target: np.ndarray, pred: np.ndarray, path: Path, title: str, n: int = 8) -> Path:
@@ -64,12 +64,13 @@ def image_grid(target: np.ndarray, pred: np.ndarray, path: Path, title: str, n: 
             if j == 0:
                 ax.set_ylabel(label)
     fig.suptitle(title)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
-def _save(fig, path: Path) -> Path:
+def save_figure(fig, path: Path, dpi: float | str = "figure") -> Path:
+    """Lay out, write the PNG (creating its folder) and free the figure."""
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.tight_layout()
-    fig.savefig(path)
+    fig.savefig(path, dpi=dpi)
     plt.close(fig)
     return path
