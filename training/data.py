@@ -72,31 +72,20 @@ def as_float(x: np.ndarray | torch.Tensor) -> torch.Tensor:
 
 
 def store_problems(path: Path, modalities: tuple[str, ...]) -> list[str]:
-    """Every reason `path` cannot be trained on (empty when it can)."""
-    try:
-        from bodyschema.datagen.validate import validate_store
-    except ImportError:          # datagen's validator not installed: the basic checks below still run
-        validate_store = None
+    """Every reason `path` cannot be trained on (empty when it can): the datagen validator's findings (schema,
+    completion marker, NaN, axes, ...) plus the arrays this training run asks for."""
+    from bodyschema.datagen.validate import validate_store
+
     if not (path / "zarr.json").is_file():
         return [must_be("data", "a Zarr v3 dataset store (a directory with zarr.json)", str(path),
                         "Create one with `bodyschema datagen --out PATH`.")]
-    problems = list(validate_store(path)) if validate_store is not None else []
-    root = zarr.open_group(str(path), mode="r", zarr_format=3)
-    if not root.attrs.get("complete", False):
-        problems.append(must_be("data attrs['complete']", "True (the completion marker)", root.attrs.get("complete"),
-                                "The dataset job did not finish: run the same `bodyschema datagen` again to resume."))
-    names = sorted(k for k in root.array_keys())
+    problems = validate_store(path)
+    names = sorted(zarr.open_group(str(path), mode="r", zarr_format=3).array_keys())
     for need in ("q", *modalities):
         if need not in names:
             problems.append(must_be(f"data array {need!r}", f"present (arrays: {names})", "missing",
                                     "Choose --modality among the store's arrays." if need != "q" else ""))
-    for key in ("robot", "joint_names"):
-        if key not in root.attrs:
-            problems.append(must_be(f"data attrs[{key!r}]", "present", "missing"))
-    for m in modalities:
-        if "q" in names and m in names and root["q"].shape[0] != root[m].shape[0]:
-            problems.append(must_be(f"{m}.shape[0]", f"equal to q.shape[0] = {root['q'].shape[0]}", root[m].shape[0]))
-    return list(dict.fromkeys(problems))          # the validator and the basic checks may say the same thing
+    return problems
 
 
 def load_dataset(path: str | Path, modality: str | tuple[str, ...], *, val_fraction: float = 0.2, seed: int = 0,
@@ -118,14 +107,6 @@ def load_dataset(path: str | Path, modality: str | tuple[str, ...], *, val_fract
     q = arrays["q"].astype(np.float32, copy=False)
     xs = {m: arrays[m] if arrays[m].dtype == np.uint8 else arrays[m].astype(np.float32, copy=False)
           for m in modalities}
-    finite = np.isfinite(q).all(axis=1)
-    for x in xs.values():
-        if x.dtype != np.uint8:
-            finite &= np.isfinite(x.reshape(len(x), -1)).all(axis=1)
-    if not finite.all():
-        raise ValueError(must_be(f"data arrays q and {', '.join(modalities)}", "finite in every row",
-                                 f"{int((~finite).sum())} rows with NaN or inf",
-                                 "The store has unwritten samples: regenerate or resume it with `bodyschema datagen`."))
     rng = np.random.default_rng(seed)
     train_rows, val_rows, split_by = split_rows(arrays.get("episode"), len(q), val_fraction, rng)
     if max_train is not None and len(train_rows) > max_train:
