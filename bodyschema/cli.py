@@ -119,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
         config = tyro.cli(COMMANDS, prog="bodyschema", args=argv,
                           description="A robot learns its body by motor babbling and perceives it by active inference.")
         return run(config)
-    except (ValueError, FileNotFoundError, FileExistsError, PermissionError, OSError) as error:
+    except (ValueError, OSError) as error:
         # User-facing errors are already in the house form; no traceback for them.
         print(f"error: {error}", file=sys.stderr)
         return 2
