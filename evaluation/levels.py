@@ -27,7 +27,8 @@ from bodyschema.aif.multistart import infer_multistart
 from bodyschema.aif.perception import Perception, PerceptionConfig
 from bodyschema.errors import must_be
 from bodyschema.evaluation import level_report
-from bodyschema.evaluation.targets import eval_rng, initial_beliefs, make_targets, sample_poses
+from bodyschema.datagen.samplers import uniform
+from bodyschema.evaluation.targets import eval_rng, initial_beliefs, make_targets
 
 
 MODELS_HELP = ('"models:/<name>@<alias>" (registry), a saved model directory, or "analytic:<robot>:<modality>"; '
@@ -127,7 +128,7 @@ def evaluate_level(perception: Perception, robot, targets, level: int, rng: np.r
     mu0 = initial_beliefs(level, targets.q, robot.sampling_ranges, rng)   # (N, Dq) rad
     start = time.perf_counter()
     if multistart:
-        extra = sample_poses(robot.sampling_ranges, len(mu0) * (multistart - 1), rng)
+        extra = uniform(rng, robot.sampling_ranges, len(mu0) * (multistart - 1))
         starts = np.concatenate([mu0[:, None], extra.reshape(len(mu0), multistart - 1, -1)], axis=1)
         ms = infer_multistart(perception, obs, torch.from_numpy(starts), screen_steps, keep)
         result, evaluations = ms.result, ms.evaluations

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from bodyschema.datagen.samplers import uniform
 from bodyschema.errors import must_be
 from bodyschema.models.scaling import IMAGE_SCALE
 
@@ -45,17 +46,11 @@ class Targets:
         return {m: torch.from_numpy(np.asarray(self.observations[m], dtype=np.float64)) for m in modalities}
 
 
-def sample_poses(ranges: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
-    """Uniform poses inside `ranges` (Dq, 2) rad. → (n, Dq)"""
-    low, high = np.asarray(ranges, dtype=np.float64).T
-    return low + rng.random((n, low.size)) * (high - low)
-
-
 def make_targets(robot, n: int, rng: np.random.Generator, image: bool = False,
                  noise: Mapping[str, float] | None = None, noise_rng: np.random.Generator | None = None) -> Targets:
     """n poses from `robot.sampling_ranges` and what the simulator senses there, with optional Gaussian noise
     (standard deviation per modality, in its units: m, px, rad, intensity) added to the observations."""
-    q = sample_poses(robot.sampling_ranges, n, rng)                       # (N, Dq) rad
+    q = uniform(rng, robot.sampling_ranges, n)                            # (N, Dq) rad
     sensed = robot.observe(q, image=image)
     obs = {"ee_xyz": sensed["ee_xyz"].astype(np.float64), "ee_pixel": sensed["ee_pixel"].astype(np.float64),
            "joints": q.copy()}
@@ -80,7 +75,7 @@ def initial_beliefs(level: int, q: np.ndarray, ranges: np.ndarray, rng: np.rando
     low, high = np.asarray(ranges, dtype=np.float64).T
     if level == 3:
         if n == 1:
-            return sample_poses(ranges, 1, rng)
+            return uniform(rng, np.asarray(ranges, dtype=np.float64), 1)
         order = rng.permutation(n)                                         # a derangement: each trial gets
         mu0 = np.empty_like(q)                                             # the pose of another target
         mu0[order] = q[np.roll(order, -1)]
