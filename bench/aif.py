@@ -1,10 +1,12 @@
 """Benchmark of the AIF perception update (a script, not a test): `python bench/aif.py [--quick] [--model SPEC ...]`.
 
 Prints, measured in the same run:
-  1. batched update of N trials vs a per-trial loop of the same math (wall time, ratio, max |Δμ|);
+  1. batched update of N trials vs a per-trial loop of the same math (wall time, ratio, max |Δμ|), for analytic
+     oracles and for the --model problem (the 56×80 pixel decoder: "models:/bodyschema-nao_arm-image-pixel@champion");
   2. model evaluations per trial to reach the final joint error of the plain protocol (Euler, Δt 0.1, k_z 1,
      5000 steps; Pixel-AIF) vs the default update (local linearization, Gauss–Newton curvature), both on the
-     same F (unit precisions, so that the plain protocol is stable where it can be);
+     same F (unit precisions, so that the plain protocol is stable where it can be); for the --model problem on a
+     subset of the trials (--plain-trials);
   3. wall time and results of the full levels benchmark (levels 1–3 and 3 with multi-start, N trials × runs) for
      analytic oracles on planar2 and nao_arm, and for any extra model given with --model (e.g. a pixel decoder
      "models:/bodyschema-nao_arm-image-pixel@champion" or a saved model directory);
@@ -34,20 +36,29 @@ COLUMNS = ("joint_err_deg", "joint_err_median_deg", "ee_err_mm", "success", "ste
            "diverged", "wall_s")
 
 
-def problem(robot_name: str, modalities, n: int, level: int = 2, seed: int = 0):
-    models = [resolve_model(f"analytic:{robot_name}:{m}") for m in modalities]
+def problem(models, n: int, level: int = 2, seed: int = 0, noise=None):
+    """The benchmark robot of `models`, n level-`level` trials (targets, observations, μ0) of run 0."""
     robot = load_robot(models)
-    noise = {m: SIGMA[m] for m in modalities if m == "joints"}
-    targets = make_targets(robot, n, eval_rng(seed, 0, "targets"), noise=noise, noise_rng=eval_rng(seed, 0, "noise"))
-    mu0 = torch.from_numpy(initial_beliefs(level, targets.q, robot.sampling_ranges, eval_rng(seed, 0, "beliefs", 2)))
-    precisions = {m: SIGMA[m] ** -2 for m in modalities}
-    return models, targets, mu0, precisions
+    image = any(m.modality == "image" for m in models)
+    targets = make_targets(robot, n, eval_rng(seed, 0, "targets"), image, noise, eval_rng(seed, 0, "noise"))
+    mu0 = torch.from_numpy(initial_beliefs(level, targets.q, robot.sampling_ranges, eval_rng(seed, 0, "beliefs", level)))
+    return targets, mu0
 
 
-def batched_vs_loop(robot_name, modalities, n):
-    models, targets, mu0, precisions = problem(robot_name, modalities, n)
+def analytic(robot_name: str, modalities):
+    """Analytic models of `modalities`, their precisions 1/σ² and the joint-sensor noise that goes with them."""
+    models = [resolve_model(f"analytic:{robot_name}:{m}") for m in modalities]
+    return models, {m: SIGMA[m] ** -2 for m in modalities}, {m: SIGMA[m] for m in modalities if m == "joints"}
+
+
+def label(models) -> str:
+    return f"{models[0].body.robot} " + "+".join(f"{m.modality}({getattr(m, 'kind', '?')})" for m in models)
+
+
+def batched_vs_loop(models, n, precisions=None, noise=None):
+    targets, mu0 = problem(models, n, noise=noise)
     perception = Perception(models, PerceptionConfig(), precisions)
-    obs = targets.tensors(modalities)
+    obs = targets.tensors([m.modality for m in models])
     t = time.perf_counter()
     batched = perception.infer(obs, mu0)
     t_batch = time.perf_counter() - t
@@ -55,12 +66,13 @@ def batched_vs_loop(robot_name, modalities, n):
     singles = [perception.infer({k: v[i:i + 1] for k, v in obs.items()}, mu0[i:i + 1]).mu for i in range(n)]
     t_loop = time.perf_counter() - t
     diff = (torch.cat(singles) - batched.mu).abs().max().item()
-    print(f"[1] {robot_name} {'+'.join(modalities)}, {n} trials: batched {t_batch:.3f} s, per-trial loop {t_loop:.3f} s "
+    print(f"[1] {label(models)}, {n} trials (level 2): batched {t_batch:.3f} s, per-trial loop {t_loop:.3f} s "
           f"→ ×{t_loop / t_batch:.1f}; max |Δμ| batched vs loop {diff:.2e} rad; mean steps {batched.steps.float().mean():.1f}")
 
 
-def evaluations_to_plain_error(robot_name, modalities, n):
-    models, targets, mu0, precisions = problem(robot_name, modalities, n)
+def evaluations_to_plain_error(models, n, noise=None):
+    targets, mu0 = problem(models, n, noise=noise)
+    modalities = [m.modality for m in models]
     obs = targets.tensors(modalities)
     truth = torch.from_numpy(targets.q)
     t = time.perf_counter()
@@ -71,7 +83,7 @@ def evaluations_to_plain_error(robot_name, modalities, n):
     t_ours = time.perf_counter() - t
     target = (plain.mu - truth).abs().mean(-1)                             # (N,) rad, plain protocol's final error
     floor = torch.full_like(target, FLOOR_RAD)                             # float32 observations: ~1e-8 rad floor
-    print(f"[2] {robot_name} {'+'.join(modalities)}, {n} trials (level 2), unit precisions for both (same F): "
+    print(f"[2] {label(models)}, {n} trials (level 2), unit precisions for both (same F): "
           f"plain diverged {plain.n_diverged}; plain protocol final mean joint error "
           f"{np.rad2deg(target.mean().item()):.4g}°, ours {np.rad2deg((ours.mu - truth).abs().mean().item()):.4g}°")
     for name, res, wall in (("plain (Euler Δt 0.1)", plain, t_plain), ("ours (local-linear GN)", ours, t_ours)):
@@ -132,7 +144,10 @@ def pixel_levels(model, n, runs, out, label, extra=()):
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="100 trials, 1 run, 1000 plain steps")
-    parser.add_argument("--model", action="append", default=[], help="extra model spec(s) for section 3")
+    parser.add_argument("--model", action="append", default=[],
+                        help="model spec(s) fused into one more problem for sections 1–3, e.g. a pixel decoder")
+    parser.add_argument("--plain-trials", type=int, default=100,
+                        help="trials of the plain protocol (5000 Euler steps each) for the --model problem")
     parser.add_argument("--out", type=Path, default=Path("results/bench_aif"))
     parser.add_argument("--train-pixel", type=int, default=0, metavar="N",
                         help="fit a pixel decoder on N planar2 renders (32×32) and run the levels with it")
@@ -145,25 +160,29 @@ def main():
         PLAIN = replace(PLAIN, max_steps=1000)
     torch.set_num_threads(1)
     nao = ("ee_xyz", "ee_pixel", "joints")
+    oracles = [analytic("planar2", ("ee_xyz",)), analytic("nao_arm", ("ee_xyz", "joints")), analytic("nao_arm", nao)]
+    extra = [resolve_model(spec) for spec in args.model]                  # e.g. the 56×80 pixel decoder
     if 1 not in args.skip:
-        batched_vs_loop("planar2", ("ee_xyz",), n)
-        batched_vs_loop("nao_arm", nao, n)
+        for models, precisions, noise in (oracles[0], oracles[2]):
+            batched_vs_loop(models, n, precisions, noise)
+        if extra:
+            batched_vs_loop(extra, n)
     if 2 not in args.skip:
-        evaluations_to_plain_error("planar2", ("ee_xyz",), n)
-        evaluations_to_plain_error("nao_arm", ("ee_xyz", "joints"), n)
-        evaluations_to_plain_error("nao_arm", nao, n)      # px with unit precision: Euler Δt 0.1 is unstable
+        for models, _, noise in oracles:      # nao with px at unit precision: Euler Δt 0.1 is unstable there
+            evaluations_to_plain_error(models, n, noise)
+        if extra:                             # 5000 plain steps per trial: a subset of the trials
+            evaluations_to_plain_error(extra, min(n, args.plain_trials))
     if 3 not in args.skip:
         full_levels(["analytic:planar2:ee_xyz"], n, runs, args.out, "planar2 ee_xyz")
         full_levels(["analytic:nao_arm:ee_xyz"], n, runs, args.out, "nao_arm ee_xyz")
         full_levels([f"analytic:nao_arm:{m}" for m in nao], n, runs, args.out, "nao_arm ee_xyz+ee_pixel+joints(σ 2°)",
                     precisions=[(m, SIGMA[m] ** -2) for m in nao], noise=[("joints", SIGMA["joints"])])
+        if args.model:
+            full_levels(args.model, n, runs, args.out, "+".join(args.model))
     if args.train_pixel:
         pixel = train_pixel("planar2", args.train_pixel, (32, 32), args.pixel_epochs)
         pixel.save(args.out / "pixel_decoder")                       # reuse: --model <out>/pixel_decoder
         pixel_levels(pixel, n, runs, args.out, "planar2 pixel decoder (image)")
-    if args.model:
-        full_levels(args.model, n, runs, args.out, "+".join(args.model))
-
 
 if __name__ == "__main__":
     main()

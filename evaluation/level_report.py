@@ -38,9 +38,9 @@ def write_csv(rows: Sequence[Mapping], path: Path) -> Path:
     return path
 
 
-def markdown(table: Sequence[Mapping], columns: Sequence[str] = MAIN_COLUMNS) -> str:
-    """A Markdown table of the main metrics, mean ± std over runs."""
-    head = "| level | " + " | ".join(columns) + " |"
+def markdown(table: Sequence[Mapping], columns: Sequence[str] = MAIN_COLUMNS, key: str = "level") -> str:
+    """A Markdown table of the main metrics, mean ± std over runs, one row per value of `key`."""
+    head = f"| {key} | " + " | ".join(columns) + " |"
     lines = [head, "|" + "---|" * (len(columns) + 1)]
     for row in table:
         cells = []
@@ -50,7 +50,7 @@ def markdown(table: Sequence[Mapping], columns: Sequence[str] = MAIN_COLUMNS) ->
                 continue
             std = row.get(f"{c}_std")
             cells.append(f"{row[c]:.4g} ± {std:.2g}" if std is not None else f"{row[c]:.4g}")
-        lines.append(f"| {row['level']} | " + " | ".join(cells) + " |")
+        lines.append(f"| {row[key]} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -104,9 +104,9 @@ def plot_sweep(rows: Sequence[Mapping], x: str, path: Path, y: str = "joint_err_
 
 def write_all(summary, curves: Mapping[str, np.ndarray], out: Path, plots: bool = True) -> dict[str, Path]:
     out.mkdir(parents=True, exist_ok=True)
-    paths = {"runs_csv": write_csv(summary.rows, out / "levels_runs.csv"),
-             "summary_csv": write_csv(summary.table, out / "levels_summary.csv")}
-    paths["summary_md"] = out / "levels_summary.md"
+    paths = {"runs_csv": write_csv(summary.rows, out / "runs.csv"),
+             "summary_csv": write_csv(summary.table, out / "summary.csv")}
+    paths["summary_md"] = out / "summary.md"
     paths["summary_md"].write_text(markdown(summary.table))
     if plots:
         paths["boxplot"] = plot_boxes(summary.per_trial, out / "levels_boxplot.png")

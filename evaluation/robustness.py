@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from bodyschema.evaluation.level_report import plot_sweep, write_csv
+from bodyschema.evaluation.level_report import markdown, plot_sweep, write_csv
 from bodyschema.evaluation.levels import LevelsConfig, broken_sweep, noise_sweep, resolve_model
 
 
@@ -30,7 +30,11 @@ def run_robustness(config: RobustnessConfig, models=None) -> dict[str, Path]:
     config.out.mkdir(parents=True, exist_ok=True)
     noise = noise_sweep(levels, config.modality, config.sigmas, level=config.level, models=models)
     broken = broken_sweep(levels, models=models, level=config.level)
-    return {"noise_csv": write_csv(noise, config.out / "noise_sweep.csv"),
+    summary = config.out / "summary.md"
+    summary.write_text(f"Level {config.level}, observation noise σ on {config.modality} (precisions unchanged):\n\n"
+                       f"{markdown(noise, key='sigma')}\nEach modality broken in turn (precision 0):\n\n"
+                       f"{markdown(broken, key='broken')}")
+    return {"summary_md": summary, "noise_csv": write_csv(noise, config.out / "noise_sweep.csv"),
             "noise_png": plot_sweep(noise, "sigma", config.out / "noise_sweep.png"),
             "broken_csv": write_csv(broken, config.out / "broken_sensor.csv"),
             "broken_png": plot_sweep(broken, "broken", config.out / "broken_sensor.png")}

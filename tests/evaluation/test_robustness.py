@@ -23,3 +23,5 @@ def test_robustness_writes_noise_and_broken_sensor_tables_and_plots(tmp_path):
     assert errors[0] < errors[-1], f"joint error must grow with ee_xyz noise: {errors}"
     broken = {r["broken"]: float(r["joint_err_deg"]) for r in csv.DictReader(paths["broken_csv"].open())}
     assert set(broken) == {"none", "ee_xyz", "joints"}
+    summary = paths["summary_md"].read_text()                             # one row per σ and per broken sensor
+    assert all(f"| {float(s)} |" in summary for s in config.sigmas) and all(f"| {b} |" in summary for b in broken)

@@ -1,0 +1,252 @@
+"""`bodyschema report`: one Markdown page and one self-contained HTML page gathering every benchmark's summary.md,
+plots (PNG) and tables (CSV) found under `results/` — levels, reaching, adaptation, self-recognition, robustness, …
+
+A section is a folder at most two levels under `results` holding a `summary.md`. Files that cannot belong to the last run are skipped and listed at the end: empty or truncated
+files, and plots/CSVs older than their summary.md by more than `stale_after_s`. The HTML embeds images as base64
+and needs no network; `markdown` is not a dependency, so `markdown_to_html` converts what summary.md files hold
+(headings, paragraphs, pipe tables, lists, code, links, images). Both pages are written to temporary files
+and renamed only once complete, so a failure never leaves a half-written report.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from urllib.parse import quote, unquote
+
+from bodyschema.errors import must_be
+from bodyschema.evaluation.markdown_html import LINK, embedded_image, html_page, markdown_to_html, slug
+
+KNOWN_ORDER = ("levels", "reaching", "adaptation", "self_recognition", "robustness")   # then others, A→Z
+MAX_DEPTH = 2                  # results/<benchmark>/summary.md or results/<benchmark>/<case>/summary.md
+NO_RESULTS_HINT = "Run `bodyschema evaluate levels` first."
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+@dataclass(frozen=True)
+class ReportConfig:
+    """Gather every benchmark's summary table, plots and CSVs under `results` into one Markdown and one HTML page."""
+
+    results: Path = Path("results")    # the folder benchmarks write into: results/<benchmark>/summary.md
+    out: Path | None = None            # the Markdown page, HTML beside it (.html); None: <results>/report.md
+    title: str = "bodyschema benchmark report"
+    stale_after_s: float = 3600.0      # a plot/CSV this much older than its summary.md is left from an earlier run
+
+    def __post_init__(self):
+        if not self.stale_after_s >= 0:
+            raise ValueError(must_be("stale_after_s", "a number of seconds ≥ 0", self.stale_after_s))
+
+
+@dataclass
+class Section:
+    name: str                          # folder relative to results, e.g. "adaptation/jupiter"
+    folder: Path
+    summary_path: Path
+    summary: str                       # the summary.md text
+    plots: list[Path] = field(default_factory=list)
+    tables: list[Path] = field(default_factory=list)
+
+
+# ---- finding the sections ---------------------------------------------------------------------------------
+def find_sections(results: Path, stale_after_s: float = 3600.0) -> tuple[list[Section], list[tuple[Path, str]]]:
+    """Every readable benchmark section under `results`, in report order, and the (file, reason) pairs skipped."""
+    skipped, sections = [], []
+    for folder in _folders(results):
+        summary_path = _summary_file(folder)
+        if summary_path is None:
+            continue
+        try:
+            text = summary_path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as e:
+            skipped.append((summary_path, f"unreadable ({type(e).__name__})"))
+            continue
+        if not text.strip():
+            skipped.append((summary_path, "empty summary"))
+            continue
+        sections.append(Section(folder.relative_to(results).as_posix(), folder, summary_path, text))
+    owned = [s.folder for s in sections]
+    skipped += [(top, "outputs but no summary.md") for top in _unreported(results, owned)]
+    for section in sections:
+        for path in _owned_files(section.folder, owned):
+            reason = _skip_reason(path, section.summary_path.stat().st_mtime, stale_after_s)
+            if reason:
+                skipped.append((path, reason))
+            else:
+                (section.plots if path.suffix.lower() == ".png" else section.tables).append(path)
+    sections.sort(key=lambda s: _order_key(s.name))
+    return sections, sorted(skipped)
+
+
+def _folders(results: Path, depth: int = 1):
+    for child in sorted(p for p in results.iterdir() if p.is_dir() and not p.name.startswith((".", "_"))):
+        yield child
+        if depth < MAX_DEPTH:
+            yield from _folders(child, depth + 1)
+
+
+def _summary_file(folder: Path) -> Path | None:
+    return folder / "summary.md" if (folder / "summary.md").is_file() else None
+
+
+def _unreported(results: Path, sections: list[Path]) -> list[Path]:
+    """Top-level folders holding plots or CSVs but no section: a benchmark that wrote no summary.md."""
+    tops = [p for p in _folders(results) if p.parent == results]
+    return [t for t in tops if not any(t == s or t in s.parents for s in sections) and _owned_files(t, [])]
+
+
+def _owned_files(folder: Path, sections: list[Path]) -> list[Path]:
+    """PNG and CSV files of `folder` and its subfolders, except those of nested sections; hidden files are skipped."""
+    nested = [s for s in sections if s != folder and folder in s.parents]
+    files = []
+    for path in sorted(folder.rglob("*")):
+        rel = path.relative_to(folder).parts
+        if (path.suffix.lower() in (".png", ".csv") and path.is_file() and not any(p.startswith(".") for p in rel)
+                and not any(n in path.parents for n in nested)):
+            files.append(path)
+    return files
+
+
+def _skip_reason(path: Path, summary_mtime: float, stale_after_s: float) -> str | None:
+    try:
+        stat = path.stat()
+        with open(path, "rb") as f:
+            head = f.read(len(PNG_SIGNATURE))
+    except OSError as e:                                              # removed or locked by a running benchmark
+        return f"unreadable ({type(e).__name__})"
+    if stat.st_size == 0:
+        return "empty file"
+    if path.suffix.lower() == ".png" and head != PNG_SIGNATURE:
+        return "not a PNG (truncated or corrupt)"
+    if summary_mtime - stat.st_mtime > stale_after_s:
+        return f"stale: {_duration(summary_mtime - stat.st_mtime)} older than its summary.md (an earlier run)"
+    return None
+
+
+def _order_key(name: str) -> tuple:
+    top = name.split("/")[0].replace("-", "_")
+    rank = KNOWN_ORDER.index(top) if top in KNOWN_ORDER else len(KNOWN_ORDER)
+    return rank, top, name.count("/"), name                  # a benchmark's own section before its cases
+
+
+# ---- the Markdown page ------------------------------------------------------------------------------------
+def render_markdown(sections: list[Section], skipped: list[tuple[Path, str]], page_dir: Path, title: str,
+                    results: Path) -> str:
+    """The report page; links are relative to `page_dir`, where the page is written."""
+    heads = [s.name.replace("/", " / ") for s in sections] + (["Skipped files"] if skipped else [])
+    n_plots = sum(len(s.plots) for s in sections)
+    lines = [f"# {title}", "", f"_Generated {_when(time.time())} from `{results.as_posix()}/`: "
+             f"{len(sections)} sections, {n_plots} plots._", "", "## Contents", ""]
+    lines += [f"- [{h}](#{slug(h)})" for h in heads] + [""]
+    for head, section in zip(heads, sections):
+        lines += [f"## {head}", ""] + _section_body(section, page_dir) + [""]
+    if skipped:
+        lines += ["## Skipped files", ""]
+        lines += [f"- `{_rel(p, page_dir)}`: {reason}" for p, reason in skipped] + [""]
+    return "\n".join(lines)
+
+
+def _section_body(section: Section, page_dir: Path) -> list[str]:
+    files = [section.summary_path, *section.plots, *section.tables]
+    newest = max(p.stat().st_mtime for p in files)
+    summary, linked = _relink(_demote_headings(section.summary, 2), section.folder, page_dir)
+    summary_time = _when(section.summary_path.stat().st_mtime)
+    lines = [f"_Folder `{_rel(section.folder, page_dir)}/` · last modified {_when(newest)} "
+             f"(`{section.summary_path.name}` {summary_time})._", "", summary.strip(), ""]
+    plots = [p for p in section.plots if p.resolve() not in linked]
+    if plots:
+        lines += ["**Plots**", ""]
+        for p in plots:
+            lines += [f"![{p.stem}]({_link(p, page_dir)})", "",
+                      f"`{p.relative_to(section.folder).as_posix()}` · {_when(p.stat().st_mtime)}", ""]
+    if section.tables:
+        lines += ["**Tables**", ""]
+        lines += [f"- [{p.relative_to(section.folder).as_posix()}]({_link(p, page_dir)}) · {_when(p.stat().st_mtime)}"
+                  for p in section.tables]
+    return lines
+
+
+def _demote_headings(text: str, by: int) -> str:
+    """Headings of a summary.md sit below the section heading: `#` → `###` (at most `######`); code untouched."""
+    out, fenced = [], False
+    for line in text.splitlines():
+        fenced ^= line.lstrip().startswith("```")
+        m = None if fenced else re.match(r"(#{1,6})(\s.*)", line)
+        out.append("#" * min(6, len(m[1]) + by) + m[2] if m else line)
+    return "\n".join(out)
+
+
+
+
+def _relink(text: str, folder: Path, page_dir: Path) -> tuple[str, set[Path]]:
+    """Links and images of a summary.md, relative to its folder, rewritten relative to the page; the images found."""
+    images = set()
+
+    def fix(m: re.Match) -> str:
+        target = m[3]
+        if re.match(r"[a-zA-Z][\w+.-]*:|[#/]", target):            # URL, anchor or absolute path: as is
+            return m[0]
+        path = folder / unquote(target)
+        if m[1]:
+            images.add(path.resolve())
+        return f"{m[1]}[{m[2]}]({_link(path, page_dir)})"
+    return LINK.sub(fix, text), images
+
+
+def _rel(path: Path, page_dir: Path) -> str:
+    return Path(os.path.relpath(path, page_dir)).as_posix()
+
+
+def _link(path: Path, page_dir: Path) -> str:
+    return quote(_rel(path, page_dir))
+
+
+def _when(timestamp: float) -> str:
+    return time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(timestamp))
+
+
+def _duration(seconds: float) -> str:
+    return f"{seconds / 3600:.1f} h" if seconds >= 3600 else f"{seconds / 60:.0f} min"
+
+
+# ---- writing ----------------------------------------------------------------------------------------------
+def write_report(config: ReportConfig = ReportConfig()) -> dict[str, Path]:
+    """Write the Markdown and HTML report pages; returns {"markdown": path, "html": path}."""
+    results = Path(config.results)
+    if not results.is_dir():
+        raise ValueError(must_be("results", "a folder holding benchmark outputs", str(results), NO_RESULTS_HINT))
+    sections, skipped = find_sections(results, config.stale_after_s)
+    if not sections:
+        raise ValueError(must_be("results", "a folder with at least one <benchmark>/summary.md", str(results),
+                                 NO_RESULTS_HINT))
+    md_path = Path(config.out) if config.out is not None else results / "report.md"
+    md_path = md_path.with_suffix(".md")
+    md_path.parent.mkdir(parents=True, exist_ok=True)
+    page_dir = md_path.parent
+    text = render_markdown(sections, skipped, page_dir, config.title, results)
+    page = html_page(markdown_to_html(text, embedded_image(page_dir)), config.title)
+    paths = {"markdown": md_path, "html": md_path.with_suffix(".html")}
+    write_atomically({paths["markdown"]: text, paths["html"]: page})
+    return paths
+
+
+def write_atomically(texts: dict[Path, str]) -> None:
+    """Write every file to a hidden temporary beside it, then rename them all: a failure leaves no partial file."""
+    temps = {}
+    try:
+        for path, text in texts.items():
+            fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+            temps[path] = Path(tmp)
+            with os.fdopen(fd, "w", encoding="utf-8") as f:
+                f.write(text)
+                f.flush()
+                os.fsync(f.fileno())
+            os.chmod(tmp, 0o644)                                    # mkstemp makes 0600; a report is for reading
+        for path, tmp in temps.items():
+            os.replace(tmp, path)
+    finally:
+        for tmp in temps.values():
+            tmp.unlink(missing_ok=True)
