@@ -5,6 +5,7 @@
     bodyschema train --model gpr --data data/nao.zarr --modality ee_xyz
     bodyschema registry list | bodyschema registry promote NAME VERSION
     bodyschema evaluate levels --models models:/bodyschema-nao_arm-ee_xyz-gpr@champion --levels 1 2 3
+    bodyschema report
     bodyschema demo
 """
 
@@ -20,6 +21,7 @@ import tyro
 from bodyschema.datagen.config import DatagenConfig
 from bodyschema.demo import DemoConfig
 from bodyschema.evaluation.levels import LevelsConfig
+from bodyschema.evaluation.report import ReportConfig
 from bodyschema.evaluation.robustness import RobustnessConfig
 from bodyschema.training.config import TrainConfig
 
@@ -65,6 +67,7 @@ COMMANDS = Union[(  # noqa: UP007
     _group("evaluate", "Run an evaluation benchmark.",
            ("levels", LevelsConfig, "Estimation levels 1–3: where is my body? (AIF perception)"),
            ("robustness", RobustnessConfig, "Joint error vs observation noise and with a broken sensor.")),
+    _command("report", ReportConfig, "Gather every benchmark's tables and plots into results/report.md and .html."),
     _command("demo", DemoConfig, "The end-to-end demo: babble, fit, register, evaluate."),
 )]
 
@@ -107,6 +110,10 @@ def run(config) -> int:
         from bodyschema.evaluation.robustness import run_robustness
 
         print("\n".join(f"{k}: {v}" for k, v in run_robustness(config).items()))
+    elif isinstance(config, ReportConfig):
+        from bodyschema.evaluation.report import write_report
+
+        print("\n".join(f"{k}: {v}" for k, v in write_report(config).items()))
     elif isinstance(config, DemoConfig):
         from bodyschema.demo import run_demo
 

@@ -9,7 +9,7 @@ import pytest
 from bodyschema.cli import main
 
 SUBCOMMANDS = [["datagen"], ["validate"], ["train"], ["registry", "list"], ["registry", "promote"],
-               ["evaluate", "levels"], ["evaluate", "robustness"], ["demo"]]
+               ["evaluate", "levels"], ["evaluate", "robustness"], ["report"], ["demo"]]
 
 
 @pytest.mark.parametrize("words", SUBCOMMANDS, ids=" ".join)
