@@ -79,6 +79,12 @@ def check_observations(models: Sequence[SensoryModel], observations: Mapping[str
                                      f"dtype {x.dtype}", "Convert images to float in the model's intensity range."))
 
 
+def model_input(model: SensoryModel, mu: torch.Tensor) -> torch.Tensor:
+    """μ in the dtype the model computes in (optional `compute_dtype`, e.g. float32 for networks): the belief and
+    the update stay float64, a network is not run through a ~10× slower float64 copy of its float32 weights."""
+    return mu.to(getattr(model, "compute_dtype", mu.dtype))
+
+
 def sensory_terms(models: Sequence[SensoryModel], observations: Mapping[str, torch.Tensor],
                   precisions: Mapping[str, torch.Tensor | None], mu: torch.Tensor, need_hessian: bool,
                   jacobian_max_outputs: int = JACOBIAN_MAX_OUTPUTS, need_grad: bool = True) -> SensoryTerms:
@@ -97,12 +103,13 @@ def sensory_terms(models: Sequence[SensoryModel], observations: Mapping[str, tor
         if m.modality not in observations:
             continue
         x = observations[m.modality].to(mu.dtype)                          # (B, *out)
+        z = model_input(m, mu)
         pi = precisions.get(m.modality)
-        pi = m.precision(mu) if pi is None else pi.to(mu.dtype)            # (B, *out)
+        pi = m.precision(z).to(mu.dtype) if pi is None else pi.to(mu.dtype)  # (B, *out)
         n_out = x[0].numel()
         small = n_out <= jacobian_max_outputs
-        jac = m.jacobian(mu) if small and need_grad else None                          # (B, O, Dz)
-        eps = (x - m.predict(mu)).reshape(b, n_out)                        # (B, O) ε = x − g(μ)
+        jac = m.jacobian(z).to(mu.dtype) if small and need_grad else None  # (B, O, Dz)
+        eps = (x - m.predict(z).to(mu.dtype)).reshape(b, n_out)            # (B, O) ε = x − g(μ)
         pi = pi.reshape(b, n_out)
         pe = pi * eps                                                      # (B, O) Π ε
         jt_pe = None                                                       # (B, Dz) Jᵀ Π ε
@@ -111,7 +118,8 @@ def sensory_terms(models: Sequence[SensoryModel], observations: Mapping[str, tor
             hess += curvature
         if need_grad:
             if jt_pe is None:
-                jt_pe = torch.einsum("bod,bo->bd", jac, pe) if small else m.vjp(mu, pe.reshape(x.shape))
+                jt_pe = torch.einsum("bod,bo->bd", jac, pe) if small else \
+                    m.vjp(z, pe.reshape(x.shape).to(z.dtype)).to(mu.dtype)
             grad -= jt_pe                                                  # −Jᵀ Π ε
         term = 0.5 * (pe * eps).sum(-1)
         logdet = torch.where(pi > 0, pi.clamp_min(1e-300).log(), torch.zeros_like(pi)).sum(-1)
@@ -130,7 +138,7 @@ def _gauss_newton(model: SensoryModel, mu: torch.Tensor, pi: torch.Tensor, pe: t
     step = max(1, CHUNK_ELEMENTS // (n_out * mu.shape[1]))
     curvature, gradient = [], []
     for s in range(0, b, step):
-        j = model.jacobian(mu[s:s + step])                                 # (b_chunk, O, Dz)
+        j = model.jacobian(model_input(model, mu[s:s + step])).to(mu.dtype)  # (b_chunk, O, Dz)
         curvature.append(torch.einsum("bod,bo,boe->bde", j, pi[s:s + step], j))
         gradient.append(torch.einsum("bod,bo->bd", j, pe[s:s + step]))
     return torch.cat(curvature), torch.cat(gradient)

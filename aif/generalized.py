@@ -39,23 +39,30 @@ def phi1(a: torch.Tensor) -> torch.Tensor:
     return torch.linalg.matrix_exp(aug)[:, :n, n:]
 
 
-def local_linear_step(flow: torch.Tensor, flow_jacobian: torch.Tensor, dt: float) -> torch.Tensor:
-    """Δu = Δt φ₁(Δt 𝓙) u̇ (Ozaki 1992). flow (B, N), flow_jacobian (B, N, N) → (B, N).
+def _per_row(dt: float | torch.Tensor, flow: torch.Tensor) -> torch.Tensor:
+    """Δt as a (B, 1) column: one step size for all rows, or one per row (adaptive step control)."""
+    return torch.as_tensor(dt, dtype=flow.dtype).expand(flow.shape[0]).reshape(-1, 1)
+
+
+def local_linear_step(flow: torch.Tensor, flow_jacobian: torch.Tensor, dt: float | torch.Tensor) -> torch.Tensor:
+    """Δu = Δt φ₁(Δt 𝓙) u̇ (Ozaki 1992). flow (B, N), flow_jacobian (B, N, N), dt scalar or (B,) → (B, N).
 
     A symmetric 𝓙 (order 0: 𝓙 = −k H) goes through its eigendecomposition, φ₁ applied to the eigenvalues
     (an order of magnitude faster than a batched matrix exponential); otherwise the augmented exponential.
     """
+    dt = _per_row(dt, flow)                                               # (B, 1)
     if torch.equal(flow_jacobian, flow_jacobian.transpose(1, 2)):
-        lam, vec = torch.linalg.eigh(dt * flow_jacobian)                  # (B, N), (B, N, N)
+        lam, vec = torch.linalg.eigh(dt[:, :, None] * flow_jacobian)      # (B, N), (B, N, N)
         small = lam.abs() < 1e-8
         ratio = torch.where(small, 1.0 + lam / 2, torch.expm1(lam) / torch.where(small, 1.0, lam))
         coeff = torch.einsum("bji,bj->bi", vec, flow) * ratio             # φ₁(λ) · Vᵀ u̇
         return dt * torch.einsum("bij,bj->bi", vec, coeff)
-    return dt * torch.einsum("bij,bj->bi", phi1(dt * flow_jacobian), flow)
+    return dt * torch.einsum("bij,bj->bi", phi1(dt[:, :, None] * flow_jacobian), flow)
 
 
-def implicit_step(flow: torch.Tensor, flow_jacobian: torch.Tensor, dt: float) -> torch.Tensor:
+def implicit_step(flow: torch.Tensor, flow_jacobian: torch.Tensor, dt: float | torch.Tensor) -> torch.Tensor:
     """Linearly implicit Euler, Δu = (I − Δt 𝓙)⁻¹ Δt u̇ (Rosenbrock 1963): L-stable, Newton as Δt → ∞,
     one batched solve instead of an exponential. flow (B, N), flow_jacobian (B, N, N) → (B, N)."""
     eye = torch.eye(flow.shape[1], dtype=flow.dtype, device=flow.device)
-    return torch.linalg.solve(eye - dt * flow_jacobian, dt * flow)
+    dt = _per_row(dt, flow)                                               # (B, 1)
+    return torch.linalg.solve(eye - dt[:, :, None] * flow_jacobian, dt * flow)

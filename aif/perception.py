@@ -6,7 +6,11 @@
 Integration: "local_linear" (default) takes Ozaki's step Δt φ₁(Δt 𝓙) u̇ with the Gauss–Newton flow Jacobian
 𝓙 = D ⊗ I − k_z H (generalized.py): each step is precision-normalised — a damped Newton step that needs no
 tuning of Δt to the sensory precision — and converges in tens of steps; "implicit" is the linearly implicit
-Euler step (same limits, a solve instead of an exponential); "euler" is the plain Δt·u̇ of the Pixel-AIF protocol. A step of the joints is capped at `max_step` rad (trust region), the belief is clamped
+Euler step (same limits, a solve instead of an exponential); "euler" is the plain Δt·u̇ of the Pixel-AIF protocol. With step_control "descent" (order 0: F is then a Lyapunov
+function of the flow) a step that raises F is undone and that trial's Δt shrinks ×0.1 (it regrows ×2 on accepted
+steps, up to config.dt): the Gauss–Newton step becomes Levenberg–Marquardt-like, monotone, and a trial stops once
+no step descends any more instead of jittering at the float32 noise floor of a learned model.
+A step of the joints is capped at `max_step` rad (trust region), the belief is clamped
 to the joint limits, and every trial stops on its own: trials that converged (moved < tol) or diverged (F
 or the step not finite, an Euler step > divergence_step rad, or the precision-weighted prediction error E = F + ½ln|Π|
 grown above divergence_ratio · max(E at the start, 1) — an unstable update bouncing between the joint limits)
@@ -20,13 +24,17 @@ from dataclasses import dataclass
 
 import torch
 
-from bodyschema.aif.free_energy import check_models, check_observations, sensory_terms
+from bodyschema.aif.free_energy import check_models, check_observations, model_input, sensory_terms
 from bodyschema.aif.generalized import implicit_step, local_linear_step, shift, shift_matrix
 from bodyschema.aif.priors import PRIORS, attractor_flow, prior_terms
 from bodyschema.errors import must_be
 
 INTEGRATORS = ("local_linear", "implicit", "euler")
 STEPS = {"local_linear": local_linear_step, "implicit": implicit_step}
+STEP_CONTROLS = ("descent", "none")
+DESCENT_SLACK = 1e-7     # relative rise of F still accepted: float32 models evaluate F to ~1e-7
+DT_GROW, DT_SHRINK = 2.0, 0.1   # Δt of a trial after an accepted / a rejected step (never above config.dt)
+DT_FLOOR = 1e-6          # a trial whose Δt fell this far below config.dt found no descent left: converged
 
 
 @dataclass(frozen=True)
@@ -47,6 +55,7 @@ class PerceptionConfig:
     precisions: tuple[tuple[str, float], ...] = ()   # per-modality overrides, e.g. (("ee_xyz", 1e4),)
     precision_update: str = "step"  # "step": Π from model.precision(μ) at every step; "initial": at μ0 only
     record: bool = False           # keep the trajectory of μ̃, F and the prediction errors
+    step_control: str = "none"     # "descent": a step that raises F is undone and that trial's Δt shrinks (order 0)
 
     def __post_init__(self):
         for name in ("dt", "k_z", "prior_precision", "attractor_gain", "tol", "divergence_step"):
@@ -65,6 +74,11 @@ class PerceptionConfig:
             raise ValueError(must_be("divergence_ratio", "greater than 1 or None", self.divergence_ratio))
         if self.max_step is not None and not self.max_step > 0:
             raise ValueError(must_be("max_step", "positive or None", self.max_step))
+        if self.step_control not in STEP_CONTROLS:
+            raise ValueError(must_be("step_control", f"one of {STEP_CONTROLS}", self.step_control))
+        if self.step_control == "descent" and self.order > 0:
+            raise ValueError(must_be("step_control", "'none' when order > 0", self.step_control,
+                                     "With generalized motion the Dμ̃ term makes F no Lyapunov function of the flow."))
         if self.precision_update not in ("step", "initial"):
             raise ValueError(must_be("precision_update", "'step' or 'initial'", self.precision_update))
 
@@ -84,6 +98,34 @@ class PerceptionResult:
     @property
     def n_diverged(self) -> int:
         return int(self.diverged.sum())
+
+
+class _Cache:
+    """F, ∂F/∂μ̃, H and prediction errors at every trial's accepted belief: a rejected step falls back on them."""
+
+    def __init__(self, b: int, n: int, need_h: bool):
+        self.free = torch.zeros(b, dtype=torch.float64)
+        self.grad = None
+        self.hess = torch.zeros(b, n, n, dtype=torch.float64) if need_h else None
+        self.errors: dict[str, torch.Tensor] = {}
+
+    def store(self, rows, free, grad, hess, errors):
+        if self.grad is None:
+            self.grad = torch.zeros(self.free.shape[0], *grad.shape[1:], dtype=grad.dtype)
+        self.free[rows], self.grad[rows] = free, grad
+        if hess is not None:
+            self.hess[rows] = hess
+        for name, e in errors.items():
+            self.errors.setdefault(name, torch.zeros_like(self.free))[rows] = e
+
+    def merge(self, rows, ok, free, grad, hess, errors):
+        """The new terms where the step was accepted (ok), the cached ones where it was rejected."""
+        free = torch.where(ok, free, self.free[rows])
+        grad = torch.where(ok[:, None, None], grad, self.grad[rows])
+        if hess is not None:
+            hess = torch.where(ok[:, None, None], hess, self.hess[rows])
+        errors = {name: torch.where(ok, e, self.errors[name][rows]) for name, e in errors.items()}
+        return free, grad, hess, errors
 
 
 @dataclass
@@ -149,22 +191,43 @@ class Perception:
         active = torch.arange(b)
         trajectory = {"mu": [], "F": []} if cfg.record else None
         evaluations = 0
+        descent = cfg.step_control == "descent"
+        dt = torch.full((b,), cfg.dt, dtype=torch.float64)                 # per trial: shrinks on rejected steps
+        cand = u.clone()                                                   # the point each trial evaluates next
+        cache = _Cache(b, k * dz, need_h) if descent else None
         for t in range(cfg.max_steps):
             if active.numel() == 0:
                 break
-            ua = u[active]                                                 # (b_a, K, Dz)
+            ua = cand[active]                                              # (b_a, K, Dz)
             f_a, grad, hess, errors = self._terms(sensors, ua, active, need_h)
+            evaluations += active.numel()
+            if descent and t > 0:                                          # accept where F did not rise
+                ok = torch.isfinite(f_a) & (f_a <= free[active] + DESCENT_SLACK * free[active].abs())
+                moved = (ua - u[active]).abs().amax(dim=(1, 2))
+                u[active[ok]] = ua[ok]
+                dt[active] = torch.where(ok, (dt[active] * DT_GROW).clamp(max=cfg.dt), dt[active] * DT_SHRINK)
+                f_a, grad, hess, errors = cache.merge(active, ok, f_a, grad, hess, errors)
+                done = (ok & (moved < cfg.tol)) | (~ok & (dt[active] < cfg.dt * DT_FLOOR))
+                converged[active[done]] = True
+                keep = ~done
+                active, f_a, grad = active[keep], f_a[keep], grad[keep]
+                hess = hess[keep] if hess is not None else None
+                errors = {name: e[keep] for name, e in errors.items()}
+                if active.numel() == 0:
+                    break
+                ua = u[active]
+            if descent:
+                cache.store(active, f_a, grad, hess, errors)
             energy = sum(errors.values(), torch.zeros_like(f_a))           # (b_a,) E = Σ ½ εᵀΠε
             if t == 0:
                 start_error[active] = energy
-            evaluations += active.numel()
             flow = shift(ua) - cfg.k_z * grad                              # (b_a, K, Dz) u̇ = Dμ̃ − k ∂F/∂μ̃
             if need_h:
                 hess = 0.5 * (hess + hess.transpose(1, 2))                 # exactly symmetric (eigh fast path)
                 jac_flow = dmat[None] - cfg.k_z * hess                     # (b_a, K·Dz, K·Dz) 𝓙
-                du = STEPS[cfg.integrator](flow.reshape(-1, k * dz), jac_flow, cfg.dt).reshape(ua.shape)
+                du = STEPS[cfg.integrator](flow.reshape(-1, k * dz), jac_flow, dt[active]).reshape(ua.shape)
             else:
-                du = cfg.dt * flow
+                du = dt[active, None, None] * flow
             raw = du.abs().amax(dim=(1, 2))                                # (b_a,)
             # Divergence. Only for Euler is a huge step the instability itself; a Newton-like step near a singular
             # pose is legitimate and is cut by the trust region below.
@@ -182,11 +245,13 @@ class Perception:
             if trajectory is not None:
                 self._record(trajectory, b, active, ua, f_a, errors)
             free[active] = torch.where(torch.isfinite(f_a), f_a, free[active])
-            u[active[~bad]] = new[~bad]
+            cand[active[~bad]] = new[~bad]
+            if not descent:
+                u[active[~bad]] = new[~bad]
             steps[active] = t + 1
             diverged[active[bad]] = True
             diverged_step[active[bad]] = t
-            done = ~bad & (moved < cfg.tol)
+            done = ~bad & (moved < cfg.tol)                                # descent: judged when evaluated
             converged[active[done]] = True
             active = active[~bad & ~done]
         keep = torch.nonzero(~diverged).squeeze(-1)
@@ -273,7 +338,9 @@ class Perception:
         f0 = a = None
         if sensors.goal is not None:
             model, x_d = sensors.goal
-            f0, a = attractor_flow(model.predict(mu), model.jacobian(mu), x_d[rows], cfg.attractor_gain)
+            z = model_input(model, mu)
+            f0, a = attractor_flow(model.predict(z).to(mu.dtype), model.jacobian(z).to(mu.dtype), x_d[rows],
+                                   cfg.attractor_gain)
         prior = prior_terms(u, cfg.prior, cfg.prior_precision, f0, a)
         if prior is not None:
             free = free + prior.free_energy

@@ -227,6 +227,8 @@ class NetModel:
     """Mixin: the subclass sets `self.net_` (float32, trained) and implements `_outputs(net, u)`, u in [-1, 1]."""
 
     net_: nn.Module | None = None
+    compute_dtype = torch.float32   # what inference should feed: the weights' dtype (the float64 copy is for
+                                    # derivative checks: ~10× slower on CPU and no more accurate than its weights)
 
     @property
     def is_fitted(self) -> bool:
@@ -245,17 +247,18 @@ class NetModel:
     def _outputs(self, net: nn.Module, u: torch.Tensor) -> torch.Tensor:
         raise NotImplementedError
 
-    def _g(self, z: torch.Tensor) -> torch.Tensor:
+    def _g(self, z: torch.Tensor, net: nn.Module | None = None) -> torch.Tensor:
         """g(z) with z in rad, scaled inside so autograd derivatives are w.r.t. rad. # (B, Dz) → (B, *out)"""
-        return self._outputs(self._net(z.dtype), self.body.to_unit(z))
+        return self._outputs(net or self._net(z.dtype), self.body.to_unit(z))
 
     def _predict(self, z: torch.Tensor) -> torch.Tensor:
         with torch.no_grad():
             return self._g(z)
 
     def _jacobian(self, z: torch.Tensor) -> torch.Tensor:
+        net = self._net(z.dtype)   # resolved outside the transform: a first float64 call copies the net
         def single(zi):   # (Dz,) → (O,)
-            return self._g(zi[None]).reshape(-1)
+            return self._g(zi[None], net).reshape(-1)
         with torch.no_grad():
             return torch.func.vmap(torch.func.jacfwd(single))(z)   # (B, O, Dz)
 
