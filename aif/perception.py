@@ -9,7 +9,7 @@ tuning of Δt to the sensory precision — and converges in tens of steps; "impl
 Euler step (same limits, a solve instead of an exponential); "euler" is the plain Δt·u̇ of the Pixel-AIF protocol. With step_control "descent" (order 0: F is then a Lyapunov
 function of the flow) a step that raises F is undone and that trial's Δt shrinks ×0.1 (it regrows ×2 on accepted
 steps, up to config.dt): the Gauss–Newton step becomes Levenberg–Marquardt-like, monotone, and a trial stops once
-no step descends any more instead of jittering at the float32 noise floor of a learned model.
+even a step below `tol` does not descend, instead of jittering at the float32 noise floor of a learned model.
 A step of the joints is capped at `max_step` rad (trust region), the belief is clamped
 to the joint limits, and every trial stops on its own: trials that converged (moved < tol) or diverged (F
 or the step not finite, an Euler step > divergence_step rad, or the precision-weighted prediction error E = F + ½ln|Π|
@@ -34,7 +34,6 @@ STEPS = {"local_linear": local_linear_step, "implicit": implicit_step}
 STEP_CONTROLS = ("descent", "none")
 DESCENT_SLACK = 1e-7     # relative rise of F still accepted: float32 models evaluate F to ~1e-7
 DT_GROW, DT_SHRINK = 2.0, 0.1   # Δt of a trial after an accepted / a rejected step (never above config.dt)
-DT_FLOOR = 1e-6          # a trial whose Δt fell this far below config.dt found no descent left: converged
 
 
 @dataclass(frozen=True)
@@ -207,7 +206,8 @@ class Perception:
                 u[active[ok]] = ua[ok]
                 dt[active] = torch.where(ok, (dt[active] * DT_GROW).clamp(max=cfg.dt), dt[active] * DT_SHRINK)
                 f_a, grad, hess, errors = cache.merge(active, ok, f_a, grad, hess, errors)
-                done = (ok & (moved < cfg.tol)) | (~ok & (dt[active] < cfg.dt * DT_FLOOR))
+                done = moved < cfg.tol                                     # rejected too: no descent left
+                                                                           # within tol of this belief
                 converged[active[done]] = True
                 keep = ~done
                 active, f_a, grad = active[keep], f_a[keep], grad[keep]
@@ -230,11 +230,12 @@ class Perception:
                 du = dt[active, None, None] * flow
             raw = du.abs().amax(dim=(1, 2))                                # (b_a,)
             # Divergence. Only for Euler is a huge step the instability itself; a Newton-like step near a singular
-            # pose is legitimate and is cut by the trust region below.
+            # pose is legitimate and is cut by the trust region below. Under descent control a step too large is
+            # undone when evaluated, never taken.
             bad = ~torch.isfinite(f_a) | ~torch.isfinite(raw)
-            if not need_h:
+            if not need_h and not descent:
                 bad |= raw > cfg.divergence_step
-            if cfg.divergence_ratio is not None:
+            if cfg.divergence_ratio is not None and not descent:
                 bad |= energy > cfg.divergence_ratio * start_error[active].clamp_min(1.0)
             if cfg.max_step is not None:
                 scale = (cfg.max_step / du[:, 0].abs().amax(-1).clamp_min(1e-300)).clamp(max=1.0)

@@ -7,7 +7,7 @@ import math
 import pytest
 import torch
 
-from bodyschema.aif.perception import Perception, PerceptionConfig
+from bodyschema.aif.perception import DESCENT_SLACK, Perception, PerceptionConfig
 from tests.aif.toys import ToyJoints, other_robot_joints, perturb, planar_poses
 from tests.toy_models import ToyPlanarArm
 
@@ -92,6 +92,44 @@ def test_absurd_dt_marks_trials_diverged_and_the_run_goes_on(arm):
     assert torch.isfinite(result.mu).all(), "a diverged trial keeps its last finite belief"
 
 
+def test_descent_step_control_never_raises_F_and_tames_an_absurd_euler_step(arm):
+    q = planar_poses(32, seed=21)
+    mu0 = perturb(q, seed=22)
+    obs = {"ee_xyz": arm.predict(q)}
+    wild = dict(integrator="euler", dt=1e3, k_z=1.0, max_steps=400, max_step=None, record=True)
+    plain = Perception([arm], PerceptionConfig(**wild)).infer(obs, mu0)
+    assert plain.diverged.all(), "without step control this Euler step must blow up"
+    result = Perception([arm], PerceptionConfig(**wild, step_control="descent")).infer(obs, mu0)
+    f = result.trajectory["F"]                                             # (T, B) at the accepted beliefs
+    rises = torch.diff(f, dim=0) - DESCENT_SLACK * f[:-1].abs()           # the float32 allowance of a model
+    assert (rises[torch.isfinite(rises)] <= 0).all(), "an accepted step never raises F"
+    assert not result.diverged.any() and result.converged.all()
+    assert (result.F < f[0]).all()
+
+
+def test_descent_step_control_matches_the_plain_update_where_every_step_descends(arm):
+    q = planar_poses(16, seed=23)
+    mu0 = perturb(q, seed=24)
+    obs = {"ee_xyz": arm.predict(q)}
+    plain = Perception([arm], PerceptionConfig()).infer(obs, mu0)
+    descent = Perception([arm], PerceptionConfig(step_control="descent")).infer(obs, mu0)
+    assert (descent.mu - q).abs().max() < 0.1 * DEG and (plain.mu - q).abs().max() < 0.1 * DEG
+    assert descent.converged.all()
+
+
+def test_batched_result_equals_per_trial_loop_under_descent(arm):
+    q = planar_poses(8, seed=25)
+    mu0 = perturb(q, seed=26)
+    config = PerceptionConfig(integrator="euler", dt=1e3, max_step=None, step_control="descent")
+    perception = Perception([arm, ToyJoints()], config)
+    obs = {"ee_xyz": arm.predict(q), "joints": q + 0.01}
+    batched = perception.infer(obs, mu0)
+    for i in range(q.shape[0]):
+        single = perception.infer({k: v[i:i + 1] for k, v in obs.items()}, mu0[i:i + 1])
+        torch.testing.assert_close(single.mu[0], batched.mu[i], rtol=0, atol=1e-12)
+        assert single.steps[0] == batched.steps[i]
+
+
 def test_batched_result_equals_per_trial_loop(arm):
     q = planar_poses(12, seed=13)
     mu0 = perturb(q, seed=14)
@@ -158,6 +196,8 @@ def test_bad_mu0_and_config_raise(arm):
         Perception([arm]).infer({"ee_xyz": torch.zeros(3, 3, dtype=torch.float64)}, torch.zeros(3, 5))
     with pytest.raises(ValueError, match="order must be 0, 1 or 2"):
         PerceptionConfig(order=3)
+    with pytest.raises(ValueError, match="step_control must be 'none' when order > 0"):
+        PerceptionConfig(order=1, step_control="descent")
     with pytest.raises(ValueError, match="precision override key must be"):
         Perception([arm], precisions={"image": 1.0})
 
