@@ -1,0 +1,259 @@
+"""Closed-loop reaching: active inference against a PD baseline on N random reachable targets.
+
+Targets are joint poses drawn uniformly from the robot's sampling ranges (a seed stream of their own, held out
+from datagen and from the levels benchmark); the goal is what the goal sensor would read at that pose (so it
+is reachable by construction): an image (nao_arm with an image model, rendered at the target pose and scaled
+as training images), an ee pixel, an ee position (panda) or joint angles. Every episode starts at rest at
+another random pose, with the belief at that pose.
+  nao_arm  AIF: `aif.action.VelocityController` velocity commands integrated into the position servos;
+           baseline: the servos commanded to the target's joint pose (its true inverse kinematics).
+  panda    AIF: `aif.aic.AICController` torques on motors; baseline: PD + gravity compensation on the target pose.
+Metrics per episode (reaching_report.py): success (simulator ee within `success_mm` of the target's ee at the
+end), final ee error, final joint error, time to reach (first time within success_mm and staying), the error
+in the goal's own space (px, mm, deg or image MSE) and failures with their reasons.
+An ee pixel goal fixes the ray through the target, not its depth: with the default nao_arm models the AIF meets
+the pixel goal far more often than the 1 cm (3-D) criterion. With an image model every control tick renders B
+images (≈ 40 ms each with this machine's software EGL): 100 targets × 3 s at 50 Hz take ≈ 10 min.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import torch
+import tyro
+
+from bodyschema.aif.action import ActionConfig, VelocityController
+from bodyschema.aif.aic import AICConfig, AICController
+from bodyschema.aif.perception import PerceptionConfig
+from bodyschema.datagen.samplers import uniform
+from bodyschema.errors import must_be
+from bodyschema.evaluation import reaching_report
+from bodyschema.evaluation.levels import MODELS_HELP, load_robot, resolve_model
+from bodyschema.evaluation.pd import PDController
+from bodyschema.evaluation.reaching_loop import (Sensors, ServoPolicy, TorquePolicy, VelocityPolicy, control_substeps,
+                                                 rollout)
+from bodyschema.evaluation.targets import EVAL_STREAM
+from bodyschema.models.scaling import IMAGE_SCALE
+
+REACHING_STREAM = 0x4EAC_4100          # second entropy word: reaching targets are their own stream
+PURPOSE = {"targets": 0, "starts": 1, "noise": 2}
+ROBOTS = {   # default models, goal sensor, control rate (Hz), duration (s)
+    "nao_arm": {"models": ("analytic:nao_arm:ee_pixel", "analytic:nao_arm:joints"), "hz": 50.0, "duration": 3.0},
+    "panda": {"models": ("analytic:panda:ee_xyz",), "hz": 500.0, "duration": 5.0},
+}
+GOAL_PREFERENCE = ("image", "ee_xyz", "ee_pixel", "joints")   # "auto": the first modality among the models
+
+
+@dataclass(frozen=True)
+class ReachingConfig:
+    robot: str = "nao_arm"                 # "nao_arm" (velocity AIF on servos) | "panda" (AIC torques)
+    models: Annotated[tuple[str, ...], tyro.conf.arg(aliases=("--model",), help=MODELS_HELP)] = ()  # () = robot's
+    goal: str = "auto"                     # goal modality; auto: image > ee_xyz > ee_pixel > joints among the models
+    targets: int = 100                     # random reachable targets (episodes per controller)
+    duration: float | None = None          # s per episode; None: 3 (nao_arm), 5 (panda)
+    control_hz: float | None = None        # must divide into whole MuJoCo steps; None: 50 (nao_arm), 500 (panda)
+    noise: tuple[tuple[str, float], ...] = ()   # observation noise σ per modality (rad, m, px, intensity)
+    broken: tuple[str, ...] = ()           # modalities whose precision is 0 (a dead sensor)
+    frozen: tuple[str, ...] = ()           # modalities whose stream is frozen at its first reading
+    baseline: bool = True                  # also run the PD baseline
+    action: ActionConfig = ActionConfig()  # nao_arm
+    perception: PerceptionConfig = PerceptionConfig()   # nao_arm: per-tick perception (prior set to attractor)
+    aic: AICConfig = AICConfig()           # panda: the torque controller's gains and precisions
+    success_mm: float = 10.0               # success: final simulator ee error below this
+    pixel_tolerance: float = 1.0           # px; goal-space success of an ee_pixel goal
+    image_mse_threshold: float = 7e-4      # image goal success; the median MSE (200 poses) of a 1 cm ee offset
+    image_size: tuple[int, int] | None = None
+    path_plots: int = 6                    # targets drawn in the image-plane path plot
+    seed: int = 0
+    out: Path = Path("results/reaching")
+    mlflow: bool = True
+    tracking_uri: str | None = None        # None: $MLFLOW_TRACKING_URI, else sqlite:///mlflow.db
+    experiment: str = "bodyschema-reaching"
+    progress: bool = True
+
+    def __post_init__(self):
+        if self.robot not in ROBOTS:
+            raise ValueError(must_be("robot", f"one of {tuple(ROBOTS)}", self.robot))
+        if self.targets < 1:
+            raise ValueError(must_be("targets", "at least 1", self.targets))
+        if self.duration is not None and not self.duration > 0:
+            raise ValueError(must_be("duration", "positive (s)", self.duration))
+        if self.goal not in ("auto", *GOAL_PREFERENCE):
+            raise ValueError(must_be("goal", f"'auto' or one of {GOAL_PREFERENCE}", self.goal))
+        for name, sigma in self.noise:
+            if not (isinstance(sigma, (int, float)) and sigma >= 0):
+                raise ValueError(must_be(f"noise[{name!r}]", "a standard deviation ≥ 0", sigma))
+
+    @property
+    def model_specs(self) -> tuple[str, ...]:
+        return self.models or ROBOTS[self.robot]["models"]
+
+    @property
+    def rate(self) -> float:
+        return ROBOTS[self.robot]["hz"] if self.control_hz is None else self.control_hz
+
+    @property
+    def seconds(self) -> float:
+        return ROBOTS[self.robot]["duration"] if self.duration is None else self.duration
+
+
+def reaching_rng(seed: int, purpose: str) -> np.random.Generator:
+    return np.random.default_rng(np.random.SeedSequence([EVAL_STREAM, REACHING_STREAM, int(seed), PURPOSE[purpose]]))
+
+
+@dataclass
+class Episodes:
+    q_target: np.ndarray                   # (N, Dq) rad
+    q_start: np.ndarray                    # (N, Dq) rad
+    goal: dict[str, torch.Tensor]          # one modality → (N, *out)
+    target_xyz: np.ndarray                 # (N, 3) m
+    extra: dict = field(default_factory=dict)
+
+
+# ---- goals ------------------------------------------------------------------------------------------------
+def goal_modality(config: ReachingConfig, models) -> str:
+    names = [m.modality for m in models] + (["joints"] if config.robot == "panda" else [])
+    if config.goal != "auto":
+        if config.goal not in names:
+            raise ValueError(must_be("goal", f"the modality of one of the models {names}", config.goal))
+        return config.goal
+    return next(g for g in GOAL_PREFERENCE if g in names)
+
+
+def make_goal(robot, modality: str, q: np.ndarray) -> torch.Tensor:
+    """What the goal sensor reads at poses q (N, Dq) rad: joints rad, ee_xyz m, ee_pixel px, image in [0, 1]."""
+    if modality == "joints":
+        x = q
+    elif modality == "ee_xyz":
+        x = robot.fk(q)
+    elif modality == "ee_pixel":
+        x = robot.project(robot.fk(q))
+    else:
+        x = robot.render(q).astype(np.float64) / IMAGE_SCALE
+    return torch.from_numpy(np.asarray(x, dtype=np.float64))
+
+
+def check_goal(robot, modality: str, goal, output_shape: tuple[int, ...]) -> None:
+    """Raise the house error for a malformed goal or one the arm cannot reach (outside the joint limits, the
+    arm's reach or the image)."""
+    shape = tuple(getattr(goal, "shape", ()))
+    if not isinstance(goal, torch.Tensor) or len(shape) != 1 + len(output_shape) or shape[1:] != tuple(output_shape):
+        raise ValueError(must_be(f"{modality} goal", f"a tensor of shape (N, {', '.join(map(str, output_shape))})",
+                                 shape or type(goal).__name__))
+    x = goal.numpy()
+    if not np.isfinite(x).all():
+        raise ValueError(must_be(f"{modality} goal", "finite", "NaN or inf values"))
+    if modality == "joints":
+        robot.check_q(x)
+    elif modality == "ee_pixel":
+        h, w = robot.image_size
+        outside = (x[:, 0] < 0) | (x[:, 0] > w - 1) | (x[:, 1] < 0) | (x[:, 1] > h - 1)
+        if outside.any():
+            raise ValueError(must_be("ee_pixel goal", f"inside the {w}×{h} px image", x[outside][0].tolist(),
+                                     "A pixel the camera cannot see is not a reachable goal."))
+    elif modality == "ee_xyz":
+        base, reach = _reach(robot)
+        far = np.linalg.norm(x - base, axis=1) > reach
+        if far.any():
+            raise ValueError(must_be("ee_xyz goal", f"within the arm's reach ({reach:.3f} m from {base.round(3)})",
+                                     x[far][0].round(4).tolist(), "Pick a goal inside the workspace."))
+    elif modality == "image" and ((x < 0) | (x > 1)).any():
+        raise ValueError(must_be("image goal", "intensities in [0, 1] (uint8 / 255)", (x.min(), x.max())))
+
+
+def _reach(robot) -> tuple[np.ndarray, float]:
+    """The first joint's anchor (m) and the largest ee distance from it over the joint limits (m)."""
+    import mujoco
+    d = mujoco.MjData(robot.model)
+    mujoco.mj_kinematics(robot.model, d)
+    base = d.xanchor[0].copy()
+    q = uniform(np.random.default_rng(0), robot.joint_limits, 4096)
+    return base, float(np.linalg.norm(robot.fk(q) - base, axis=1).max()) * 1.01
+
+
+def make_episodes(config: ReachingConfig, robot, modality: str, output_shape) -> Episodes:
+    q_target = uniform(reaching_rng(config.seed, "targets"), robot.sampling_ranges, config.targets)
+    q_start = uniform(reaching_rng(config.seed, "starts"), robot.sampling_ranges, config.targets)
+    goal = make_goal(robot, modality, q_target)
+    check_goal(robot, modality, goal, output_shape)
+    return Episodes(q_target, q_start, {modality: goal}, robot.fk(q_target))
+
+
+# ---- controllers ------------------------------------------------------------------------------------------
+def aif_policy(config: ReachingConfig, models, robot):
+    precisions = {m: 0.0 for m in config.broken}
+    if config.robot == "nao_arm":
+        return VelocityPolicy(VelocityController(models, config.perception, config.action, precisions))
+    if "joints" in config.broken:
+        raise ValueError(must_be("broken", "extra sensors only on the panda (the AIC's joint sensor is built in)",
+                                 config.broken))
+    aic = replace(config.aic, precisions=tuple((m, p) for m, p in config.aic.precisions if m not in precisions)
+                  + tuple(precisions.items()))
+    extra = [m for m in models if m.modality != "joints"]
+    return TorquePolicy(AICController(extra, aic, np.abs(robot.model.actuator_ctrlrange[:, 1])))
+
+
+def baseline_policy(config: ReachingConfig, robot, episodes: Episodes):
+    if config.robot == "nao_arm":
+        return ServoPolicy(episodes.q_target)
+    return TorquePolicy(PDController("panda"), goal={"joints": episodes.q_target})
+
+
+# ---- the benchmark ----------------------------------------------------------------------------------------
+def run_reaching(config: ReachingConfig = ReachingConfig(), models=None) -> dict[str, Path]:
+    """AIF (and the PD baseline) on config.targets episodes; writes tables, plots and one MLflow run."""
+    robot, models, modality, episodes, results, walls = simulate(config, models)
+    return reaching_report.write_all(config, robot, models, modality, episodes, results, walls)
+
+
+def simulate(config: ReachingConfig, models=None):
+    """Run every controller on the episodes. → robot, models, goal modality, episodes, {name: Rollout},
+    {name: wall time s}."""
+    robot, models, modality, episodes, sensed = prepare(config, models)
+    substeps = control_substeps(config.rate, robot.model.opt.timestep)
+    ticks = int(round(config.seconds * config.rate))
+    policies = {"aif": aif_policy(config, models, robot)}
+    if config.baseline:
+        policies["pd"] = baseline_policy(config, robot, episodes)
+    results, walls = {}, {}
+    for name, policy in policies.items():
+        sensors = Sensors(sensed if name == "aif" else (), dict(config.noise), frozenset(config.frozen),
+                          reaching_rng(config.seed, "noise"))                  # the baselines sense the true state
+        start = time.perf_counter()
+        goal = {k: v.clone() for k, v in episodes.goal.items()}
+        results[name] = rollout(robot, policy, episodes.q_start, goal, episodes.target_xyz, sensors, ticks,
+                                substeps, config.progress, desc=f"reaching {name}")
+        walls[name] = time.perf_counter() - start
+    return robot, models, modality, episodes, results, walls
+
+
+def prepare(config: ReachingConfig, models=None):
+    """Resolve and check the models, load the robot, build the episodes. → robot, models, goal modality,
+    episodes, sensed modalities."""
+    models = [resolve_model(s, config.tracking_uri) for s in config.model_specs] if models is None else list(models)
+    if any(m.body.robot != config.robot for m in models):
+        bad = next(m for m in models if m.body.robot != config.robot)
+        raise ValueError(must_be(f"{bad.modality} model body", f"of robot {config.robot!r}", bad.body.robot,
+                                 "Pass models of the benchmark's robot (or change --robot)."))
+    robot = load_robot(models, config.image_size)
+    if config.robot == "panda":
+        from bodyschema.datagen.robot import Robot
+        robot = Robot.load("panda", image_size=robot.image_size, actuators="torque")
+    names = [m.modality for m in models]
+    for what in ("broken", "frozen"):
+        unknown = sorted(set(getattr(config, what)) - set(names) - ({"joints"} if config.robot == "panda" else set()))
+        if unknown:
+            raise ValueError(must_be(what, f"modalities of the models {names}", unknown))
+    modality = goal_modality(config, models)
+    shape = (robot.dq,) if modality == "joints" else next(m.output_shape for m in models if m.modality == modality)
+    episodes = make_episodes(config, robot, modality, shape)
+    sensed = tuple(dict.fromkeys(names + (["joints"] if config.robot == "panda" else [])))
+    unknown = sorted(set(dict(config.noise)) - set(sensed))
+    if unknown:
+        raise ValueError(must_be("noise modality", f"one of the sensed modalities {list(sensed)}", unknown))
+    return robot, models, modality, episodes, sensed

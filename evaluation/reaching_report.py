@@ -1,0 +1,169 @@
+"""Metrics, tables, plots and the MLflow run of the reaching benchmark (evaluation/reaching.py).
+
+Writes into config.out: `reaching_episodes.csv` (one row per controller × target), `summary.csv` and `summary.md`
+(one row per controller), `ee_error.png` (ee error vs time, every target and the mean, per controller) and
+`image_paths.png` (the ee path in the camera image for a few targets).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from bodyschema.evaluation.level_report import write_csv
+from bodyschema.models.scaling import IMAGE_SCALE
+
+SUMMARY_COLUMNS = ("episodes", "success", "goal_success", "ee_err_mm", "ee_err_median_mm", "joint_err_deg",
+                   "time_to_reach_s", "failed", "wall_s")
+GOAL_UNITS = {"joints": "deg", "ee_xyz": "mm", "ee_pixel": "px", "image": "MSE"}
+
+
+def time_to_reach(t: np.ndarray, err: np.ndarray, tolerance: float) -> np.ndarray:
+    """First time from which the error stays below tolerance to the end; NaN if it never does. t (T,), err (T, B)."""
+    inside = err < tolerance                                              # (T, B)
+    stays = np.flip(np.logical_and.accumulate(np.flip(inside, 0), 0), 0)   # inside from here to the end
+    first = np.argmax(stays, axis=0)
+    return np.where(stays.any(axis=0), t[first], np.nan)
+
+
+def goal_errors(config, robot, modality: str, goal: torch.Tensor, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Final error in the goal's own space and whether it is within the goal tolerance. q (B, Dq) rad → (B,), (B,)"""
+    lim = robot.joint_limits
+    q = np.clip(q, lim[:, 0], lim[:, 1])
+    x = goal.numpy()
+    if modality == "joints":
+        err = np.rad2deg(np.abs(q - x)).mean(axis=1)
+        return err, err < 1.0
+    if modality == "ee_xyz":
+        err = 1e3 * np.linalg.norm(robot.fk(q) - x, axis=1)
+        return err, err < config.success_mm
+    if modality == "ee_pixel":
+        err = np.linalg.norm(robot.project(robot.fk(q)) - x, axis=1)
+        return err, err < config.pixel_tolerance
+    image = robot.render(q).astype(np.float64) / IMAGE_SCALE
+    err = ((image - x) ** 2).reshape(len(q), -1).mean(axis=1)
+    return err, err < config.image_mse_threshold
+
+
+def episode_rows(config, robot, modality, episodes, name: str, result) -> list[dict]:
+    tol = config.success_mm * 1e-3
+    reach = time_to_reach(result.t, result.ee_err, tol)
+    final = result.ee_err[-1]                                             # (B,) m
+    joint = np.rad2deg(np.abs(result.q - episodes.q_target)).mean(axis=1)
+    goal_err, goal_ok = goal_errors(config, robot, modality, episodes.goal[modality], result.q)
+    rows = []
+    for i in range(len(final)):
+        rows.append({"controller": name, "target": i, "success": bool(final[i] < tol and not result.failed[i]),
+                     "ee_err_mm": 1e3 * float(final[i]), "joint_err_deg": float(joint[i]),
+                     "time_to_reach_s": float(reach[i]), f"goal_err_{GOAL_UNITS[modality]}": float(goal_err[i]),
+                     "goal_success": bool(goal_ok[i] and not result.failed[i]), "failed": bool(result.failed[i]),
+                     "reason": result.reasons[i] or ""})
+    return rows
+
+
+def summarize(rows: list[dict], walls: dict[str, float]) -> list[dict]:
+    table = []
+    for name in dict.fromkeys(r["controller"] for r in rows):
+        mine = [r for r in rows if r["controller"] == name]
+        ee = np.array([r["ee_err_mm"] for r in mine])
+        reached = np.array([r["time_to_reach_s"] for r in mine])
+        table.append({"controller": name, "episodes": len(mine),
+                      "success": float(np.mean([r["success"] for r in mine])),
+                      "goal_success": float(np.mean([r["goal_success"] for r in mine])),
+                      "ee_err_mm": float(ee.mean()), "ee_err_median_mm": float(np.median(ee)),
+                      "joint_err_deg": float(np.mean([r["joint_err_deg"] for r in mine])),
+                      "time_to_reach_s": float(np.nanmean(reached)) if np.isfinite(reached).any() else float("nan"),
+                      "failed": int(sum(r["failed"] for r in mine)), "wall_s": float(walls[name])})
+    return table
+
+
+def markdown(table: list[dict], config, modality: str) -> str:
+    head = "| controller | " + " | ".join(SUMMARY_COLUMNS) + " |"
+    lines = [head, "|" + "---|" * (len(SUMMARY_COLUMNS) + 1)]
+    for row in table:
+        cells = [f"{row[c]:.4g}" if isinstance(row[c], float) else str(row[c]) for c in SUMMARY_COLUMNS]
+        lines.append(f"| {row['controller']} | " + " | ".join(cells) + " |")
+    tol = {"ee_pixel": f"{config.pixel_tolerance:g} px", "image": f"image MSE {config.image_mse_threshold:g}",
+           "ee_xyz": f"{config.success_mm:g} mm", "joints": "1°"}[modality]
+    text = (f"Reaching on {config.robot}: {table[0]['episodes']} random reachable targets, {modality} goals, "
+            f"{config.seconds:g} s at {config.rate:g} Hz, seed {config.seed}. `success`: final simulator "
+            f"ee error < {config.success_mm:g} mm; `goal_success`: final error in the goal space < {tol}; "
+            "`time_to_reach_s`: mean over the episodes that reached and stayed. "
+            "aif = active inference, pd = PD on the target's true joint pose.")
+    if modality == "ee_pixel":
+        text += " A pixel goal fixes the ray, not the depth: `success` can fail where `goal_success` holds."
+    if config.noise or config.broken or config.frozen:
+        text += f" Noise σ {dict(config.noise)}, broken {list(config.broken)}, frozen {list(config.frozen)}."
+    return "\n".join(lines) + "\n\n" + text + "\n"
+
+
+def plot_errors(results: dict, path: Path, success_mm: float) -> Path:
+    from bodyschema.training.plots import plt, save_figure
+    fig, axes = plt.subplots(1, len(results), figsize=(5 * len(results), 3.8), squeeze=False, sharey=True)
+    for ax, (name, res) in zip(axes[0], results.items()):
+        err = np.maximum(1e3 * res.ee_err, 1e-3)                          # (T+1, B) mm, floor for the log axis
+        ax.plot(res.t, err, color="tab:blue", lw=0.5, alpha=0.3)
+        ax.plot(res.t, err.mean(axis=1), color="k", lw=2, label="mean")
+        ax.axhline(success_mm, color="tab:red", ls="--", lw=1, label=f"{success_mm:g} mm")
+        ax.set(yscale="log", xlabel="time (s)", title=name)
+        ax.legend(fontsize=8)
+    axes[0][0].set_ylabel("ee error (mm)")
+    return save_figure(fig, path)
+
+
+def plot_paths(results: dict, goal_px: np.ndarray, robot, path: Path, n: int) -> Path:
+    from bodyschema.training.plots import plt, save_figure
+    h, w = robot.image_size
+    fig, axes = plt.subplots(1, len(results), figsize=(4.5 * len(results), 4.5 * h / w + 0.6), squeeze=False)
+    colors = plt.get_cmap("tab10").colors
+    for ax, (name, res) in zip(axes[0], results.items()):
+        for i in range(min(n, res.ee_pixel.shape[1])):
+            c = colors[i % len(colors)]
+            ax.plot(res.ee_pixel[:, i, 0], res.ee_pixel[:, i, 1], color=c, lw=1)
+            ax.plot(*res.ee_pixel[0, i], "o", color=c, ms=4)
+            ax.plot(*goal_px[i], "x", color=c, ms=8, mew=2)
+        ax.set(xlim=(0, w - 1), ylim=(h - 1, 0), aspect="equal", xlabel="u (px)", ylabel="v (px)",
+               title=f"{name}: ee path (o start, x goal)")
+    return save_figure(fig, path)
+
+
+def write_all(config, robot, models, modality, episodes, results: dict, walls: dict) -> dict:
+    out = Path(config.out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = [r for name, res in results.items() for r in episode_rows(config, robot, modality, episodes, name, res)]
+    table = summarize(rows, walls)
+    paths = {"episodes_csv": write_csv(rows, out / "reaching_episodes.csv"),
+             "summary_csv": write_csv(table, out / "summary.csv"),
+             "summary_md": out / "summary.md"}
+    paths["summary_md"].write_text(markdown(table, config, modality))
+    paths["ee_error_png"] = plot_errors(results, out / "ee_error.png", config.success_mm)
+    goal_px = robot.project(episodes.target_xyz)
+    paths["paths_png"] = plot_paths(results, goal_px, robot, out / "image_paths.png", config.path_plots)
+    if config.mlflow:
+        log_mlflow(config, models, table, paths)
+    return paths
+
+
+def log_mlflow(config, models, table: list[dict], paths: dict) -> str:
+    import mlflow
+
+    from bodyschema.training.registry import ensure_experiment, use_tracking
+    use_tracking(config.tracking_uri)
+    params = {k: str(v) for k, v in asdict(config).items() if k not in ("action", "perception", "aic")}
+    params.update({f"action.{k}": str(v) for k, v in asdict(config.action).items()})
+    params.update({f"perception.{k}": str(v) for k, v in asdict(config.perception).items()})
+    params.update({f"aic.{k}": str(v) for k, v in asdict(config.aic).items()})
+    params["model_kinds"] = ",".join(f"{getattr(m, 'kind', type(m).__name__)}:{m.modality}" for m in models)
+    experiment = ensure_experiment(config.experiment)
+    with mlflow.start_run(experiment_id=experiment, run_name=f"reaching-{config.robot}") as run:
+        mlflow.log_params(params)
+        for row in table:
+            for key, value in row.items():
+                if isinstance(value, (int, float)) and np.isfinite(value):
+                    mlflow.log_metric(f"{row['controller']}.{key}", float(value))
+        for path in paths.values():
+            mlflow.log_artifact(str(path))
+        return run.info.run_id

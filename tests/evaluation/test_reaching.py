@@ -1,0 +1,143 @@
+"""Closed-loop reaching on nao_arm with the analytic models: AIF reaches, failures stay in their episode,
+bad input raises the house error, a seed reproduces the metrics."""
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from bodyschema.evaluation.reaching import (ReachingConfig, aif_policy, check_goal, make_goal, prepare,
+                                            run_reaching)
+from bodyschema.evaluation.reaching_loop import Sensors, control_substeps, rollout
+from bodyschema.evaluation.reaching_report import time_to_reach
+
+SHORT = dict(targets=4, duration=1.5, mlflow=False, progress=False)
+
+
+def read_rows(path: Path) -> list[dict]:
+    with open(path) as f:
+        return list(csv.DictReader(f))
+
+
+@pytest.fixture(scope="module")
+def short_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("reaching")
+    return run_reaching(ReachingConfig(out=out, **SHORT))
+
+
+def test_aif_reaches_pixel_goals_and_beats_standing_still(short_run):
+    config = ReachingConfig(**SHORT)
+    robot, _, modality, episodes, _ = prepare(config)
+    standing = 1e3 * np.linalg.norm(robot.fk(episodes.q_start) - episodes.target_xyz, axis=1)   # (N,) mm
+    standing_px = np.linalg.norm(robot.project(robot.fk(episodes.q_start)) - episodes.goal["ee_pixel"].numpy(), axis=1)
+    aif = [r for r in read_rows(short_run["episodes_csv"]) if r["controller"] == "aif"]
+    final = np.array([float(r["ee_err_mm"]) for r in aif])
+    final_px = np.array([float(r["goal_err_px"]) for r in aif])
+    assert modality == "ee_pixel"
+    assert (final < 0.5 * standing).all()
+    assert (final_px < 0.2 * standing_px).all() and not any(r["failed"] == "True" for r in aif)
+
+
+def test_outputs_are_written(short_run):
+    for key in ("episodes_csv", "summary_csv", "summary_md", "ee_error_png", "paths_png"):
+        assert short_run[key].is_file() and short_run[key].stat().st_size > 0
+    table = read_rows(short_run["summary_csv"])
+    assert [r["controller"] for r in table] == ["aif", "pd"]
+    assert "| aif |" in short_run["summary_md"].read_text()
+
+
+def test_same_seed_reproduces_the_metrics_exactly(short_run, tmp_path):
+    again = run_reaching(ReachingConfig(out=tmp_path, **SHORT))
+    assert again["episodes_csv"].read_bytes() == short_run["episodes_csv"].read_bytes()
+
+
+def test_nan_in_one_stream_fails_only_its_episode():
+    config = ReachingConfig(**SHORT)
+    robot, models, _, episodes, sensed = prepare(config)
+
+    class Glitch(Sensors):                      # the camera returns NaN for episode 1 from the 10th tick on
+        ticks = 0
+
+        def read(self, arm):
+            out = super().read(arm)
+            self.ticks += 1
+            if self.ticks >= 10:
+                out["ee_pixel"] = out["ee_pixel"].clone()
+                out["ee_pixel"][1] = float("nan")
+            return out
+
+    result = rollout(robot, aif_policy(config, models, robot), episodes.q_start, episodes.goal,
+                     episodes.target_xyz, Glitch(sensed), ticks=60, substeps=control_substeps(50, 0.002))
+    assert result.failed.tolist() == [False, True, False, False]
+    assert "non-finite" in result.reasons[1]
+    others = result.ee_err[-1, [0, 2, 3]]
+    assert (others < result.ee_err[0, [0, 2, 3]]).all()
+
+
+def test_time_to_reach_is_the_first_time_it_stays_inside():
+    t = np.arange(5) * 0.1
+    err = np.array([[5, 5, 5], [0.5, 5, 5], [5, 0.5, 5], [0.5, 0.5, 5], [0.5, 0.5, 5]])   # (T, B)
+    reach = time_to_reach(t, err, 1.0)
+    assert reach[0] == pytest.approx(0.3) and reach[1] == pytest.approx(0.2) and np.isnan(reach[2])
+
+
+def test_bad_control_rate_raises():
+    with pytest.raises(ValueError, match="control_hz"):
+        control_substeps(33.0, 0.002)
+    with pytest.raises(ValueError, match="control_hz"):
+        control_substeps(1000.0, 0.002)                # faster than the simulator
+    assert control_substeps(50.0, 0.002) == 10
+    with pytest.raises(ValueError, match="control_hz"):
+        run_reaching(ReachingConfig(control_hz=30.0, **SHORT))
+
+
+def test_model_of_another_robot_raises():
+    with pytest.raises(ValueError, match="robot 'nao_arm'"):
+        prepare(ReachingConfig(models=("analytic:planar2:ee_xyz",), **SHORT))
+
+
+def test_malformed_or_unreachable_goals_raise():
+    config = ReachingConfig(**SHORT)
+    robot, *_ = prepare(config)
+    q = robot.sampling_ranges.mean(axis=1)[None]
+    with pytest.raises(ValueError, match="ee_pixel goal"):
+        check_goal(robot, "ee_pixel", torch.tensor([[-5.0, 10.0]]), (2,))           # outside the image
+    with pytest.raises(ValueError, match="ee_pixel goal"):
+        check_goal(robot, "ee_pixel", torch.zeros(1, 3), (2,))                      # wrong shape
+    with pytest.raises(ValueError, match="finite"):
+        check_goal(robot, "ee_xyz", torch.full((1, 3), float("nan")), (3,))
+    with pytest.raises(ValueError, match="reach"):
+        check_goal(robot, "ee_xyz", torch.tensor([[2.0, 0.0, 0.0]]), (3,))          # 2 m away
+    with pytest.raises(ValueError, match="joint limits"):
+        check_goal(robot, "joints", torch.full((1, 4), 3.0), (4,))
+    check_goal(robot, "ee_xyz", make_goal(robot, "ee_xyz", q), (3,))                # a reachable one passes
+    with pytest.raises(ValueError, match="goal"):
+        ReachingConfig(goal="touch")
+    with pytest.raises(ValueError, match="goal"):
+        prepare(ReachingConfig(goal="ee_xyz", **SHORT))                             # no ee_xyz model
+
+
+def test_panda_runs_the_torque_loop_and_its_pd_baseline_reaches(tmp_path):
+    paths = run_reaching(ReachingConfig(robot="panda", targets=2, duration=1.5, out=tmp_path, mlflow=False,
+                                        progress=False))
+    rows = read_rows(paths["episodes_csv"])
+    assert [r["controller"] for r in rows] == ["aif", "aif", "pd", "pd"]
+    assert not any(r["failed"] == "True" for r in rows)
+    assert all(r["success"] == "True" for r in rows if r["controller"] == "pd")
+    with pytest.raises(ValueError, match="broken"):
+        run_reaching(ReachingConfig(robot="panda", broken=("joints",), **SHORT))
+
+
+def test_one_mlflow_run_with_the_outputs_as_artifacts(tmp_path, monkeypatch):
+    import mlflow
+    monkeypatch.chdir(tmp_path)                        # MLflow puts artifacts under ./mlartifacts
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    paths = run_reaching(ReachingConfig(targets=2, duration=0.5, baseline=False, progress=False, out=tmp_path / "out",
+                                        tracking_uri=uri, experiment="test-reaching"))
+    mlflow.set_tracking_uri(uri)
+    runs = mlflow.search_runs(experiment_names=["test-reaching"])
+    assert len(runs) == 1 and "metrics.aif.success" in runs.columns
+    artifacts = {a.path for a in mlflow.MlflowClient().list_artifacts(runs.run_id[0])}
+    assert artifacts == {p.name for p in paths.values()}
