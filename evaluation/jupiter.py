@@ -1,0 +1,350 @@
+"""Adaptation (b), "Jupiter": gravity jumps from 9.81 to 24.79 m/s² mid-task on the torque-driven panda.
+
+As in the AIC paper's experiment (Pezzato, Ferrari & Hernández Corbato 2020, §VI), the same joint goals are held
+by three controllers from the same start poses: the PD baseline with Earth-gravity compensation
+(evaluation/pd.py, the "built-in" controller), the unimodal AIC (joint sensors) and the multimodal AIC (joints +
+an extra SensoryModel, by default the analytic ee_xyz). Recorded over time: the joint tracking error (deg, mean
+over joints) and the end-effector error (mm). Summary per controller: steady error before and after the switch,
+peak error after it, settle time, failed episodes. An episode whose controller or simulation fails (non-finite
+input, diverged belief, unstable physics) is marked failed with its reason and the benchmark goes on.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Annotated
+
+import mujoco
+import numpy as np
+import torch
+import tyro
+
+from bodyschema.aif.aic import AICConfig, AICController
+from bodyschema.datagen.robot import GRAVITY, Robot
+from bodyschema.errors import must_be
+from bodyschema.evaluation.level_report import write_csv
+from bodyschema.evaluation.levels import MODELS_HELP, check_models_match, resolve_model
+from bodyschema.evaluation.pd import PDConfig, PDController
+from bodyschema.evaluation.targets import eval_rng
+from bodyschema.models.scaling import IMAGE_SCALE
+
+TIMESTEP = 0.002                   # s, the panda MJCF's MuJoCo step
+READY = (0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785)   # rad, Franka's "ready" pose: goals and starts around it
+MIN_EE_HEIGHT = 0.15               # m; the fingertip collides with the floor, keep goals and starts above it
+SENSED = ("ee_xyz", "ee_pixel", "image")   # extra modalities the loop simulates
+
+
+@dataclass(frozen=True)
+class JupiterConfig:
+    """PD vs unimodal vs multimodal AIC on the panda while gravity jumps to Jupiter's mid-task."""
+
+    episodes: int = 10                 # random reachable joint goals (and start poses) around the ready pose
+    duration: float = 12.0             # s of simulated time per episode
+    switch_time: float = 6.0           # s; gravity 9.81 → jupiter_gravity here
+    jupiter_gravity: float = 24.79     # m/s²
+    control_rate: float = 500.0        # Hz; 1 / (rate · 0.002 s) must be a whole number of MuJoCo steps
+    models: Annotated[tuple[str, ...], tyro.conf.arg(help=MODELS_HELP)] = ("analytic:panda:ee_xyz",)
+    aic: AICConfig = AICConfig()
+    pd: PDConfig = PDConfig()
+    spread: float = 0.4                # rad; goals and starts uniform in READY ± spread (inside the joint ranges)
+    steady_window: float = 1.0         # s; steady error = mean error over the last window before the switch / the end
+    settle_deg: float = 0.1            # deg; settled once the joint error stays below this until the end
+    seed: int = 0
+    out: Path = Path("results/adaptation/jupiter")
+    mlflow: bool = True
+    tracking_uri: str | None = None    # None: $MLFLOW_TRACKING_URI, else sqlite:///mlflow.db
+    experiment: str = "bodyschema-adaptation"
+    progress: bool = True
+
+    def __post_init__(self):
+        if self.episodes < 1:
+            raise ValueError(must_be("episodes", "at least 1", self.episodes))
+        if not (0 < self.switch_time < self.duration) or not np.isfinite(self.duration):
+            raise ValueError(must_be("switch_time", f"inside (0, duration = {self.duration}) s", self.switch_time))
+        if not (0 < self.steady_window <= min(self.switch_time, self.duration - self.switch_time) + 1e-9):
+            raise ValueError(must_be("steady_window", "> 0 and no longer than the phases before and after the switch",
+                                     self.steady_window))
+        if not (np.isfinite(self.jupiter_gravity) and self.jupiter_gravity >= 0):
+            raise ValueError(must_be("jupiter_gravity", "a finite magnitude ≥ 0 in m/s²", self.jupiter_gravity))
+        if not (self.spread > 0 and self.settle_deg > 0):
+            raise ValueError(must_be("spread and settle_deg", "> 0", (self.spread, self.settle_deg)))
+        control_substeps(self.control_rate, TIMESTEP)
+
+
+def control_substeps(rate_hz: float, timestep: float) -> int:
+    """MuJoCo steps per control tick; the house error unless the control period is a whole number of steps."""
+    steps = 1.0 / (rate_hz * timestep) if rate_hz > 0 and np.isfinite(rate_hz) else 0.0
+    if not (steps >= 1 - 1e-9 and abs(steps - round(steps)) < 1e-6):
+        rates = ", ".join(f"{1 / (n * timestep):g}" for n in (1, 2, 4, 5, 10))
+        raise ValueError(must_be("control_rate", f"a rate whose period is a whole number of {timestep} s MuJoCo "
+                                 "steps", rate_hz, f"A rate above {1 / timestep:g} Hz cannot be met; try {rates} Hz."))
+    return int(round(steps))
+
+
+# ---- episodes ---------------------------------------------------------------------------------------------
+def sample_poses(robot: Robot, n: int, spread: float, rng: np.random.Generator) -> np.ndarray:
+    """n poses uniform in READY ± spread, clipped to the sampling ranges, with the fingertip above the floor."""
+    low, high = robot.sampling_ranges.T
+    out = []
+    while len(out) < n:
+        q = np.clip(np.asarray(READY) + rng.uniform(-spread, spread, (n, robot.dq)), low, high)   # (n, Dq) rad
+        out.extend(q[robot.fk(q)[:, 2] > MIN_EE_HEIGHT])
+    return np.array(out[:n])
+
+
+def load_torque_panda(models: Sequence) -> Robot:
+    """The panda on motors, with the camera the image / pixel models (if any) were made for; checks the models."""
+    for m in models:
+        if m.modality not in SENSED:
+            raise ValueError(must_be(f"{m.modality} model", f"of a simulated extra modality {SENSED}", m.modality,
+                                     "The joints sensor is built into the AIC; drop the joints model."))
+    image = next((m for m in models if m.modality == "image"), None)
+    pixel = next((m for m in models if getattr(m, "image_size", None)), None)
+    size = tuple(image.output_shape[:2]) if image else (tuple(pixel.image_size) if pixel else None)
+    rgb = image is not None and len(image.output_shape) == 3
+    robot = Robot.load("panda", image_size=size, rgb=rgb, actuators="torque")
+    check_models_match(models, robot)
+    return robot
+
+
+def sense(robot: Robot, q: np.ndarray, models: Sequence) -> dict[str, torch.Tensor]:
+    """What the extra models observe at the true poses q (B, Dq), from the simulator: modality → (B, *out)."""
+    if not models:
+        return {}
+    xyz = robot._fk(q)                                                     # (B, 3) m, unchecked: q may pass limits
+    obs = {"ee_xyz": lambda: xyz, "ee_pixel": lambda: robot.project(xyz),
+           "image": lambda: robot._render(q).astype(np.float64) / IMAGE_SCALE}
+    return {m.modality: torch.from_numpy(np.asarray(obs[m.modality](), dtype=np.float64)) for m in models}
+
+
+def simulate(robot: Robot, controller, models: Sequence, starts: np.ndarray, goals: np.ndarray,
+             config: JupiterConfig, desc: str = "") -> dict[str, np.ndarray | list]:
+    """Run B episodes side by side through one controller (reset/act interface); gravity switches at switch_time.
+    → t (T,) s, q (T, B, Dq) rad at every control tick, failed (B,), reasons."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)               # per-tick tensors are tiny: intra-op threads only add sync (6× slower)
+    try:
+        return _simulate(robot, controller, models, starts, goals, config, desc)
+    finally:
+        torch.set_num_threads(threads)
+
+
+def _simulate(robot: Robot, controller, models: Sequence, starts: np.ndarray, goals: np.ndarray,
+              config: JupiterConfig, desc: str) -> dict[str, np.ndarray | list]:
+    from tqdm import tqdm
+    m = robot.model
+    substeps = control_substeps(config.control_rate, m.opt.timestep)
+    period = substeps * m.opt.timestep
+    datas = [mujoco.MjData(m) for _ in starts]
+    for d, q0 in zip(datas, starts):
+        d.qpos[:] = q0
+        mujoco.mj_forward(m, d)
+    m.opt.gravity[:] = (0.0, 0.0, -GRAVITY)
+    controller.reset(starts, np.zeros_like(starts), {"joints": torch.from_numpy(goals)})
+    ticks = int(round(config.duration / period))
+    t = np.arange(ticks) * period
+    qs = np.empty((ticks, *starts.shape))
+    sim_failed = np.zeros(len(starts), dtype=bool)
+    for i in tqdm(range(ticks), desc=desc, disable=not config.progress, leave=False):
+        if t[i] >= config.switch_time:
+            m.opt.gravity[2] = -config.jupiter_gravity
+        q, qd = np.stack([d.qpos for d in datas]), np.stack([d.qvel for d in datas])
+        qs[i] = q
+        torque = controller.act(q, qd, sense(robot, q, models), period)
+        for b, (d, tau) in enumerate(zip(datas, torque)):
+            if sim_failed[b] or controller.failed[b]:
+                continue
+            d.ctrl[:] = tau
+            for _ in range(substeps):
+                mujoco.mj_step(m, d)
+            sim_failed[b] = d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0 or not np.isfinite(d.qpos).all()
+    m.opt.gravity[:] = (0.0, 0.0, -GRAVITY)
+    reasons = [r if r else ("simulation unstable (bad qacc)" if s else None)
+               for r, s in zip(controller.reasons, sim_failed)]
+    return {"t": t, "q": qs, "failed": np.array([r is not None for r in reasons]), "reasons": reasons}
+
+
+# ---- metrics ---------------------------------------------------------------------------------------------
+def errors(robot: Robot, q: np.ndarray, goals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Joint error (T, B) deg (mean |q − q_d| over joints) and ee error (T, B) mm at every tick."""
+    joint = np.rad2deg(np.abs(q - goals[None])).mean(-1)
+    flat = q.reshape(-1, q.shape[-1])
+    ee = robot._chain(flat)[0].reshape(*q.shape[:2], 3)                    # vectorized FK, (T, B, 3) m
+    ee_goal = robot.fk(goals)                                              # (B, 3) m
+    return joint, 1e3 * np.linalg.norm(ee - ee_goal[None], axis=-1)
+
+
+def episode_metrics(t: np.ndarray, joint: np.ndarray, ee: np.ndarray, config: JupiterConfig) -> list[dict]:
+    """Per episode: steady errors before / after the switch, peak after it, settle time (NaN: never settled)."""
+    before = (t >= config.switch_time - config.steady_window) & (t < config.switch_time)
+    after, end = t >= config.switch_time, t >= t[-1] + (t[1] - t[0]) - config.steady_window
+    rows = []
+    for b in range(joint.shape[1]):
+        outside = np.flatnonzero(after & (joint[:, b] >= config.settle_deg))
+        if not outside.size:
+            settle = 0.0
+        elif outside[-1] == len(t) - 1:
+            settle = float("nan")                                          # still outside at the end
+        else:
+            settle = float(t[outside[-1] + 1] - config.switch_time)
+        rows.append({"joint_err_before_deg": float(joint[before, b].mean()),
+                     "joint_err_after_deg": float(joint[end, b].mean()),
+                     "joint_peak_after_deg": float(joint[after, b].max()),
+                     "ee_err_before_mm": float(ee[before, b].mean()), "ee_err_after_mm": float(ee[end, b].mean()),
+                     "ee_peak_after_mm": float(ee[after, b].max()), "settle_s": settle})
+    return rows
+
+
+# ---- the benchmark ---------------------------------------------------------------------------------------
+@dataclass
+class _Run:                        # one controller's episodes
+    name: str
+    t: np.ndarray
+    q: np.ndarray                  # (T, B, Dq) rad
+    joint: np.ndarray              # (T, B) deg
+    ee: np.ndarray                 # (T, B) mm
+    rows: list[dict] = field(default_factory=list)
+
+
+def run_jupiter(config: JupiterConfig = JupiterConfig(), models: Sequence | None = None) -> dict[str, Path]:
+    """PD, AIC-unimodal and AIC-multimodal on the same goals and starts; writes tables and plots to config.out."""
+    models = [resolve_model(s, config.tracking_uri) for s in config.models] if models is None else list(models)
+    robot = load_torque_panda(models)
+    control_substeps(config.control_rate, robot.model.opt.timestep)
+    goals = sample_poses(robot, config.episodes, config.spread, eval_rng(config.seed, 0, "targets"))
+    starts = sample_poses(robot, config.episodes, config.spread, eval_rng(config.seed, 0, "starts"))
+    limits = robot.model.actuator_ctrlrange.copy()                          # (Dq, 2) N·m
+    multimodal = "AIC " + " + ".join(["joints", *(m.modality for m in models)])
+    controllers = {"PD + g(q) on Earth": (PDController("panda", config.pd), []),
+                   "AIC joints": (AICController([], config.aic, limits), [])}
+    if models:
+        controllers[multimodal] = (AICController(models, config.aic, limits), models)
+    runs = []
+    for name, (controller, extra) in controllers.items():
+        sim = simulate(robot, controller, extra, starts, goals, config, desc=name)
+        joint, ee = errors(robot, sim["q"], goals)
+        run = _Run(name, sim["t"], sim["q"], joint, ee)
+        for b, row in enumerate(episode_metrics(sim["t"], joint, ee, config)):
+            failed = bool(sim["failed"][b])
+            run.rows.append({"controller": name, "episode": b, **{k: (np.nan if failed else v) for k, v in row.items()},
+                             "failed": failed, "reason": sim["reasons"][b] or ""})
+        runs.append(run)
+    paths = write_report(runs, goals, config)
+    if config.mlflow:
+        _log_mlflow(config, runs, paths)
+    return paths
+
+
+# ---- tables and plots -----------------------------------------------------------------------------------
+SUMMARY_COLUMNS = ("joint_err_before_deg", "joint_err_after_deg", "joint_peak_after_deg", "settle_s",
+                   "ee_err_before_mm", "ee_err_after_mm", "ee_peak_after_mm")
+
+
+def summarize(runs: Sequence[_Run]) -> list[dict]:
+    """One row per controller: the mean over its non-failed episodes; settle_s over the episodes that settled."""
+    table = []
+    for run in runs:
+        ok = [r for r in run.rows if not r["failed"]]
+        row = {"controller": run.name, "episodes": len(run.rows), "failed": len(run.rows) - len(ok)}
+        for key in SUMMARY_COLUMNS:
+            values = np.array([r[key] for r in ok], dtype=float)
+            row[key] = float(np.nanmean(values)) if np.isfinite(values).any() else float("nan")
+        row["settled"] = float(np.mean([np.isfinite(r["settle_s"]) for r in ok])) if ok else float("nan")
+        table.append(row)
+    return table
+
+
+def markdown(table: Sequence[dict], config: JupiterConfig) -> str:
+    columns = (*SUMMARY_COLUMNS, "settled", "failed")
+    lines = ["| controller | " + " | ".join(columns) + " |", "|" + "---|" * (len(columns) + 1)]
+    lines += [f"| {r['controller']} | " + " | ".join(f"{r[c]:.3g}" for c in columns) + " |" for r in table]
+    aic, pd = config.aic, config.pd
+    return "\n".join([
+        f"# Jupiter: gravity {GRAVITY} → {config.jupiter_gravity} m/s² at t = {config.switch_time} s (torque panda)",
+        "", *lines, "",
+        f"{config.episodes} episodes hold random joint goals (ready pose ± {config.spread} rad) at "
+        f"{config.control_rate:g} Hz; joint error = mean |q − q_d| over joints. before / after: mean error over the "
+        f"last {config.steady_window} s before the switch / of the run; peak: after the switch.",
+        f"settle_s: time after the switch until the joint error stays below {config.settle_deg}° (mean over the "
+        "episodes that settled, `settled` = their fraction).",
+        f"Gains: PD K_p = {'/'.join(f'{k:g}' for k in pd.kp)} N·m/rad plus Earth-gravity compensation; AIC "
+        f"κ_a Π_q̇ = {aic.k_a * aic.pi_qd:g} N·m/rad (acts as P) and κ_a Π_q = {aic.k_a * aic.pi_q:g} N·m/(rad·s) "
+        "(integral).", ""])
+
+
+def plot_errors(runs: Sequence[_Run], config: JupiterConfig, path: Path) -> Path:
+    """Median and inter-quartile band over episodes of the joint and ee error vs time, the switch marked."""
+    from bodyschema.training.plots import plt, save_figure
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4))
+    for ax, key, unit in ((axes[0], "joint", "deg"), (axes[1], "ee", "mm")):
+        for run in runs:
+            err = np.maximum(getattr(run, key), 1e-4)                       # (T, B); log axis floor
+            q25, q50, q75 = np.nanpercentile(err, [25, 50, 75], axis=1)
+            ax.plot(run.t, q50, label=run.name)
+            ax.fill_between(run.t, q25, q75, alpha=0.2)
+        ax.axvline(config.switch_time, color="k", ls="--", lw=0.8, label=f"g → {config.jupiter_gravity} m/s²")
+        ax.set(yscale="log", xlabel="time (s)", ylabel=f"{key} error ({unit}), median and IQR")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    return save_figure(fig, path)
+
+
+def plot_trajectories(runs: Sequence[_Run], goal: np.ndarray, config: JupiterConfig, path: Path) -> Path:
+    """Every joint of episode 0 under each controller, the goal dashed, the switch marked."""
+    from bodyschema.training.plots import plt, save_figure
+    dq = len(goal)
+    fig, axes = plt.subplots(2, (dq + 1) // 2, figsize=(3.2 * ((dq + 1) // 2), 6), squeeze=False)
+    for j, ax in enumerate(axes.flat):
+        if j >= dq:
+            ax.axis("off")
+            continue
+        for run in runs:
+            ax.plot(run.t, np.rad2deg(run.q[:, 0, j]), label=run.name, lw=1)
+        ax.axhline(np.rad2deg(goal[j]), color="k", ls=":", lw=0.8)
+        ax.axvline(config.switch_time, color="k", ls="--", lw=0.6)
+        ax.set(title=f"joint{j + 1}", xlabel="time (s)", ylabel="q (deg)")
+    axes.flat[0].legend(fontsize=7)
+    return save_figure(fig, path)
+
+
+def write_report(runs: Sequence[_Run], goals: np.ndarray, config: JupiterConfig) -> dict[str, Path]:
+    out = Path(config.out)
+    out.mkdir(parents=True, exist_ok=True)
+    table = summarize(runs)
+    paths = {"summary_csv": write_csv(table, out / "summary.csv"),
+             "episodes_csv": write_csv([r for run in runs for r in run.rows], out / "episodes.csv")}
+    every = max(1, int(round(0.01 * config.control_rate)))                 # 100 Hz time series
+    series = [{"controller": run.name, "t_s": float(run.t[i]), "joint_err_deg_median": float(np.median(run.joint[i])),
+               "ee_err_mm_median": float(np.median(run.ee[i]))} for run in runs for i in range(0, len(run.t), every)]
+    paths["timeseries_csv"] = write_csv(series, out / "timeseries.csv")
+    paths["summary_md"] = out / "summary.md"
+    paths["summary_md"].write_text(markdown(table, config))
+    paths["errors_png"] = plot_errors(runs, config, out / "errors.png")
+    paths["trajectories_png"] = plot_trajectories(runs, goals[0], config, out / "trajectories.png")
+    return paths
+
+
+def _slug(name: str) -> str:
+    return "".join(c if c.isalnum() else "_" for c in name.lower()).strip("_")
+
+
+def _log_mlflow(config: JupiterConfig, runs: Sequence[_Run], paths: dict[str, Path]) -> str:
+    import mlflow
+
+    from bodyschema.training.registry import ensure_experiment, use_tracking
+    use_tracking(config.tracking_uri)
+    params = {k: str(v) for k, v in asdict(config).items() if k not in ("aic", "pd")}
+    params.update({f"aic.{k}": str(v) for k, v in asdict(config.aic).items()})
+    params.update({f"pd.{k}": str(v) for k, v in asdict(config.pd).items()})
+    with mlflow.start_run(experiment_id=ensure_experiment(config.experiment), run_name="jupiter") as run:
+        mlflow.log_params(params)
+        for row in summarize(runs):
+            key = _slug(row["controller"])
+            for name, value in row.items():
+                if isinstance(value, (int, float)) and np.isfinite(value):
+                    mlflow.log_metric(f"{key}.{name}", float(value))
+        for path in paths.values():
+            mlflow.log_artifact(str(path))
+        return run.info.run_id

@@ -1,0 +1,99 @@
+"""The baseline ("built-in") joint controller of the torque-driven arms: PD plus gravity compensation tuned on Earth.
+
+    τ = K_p (q_d − q) − K_d q̇ + g_⊕(q),   clipped to the torque limits
+g_⊕(q) is the gravity torque of the same MJCF under Earth gravity (9.81 m/s², `qfrc_bias` at q̇ = 0), computed on
+a private copy of the model, so changing the simulated gravity (the Jupiter experiment) leaves the compensation
+wrong, as it would be on a real robot whose dynamic model was identified on Earth. Same interface as
+`aif.aic.AICController` (reset / act / failed / reasons), so benchmarks drive both through one loop.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from bodyschema.datagen.robot import GRAVITY, Robot
+from bodyschema.errors import must_be
+
+# libfranka's joint_impedance_control example gains (N·m/rad, N·m·s/rad): the Panda's own stiff joint PD.
+FRANKA_KP = (600.0, 600.0, 600.0, 600.0, 250.0, 150.0, 50.0)
+FRANKA_KD = (50.0, 50.0, 50.0, 50.0, 30.0, 25.0, 15.0)
+
+
+@dataclass(frozen=True)
+class PDConfig:
+    kp: tuple[float, ...] = FRANKA_KP      # N·m/rad per joint
+    kd: tuple[float, ...] = FRANKA_KD      # N·m·s/rad per joint
+    gravity: float = GRAVITY               # m/s², the gravity the compensation model was identified under
+
+    def __post_init__(self):
+        for name in ("kp", "kd"):
+            gains = np.asarray(getattr(self, name), dtype=float)
+            if gains.ndim != 1 or not np.isfinite(gains).all() or (gains < 0).any():
+                raise ValueError(must_be(name, "a tuple of finite gains ≥ 0, one per joint", getattr(self, name)))
+        if len(self.kp) != len(self.kd):
+            raise ValueError(must_be("kd", f"as long as kp ({len(self.kp)} joints)", len(self.kd)))
+        if not (np.isfinite(self.gravity) and self.gravity >= 0):
+            raise ValueError(must_be("gravity", "a finite magnitude ≥ 0 in m/s²", self.gravity))
+
+
+class PDController:
+    """PD + Earth-gravity compensation for a shipped torque-driven robot, batched over B episodes."""
+
+    def __init__(self, robot: str, config: PDConfig = PDConfig()):
+        self._robot = Robot.load(robot, actuators="torque", gravity=config.gravity)   # private model: g_⊕ only
+        self.dq = self._robot.dq
+        if len(config.kp) != self.dq:
+            raise ValueError(must_be("PDConfig.kp", f"{self.dq} gains, one per joint of {robot}", len(config.kp)))
+        self.config = config
+        self._kp, self._kd = np.asarray(config.kp, dtype=float), np.asarray(config.kd, dtype=float)
+        self.torque_limits = self._robot.model.actuator_ctrlrange.copy()          # (Dq, 2) N·m
+        self._goal = None
+        self.failed, self.reasons = np.zeros(0, dtype=bool), []
+
+    def reset(self, q: np.ndarray, qd: np.ndarray, goal: Mapping[str, np.ndarray]) -> None:
+        """goal: {"joints": (B, Dq) rad}; q, qd (B, Dq) rad, rad/s."""
+        q = self._check(q, "q")
+        if not isinstance(goal, Mapping) or set(goal) != {"joints"}:
+            raise ValueError(must_be("goal", "{'joints': (B, Dq) rad}", goal, "The PD baseline tracks joint goals."))
+        self._goal = self._check(np.asarray(goal["joints"], dtype=float), "goal['joints']", len(q))
+        if not np.isfinite(self._goal).all():
+            raise ValueError(must_be("goal['joints']", "finite", "NaN or inf"))
+        self.failed, self.reasons = np.zeros(len(q), dtype=bool), [None] * len(q)
+
+    def act(self, q: np.ndarray, qd: np.ndarray, observations: Mapping | None = None, dt: float = 0.0) -> np.ndarray:
+        """τ (B, Dq) N·m for the sensed q, q̇; observations and dt are unused (interface of AICController)."""
+        if self._goal is None:
+            raise RuntimeError("PDController.act before reset: call reset(q, qd, goal) first.")
+        q, qd = self._check(q, "q", len(self._goal)), self._check(qd, "qd", len(self._goal))
+        for name, x in (("q", q), ("qd", qd)):
+            for r in np.flatnonzero(~np.isfinite(x).all(-1) & ~self.failed):
+                self.failed[r], self.reasons[r] = True, f"non-finite {name} in the sensors"
+        torque = np.zeros_like(q)
+        ok = ~self.failed
+        if ok.any():
+            tau = self._kp * (self._goal[ok] - q[ok]) - self._kd * qd[ok] + self.gravity_torque(q[ok])
+            torque[ok] = np.clip(tau, self.torque_limits[:, 0], self.torque_limits[:, 1])
+        return torque
+
+    def gravity_torque(self, q: np.ndarray) -> np.ndarray:
+        """g(q) (N, Dq) N·m under the configured gravity: the bias force at rest."""
+        m, d = self._robot.model, self._robot._kin
+        out = np.empty_like(q)
+        d.qvel[:] = 0.0
+        for q_i, out_i in zip(q, out):
+            d.qpos[:] = q_i
+            mujoco.mj_fwdPosition(m, d)
+            mujoco.mj_fwdVelocity(m, d)                                          # qfrc_bias = RNE at q̇ = 0
+            out_i[:] = d.qfrc_bias
+        return out
+
+    def _check(self, x, name: str, batch: int | None = None) -> np.ndarray:
+        arr = np.asarray(x, dtype=np.float64)
+        if arr.ndim != 2 or arr.shape[1] != self.dq or (batch is not None and len(arr) != batch):
+            raise ValueError(must_be(name, f"an array of shape ({'B' if batch is None else batch}, {self.dq})",
+                                     arr.shape))
+        return arr
