@@ -1,0 +1,266 @@
+"""Adaptation (a): the visual end-effector marker shifted at run time, a conflict between vision and proprioception.
+
+nao_arm holds a goal (the end-effector pixel of a held-out pose, or that pose's joints) under active inference
+(aif/action.py: perception fusing joint encoders and the seen marker pixel, action driven by both). At
+`shift_time` the marker moves in the hand's frame — "left"/"right" (±y), "finger" (+x, further out), "forearm"
+(−x, back onto the forearm) — while every model still predicts it at the hand. With action driven by joints
+and vision (linearized at the goal, x_px = J q; Π_q, Π_v the joint and pixel precisions) the steady state
+puts the belief's pixel on the goal and moves the hand by e = −(I + C)⁻¹ C d with C = (Π_v/Π_q) J Jᵀ and d the
+seen shift (px): the hand moves to bring the seen marker toward the goal, by the fraction `predicted_correction`
+(0: vision ignored, 1: the seen marker back on the goal), more for higher visual precision. Recorded over time:
+joints, belief, true hand (m, px), seen marker (px), pixel errors to the goal. Per episode: hand displacement
+after the shift (mm, px), measured correction, final errors; summary per (shift, visual precision).
+Simulation: position servos (ctrl += a·Δt, clipped to ctrlrange; `mj_step` over the control period's substeps),
+started at rest on the goal pose (servo targets offset by the gravity torque / kp so the arm does not sag).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import torch
+import tyro
+
+from bodyschema.aif.action import ActionConfig, VelocityController
+from bodyschema.aif.perception import PerceptionConfig
+from bodyschema.errors import must_be
+from bodyschema.evaluation import marker_shift_report as report
+from bodyschema.evaluation.levels import MODELS_HELP, load_robot, resolve_model
+from bodyschema.evaluation.targets import eval_rng
+
+# Unit direction of each shift in the hand (LForeArm body) frame: x along the forearm towards the marker, y the
+# side (left at q = 0), times the offset size. "forearm" goes twice as far back: the hand capsule spans the last
+# 34 mm before the marker (56–90 mm of 114 mm), so one offset of a few cm would still sit on the hand. Rendered
+# for an image model, a marker 2×3 cm back lies inside the forearm capsule (r 18 mm): hidden, not shifted.
+SHIFTS = {"none": (0.0, 0.0, 0.0), "left": (0.0, 1.0, 0.0), "right": (0.0, -1.0, 0.0),
+          "finger": (1.0, 0.0, 0.0), "forearm": (-2.0, 0.0, 0.0)}
+GOALS = ("ee_pixel", "joints", "image")
+VISUAL = ("ee_pixel", "image")      # modalities that see the marker
+TARGET_KEY = 0x5417                 # extra seed word: goal poses held out from the levels' and reaching's targets
+
+
+@dataclass(frozen=True)
+class MarkerShiftConfig:
+    """nao_arm holds a goal by active inference while its visual marker is shifted in the hand frame."""
+
+    models: Annotated[tuple[str, ...], tyro.conf.arg(aliases=("--model",), help=MODELS_HELP)] = (
+        "analytic:nao_arm:joints", "analytic:nao_arm:ee_pixel")
+    shifts: tuple[str, ...] = ("left", "right", "finger", "forearm")   # hand frame ±y, +x, −x; "none": control
+    offset: float = 0.03               # m, size of the shift in the hand frame (a few cm; "forearm" goes 2×)
+    episodes: int = 10                 # goal poses per shift (the same poses for every shift and precision)
+    duration: float = 4.0              # s per episode
+    shift_time: float = 1.0            # s; the hold before it shows the unshifted loop is at rest
+    control_rate: float = 100.0        # Hz, whole 2 ms MuJoCo steps; at 50 Hz Π_v = 10 makes limit cycles
+    visual_precisions: tuple[float, ...] = (0.1, 1.0, 10.0)   # Π of ee_pixel, px⁻²: low to high trust in vision
+    goal: str = "ee_pixel"             # "ee_pixel": marker pixel at the goal pose | "joints": the pose | "image"
+    # Vision drives action too: driven by joints alone the conflict stays in the belief and the hand barely moves.
+    action: ActionConfig = ActionConfig(drive=("joints", "ee_pixel"))
+    perception: PerceptionConfig = PerceptionConfig()
+    seed: int = 0
+    out: Path = Path("results/adaptation/marker_shift")
+    mlflow: bool = True
+    tracking_uri: str | None = None    # None: $MLFLOW_TRACKING_URI, else sqlite:///mlflow.db
+    experiment: str = "bodyschema-adaptation"
+    progress: bool = True
+
+    def __post_init__(self):
+        bad = [s for s in self.shifts if s not in SHIFTS]
+        if not self.shifts or bad:
+            raise ValueError(must_be("shifts", f"a non-empty subset of {tuple(SHIFTS)}", self.shifts,
+                                     f"Unknown: {bad}." if bad else ""))
+        if not (np.isfinite(self.offset) and self.offset >= 0):
+            raise ValueError(must_be("offset", "a finite size ≥ 0 in m", self.offset))
+        if self.episodes < 1:
+            raise ValueError(must_be("episodes", "at least 1", self.episodes))
+        if not (np.isfinite(self.duration) and self.duration > 0):
+            raise ValueError(must_be("duration", "a positive time in s", self.duration))
+        if not (0 <= self.shift_time < self.duration):
+            raise ValueError(must_be("shift_time", f"in [0, duration = {self.duration}) s", self.shift_time))
+        if not (np.isfinite(self.control_rate) and self.control_rate > 0):
+            raise ValueError(must_be("control_rate", "a positive rate in Hz", self.control_rate))
+        if not self.visual_precisions or not all(np.isfinite(p) and p > 0 for p in self.visual_precisions):
+            raise ValueError(must_be("visual_precisions", "one or more finite precisions > 0 in px⁻²",
+                                     self.visual_precisions, "Use a small value (0.01) for 'barely trusted'."))
+        if self.goal not in GOALS:
+            raise ValueError(must_be("goal", f"one of {GOALS}", self.goal))
+
+
+def marker_offsets(shifts: Sequence[str], size: float) -> np.ndarray:
+    """(S, 3) m, the marker's displacement in the hand frame for each shift name."""
+    unknown = [s for s in shifts if s not in SHIFTS]
+    if unknown:
+        raise ValueError(must_be("shift", f"one of {tuple(SHIFTS)}", unknown[0]))
+    return size * np.array([SHIFTS[s] for s in shifts], dtype=np.float64)
+
+
+def substeps_per_tick(robot, control_rate: float) -> int:
+    """MuJoCo steps per control period; the house error unless the period is a whole number of them."""
+    ratio = 1.0 / (control_rate * robot.model.opt.timestep)
+    if round(ratio) < 1 or abs(ratio - round(ratio)) > 1e-6:
+        raise ValueError(must_be("control_rate", f"a divisor of {1 / robot.model.opt.timestep:g} Hz "
+                                 f"(whole {robot.model.opt.timestep * 1e3:g} ms MuJoCo steps per period)",
+                                 control_rate, "Try 50, 100 or 250 Hz."))
+    return int(round(ratio))
+
+
+class Arms:
+    """B simulated copies of the arm on position servos, with a marker displaced in the hand frame per copy."""
+
+    def __init__(self, robot, q0: np.ndarray, offsets: np.ndarray):
+        import mujoco
+        self._mj = mujoco
+        self.robot, m = robot, robot.model
+        if not (m.nu == robot.dq and np.all(m.actuator_biastype == mujoco.mjtBias.mjBIAS_AFFINE)
+                and np.array_equal(m.actuator_trnid[:, 0], np.arange(robot.dq))):
+            raise ValueError(must_be(f"the actuators of {robot.name}", "one position servo per joint, in order",
+                                     f"{m.nu} actuators", "Load the robot with actuators='position'."))
+        site = m.site("ee")
+        self._body = int(site.bodyid[0])
+        self._site, self._marker_local = site.id, m.site_pos[site.id].copy()   # (3,) m in the hand frame
+        self.offsets = np.asarray(offsets, dtype=np.float64)                      # (B, 3) m in the hand frame
+        self.datas = [mujoco.MjData(m) for _ in range(len(q0))]
+        for d, q in zip(self.datas, q0):
+            d.qpos[:] = q
+            mujoco.mj_forward(m, d)
+            # at rest on q: servo force gain·ctrl + b1·q = gravity torque qfrc_bias
+            d.ctrl[:] = (d.qfrc_bias / m.actuator_gear[:, 0] - m.actuator_biasprm[:, 1] * q) / m.actuator_gainprm[:, 0]
+        self.shifted = np.zeros(len(q0), dtype=bool)
+
+    def step(self, velocity: np.ndarray, dt: float, substeps: int) -> None:
+        """Move every servo target by velocity (B, Dq) rad/s · dt s and simulate the control period."""
+        m, mj = self.robot.model, self._mj
+        low, high = m.actuator_ctrlrange.T
+        for d, v in zip(self.datas, velocity):
+            d.ctrl[:] = np.clip(d.ctrl + v * dt, low, high)
+            for _ in range(substeps):
+                mj.mj_step(m, d)
+            mj.mj_kinematics(m, d)                      # positions of the new qpos (mj_step leaves the old ones)
+
+    def q(self) -> np.ndarray:
+        return np.stack([d.qpos.copy() for d in self.datas])                          # (B, Dq) rad
+
+    def hand(self) -> np.ndarray:
+        return np.stack([d.site_xpos[self._site].copy() for d in self.datas])         # (B, 3) m
+
+    def marker(self) -> np.ndarray:
+        """(B, 3) m, the marker in the world: body position + body rotation @ (marker point + offset if shifted)."""
+        local = self._marker_local + self.offsets * self.shifted[:, None]             # (B, 3) hand frame
+        return np.stack([d.xpos[self._body] + d.xmat[self._body].reshape(3, 3) @ p
+                         for d, p in zip(self.datas, local)])
+
+
+def vision_modality(models: Sequence) -> str:
+    """The modality that sees the marker (ee_pixel, else image); the house error unless joints and vision are both
+    modelled, since the experiment is their conflict."""
+    modalities = [m.modality for m in models]
+    vision = [m for m in VISUAL if m in modalities]
+    if "joints" not in modalities or not vision:
+        raise ValueError(must_be("models", "a 'joints' model and an 'ee_pixel' or 'image' model", modalities,
+                                 "e.g. --models analytic:nao_arm:joints analytic:nao_arm:ee_pixel"))
+    return vision[0]
+
+
+def goal_poses(robot, n: int, seed: int) -> np.ndarray:
+    """(n, Dq) rad held-out goal poses from the robot's sampling ranges."""
+    from bodyschema.datagen.samplers import uniform
+    return uniform(eval_rng(seed, 0, "targets", TARGET_KEY), robot.sampling_ranges, n)
+
+
+def simulate(robot, models: Sequence, config: MarkerShiftConfig, q_goal: np.ndarray, offsets: np.ndarray,
+             visual_precision: float) -> dict[str, np.ndarray]:
+    """One batch of B episodes (goal poses q_goal (B, Dq) rad, marker offsets (B, 3) m) at one visual precision.
+
+    Returns time series, first axis the tick (T+1 samples at t = k/rate s): "t" (T+1,), "q"/"belief" (T+1, B, Dq)
+    rad, "hand_xyz" (T+1, B, 3) m, "hand_px"/"marker_px" (T+1, B, 2) px, and per episode "goal_px" (B, 2) px,
+    "goal_xyz" (B, 3) m, "failed" (B,) bool, "reasons" (B,) str.
+    """
+    from tqdm import tqdm
+    substeps = substeps_per_tick(robot, config.control_rate)
+    dt = 1.0 / config.control_rate
+    ticks, shift_tick = int(round(config.duration / dt)), int(round(config.shift_time / dt))
+    vision = vision_modality(models)
+    drive = tuple(dict.fromkeys(vision if d in VISUAL else d for d in config.action.drive))   # "ee_pixel" → the seer
+    action = replace(config.action, drive=drive)
+    controller = VelocityController(models, config.perception, action, precisions={vision: visual_precision})
+    arms = Arms(robot, q_goal, offsets)
+    goal_xyz = arms.hand()
+    goal_px = robot.project(goal_xyz)                                             # (B, 2) px
+    goal = {"ee_pixel": goal_px, "joints": q_goal.copy()}.get(config.goal)
+    goal = torch.from_numpy(_render_shifted(robot, q_goal, np.zeros_like(offsets)) if goal is None else goal)
+    controller.reset(q_goal, {config.goal: goal})
+    image = next((m for m in models if m.modality == "image"), None)
+    known = {m.modality for m in models}
+    names = ("q", "belief", "hand_xyz", "hand_px", "marker_px")
+    series = {k: [] for k in names}
+    for k in tqdm(range(ticks + 1), desc=f"marker shift Π_v={visual_precision:g}", disable=not config.progress):
+        arms.shifted[:] = k >= shift_tick
+        q, hand, marker = arms.q(), arms.hand(), arms.marker()
+        marker_px = _project(robot, marker)
+        for name, value in zip(names, (q, controller.belief, hand, robot.project(hand), marker_px)):
+            series[name].append(value)
+        if k == ticks:
+            break
+        obs = {"joints": torch.from_numpy(q), "ee_pixel": torch.from_numpy(marker_px)}
+        if image is not None:
+            obs["image"] = torch.from_numpy(_render_shifted(robot, q, arms.offsets * arms.shifted[:, None]))
+        velocity = controller.act({n: x for n, x in obs.items() if n in known}, dt)
+        arms.step(velocity, dt, substeps)
+    out = {name: np.stack(v) for name, v in series.items()}
+    out.update(t=np.arange(ticks + 1) * dt, goal_px=goal_px, goal_xyz=goal_xyz, failed=controller.failed.copy(),
+               reasons=np.array([r or "" for r in controller.reasons]), shift_tick=np.array(shift_tick))
+    return out
+
+
+def run_marker_shift(config: MarkerShiftConfig = MarkerShiftConfig(), models: Sequence | None = None
+                     ) -> dict[str, Path]:
+    """Every shift × visual precision on the same held-out goal poses; writes tables and plots to config.out and
+    logs one MLflow run. Returns name → Path of what it wrote."""
+    models = [resolve_model(s, config.tracking_uri) for s in config.models] if models is None else list(models)
+    vision = vision_modality(models)
+    robot = load_robot(models)
+    q_goal = goal_poses(robot, config.episodes, config.seed)                     # (E, Dq) rad
+    shifts = [s for s in config.shifts for _ in range(config.episodes)]          # episode i: shift of row i
+    q0 = np.tile(q_goal, (len(config.shifts), 1))                                # (S·E, Dq) rad
+    offsets = marker_offsets(shifts, config.offset)                              # (S·E, 3) m, hand frame
+    jac_px = robot.project_jacobian(robot.fk(q0)) @ robot.jacobian(q0)           # (S·E, 2, Dq) px/rad, true
+    joints = next(m for m in models if m.modality == "joints")
+    pi_q = dict(config.perception.precisions).get("joints")
+    pi_q = float(joints.precision(torch.from_numpy(q_goal)).mean()) if pi_q is None else float(pi_q)
+    rows, batches = [], {}
+    for precision in config.visual_precisions:
+        series = simulate(robot, models, config, q0, offsets, precision)
+        k = int(series["shift_tick"])
+        seen = series["marker_px"][k] - series["hand_px"][k]                     # (S·E, 2) px
+        predicted = report.predicted_correction(jac_px, seen, precision, pi_q) if vision == "ee_pixel" \
+            else np.full(len(seen), np.nan)                                      # the theory is in px⁻²
+        rows += report.episode_rows(series, shifts, precision, predicted)
+        batches[precision] = series
+    return report.write_all(config, robot, rows, batches, shifts)
+
+
+def _project(robot, xyz: np.ndarray) -> np.ndarray:
+    """robot.project, with points that left the scene (non-finite) seen as NaN: their episodes fail."""
+    out = np.full((len(xyz), 2), np.nan)
+    ok = np.isfinite(xyz).all(axis=1)
+    if ok.any():
+        out[ok] = robot.project(xyz[ok])
+    return out
+
+
+def _render_shifted(robot, q: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+    """(B, H, W[, 3]) image intensities in [0, 1] with the marker geom moved by each row's offset (hand frame)."""
+    from bodyschema.models.scaling import IMAGE_SCALE
+    geom = robot.model.geom("marker").id
+    home = robot.model.geom_pos[geom].copy()
+    frames = []
+    try:
+        for q_i, off in zip(q, offsets):
+            robot.model.geom_pos[geom] = home + off
+            frames.append(robot.render(np.clip(q_i, *robot.joint_limits.T)[None])[0])
+    finally:
+        robot.model.geom_pos[geom] = home
+    return np.stack(frames).astype(np.float64) / IMAGE_SCALE
