@@ -1,0 +1,237 @@
+"""Self-recognition, "is this me?": does the visual stream come from my own body or from another source?
+
+Every episode the robot babbles, feels its joints (proprioception = q(t) + noise) and sees a visual stream
+(ee_pixel, ee_xyz or images) of its own body or of another source: a second arm, a time-delayed copy of itself or
+a mirrored view (self_recognition_streams.py). All episodes run through time as one batch: at every frame
+`aif.Perception` over [joints model + visual models] takes a few updates warm-started from the previous belief,
+and the Laplace free energy at the new belief is recorded. The score of an episode is the time-averaged F of the
+visual modalities (½ εᵀΠε summed over them) or of all modalities (`score="total"`); "is this me?" = score ≤
+threshold. ROC, AUC and the best threshold: self_recognition_report.py. An episode whose observations turn
+non-finite or whose perception diverges is marked failed with the reason and leaves the batch; the benchmark
+goes on.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import torch
+import tyro
+
+from bodyschema.aif.free_energy import sensory_terms
+from bodyschema.aif.perception import Perception, PerceptionConfig
+from bodyschema.errors import must_be
+from bodyschema.evaluation.levels import MODELS_HELP, load_robot, resolve_model
+from bodyschema.evaluation.self_recognition_report import log_mlflow, roc_table, summary_notes, write_report
+from bodyschema.evaluation.self_recognition_streams import Episodes, make_episodes
+
+SOURCES = ("second_arm", "delayed", "mirrored")
+VISUAL = ("ee_pixel", "ee_xyz", "image")
+SCORES = ("visual", "total")
+
+
+@dataclass(frozen=True)
+class SelfRecognitionConfig:
+    """Babbling episodes seen by the robot itself or by another source; ROC of "is this me?" on free energy."""
+
+    robot: str = "nao_arm"                # the babbling body; every model must be of it
+    models: Annotated[tuple[str, ...], tyro.conf.arg(aliases=("--model",), help=MODELS_HELP + "; empty: "
+                                                     "analytic:<robot>:ee_pixel")] = ()
+    episodes: int = 200                # half self, half others split evenly over `sources`
+    sources: tuple[str, ...] = SOURCES    # other sources of the visual stream: second_arm, delayed, mirrored
+    steps: int = 40                    # frames per episode
+    period: float = 0.05               # s between frames (control period; realised as whole physics steps)
+    delay: float = 0.2                 # s, lag of the "delayed" source: about one babbling movement
+    hold_s: tuple[float, float] = (0.2, 0.8)   # s, how long the babbler holds each random target
+    proprio_noise: float = math.radians(1.0)   # rad, σ of the joint readings (1°)
+    visual_noise: tuple[tuple[str, float], ...] = (  # σ per visual modality: px, m, intensity in [0, 1]
+        ("ee_pixel", 1.0), ("ee_xyz", 0.002), ("image", 0.02))
+    score: str = "visual"              # "visual": F of the visual modalities; "total": F of all modalities
+    perception: PerceptionConfig = PerceptionConfig(max_steps=10, tol=1e-4)   # per frame: ≤ max_steps updates
+    seed: int = 0                      # episode i draws from SeedSequence([eval stream, seed, i, role])
+    out: Path = Path("results/self_recognition")
+    mlflow: bool = True
+    tracking_uri: str | None = None    # None: $MLFLOW_TRACKING_URI, else sqlite:///mlflow.db
+    experiment: str = "bodyschema-self-recognition"
+    progress: bool = True
+    plots: bool = True
+
+    def __post_init__(self):
+        if not self.sources or len(set(self.sources)) != len(self.sources) or set(self.sources) - set(SOURCES):
+            raise ValueError(must_be("sources", f"distinct names among {SOURCES}", self.sources))
+        if self.episodes < 2 * len(self.sources):
+            raise ValueError(must_be("episodes", f"at least {2 * len(self.sources)} (half self, ≥ 1 per source)",
+                                     self.episodes, "Use ≥ 200 for a stable ROC."))
+        if self.steps < 1:
+            raise ValueError(must_be("steps", "at least 1", self.steps))
+        for name in ("period", "delay"):
+            if not getattr(self, name) > 0:
+                raise ValueError(must_be(name, "a positive duration in s", getattr(self, name)))
+        if "delayed" in self.sources and round(self.delay / self.period) < 1:
+            raise ValueError(must_be("delay", f"at least half a frame ({self.period / 2:g} s)", self.delay))
+        if not 0 < self.hold_s[0] <= self.hold_s[1]:
+            raise ValueError(must_be("hold_s", "(low, high) s with 0 < low ≤ high", self.hold_s))
+        noise = dict(self.visual_noise)
+        if set(noise) - set(VISUAL) or not all(np.isfinite(s) and s >= 0 for s in (*noise.values(),
+                                                                                    self.proprio_noise)):
+            raise ValueError(must_be("visual_noise and proprio_noise", f"σ ≥ 0 for modalities among {VISUAL}",
+                                     (self.visual_noise, self.proprio_noise)))
+        if self.score not in SCORES:
+            raise ValueError(must_be("score", f"one of {SCORES}", self.score))
+
+    @property
+    def model_specs(self) -> tuple[str, ...]:
+        return self.models or (f"analytic:{self.robot}:ee_pixel",)
+
+
+@dataclass
+class Scores:
+    visual: np.ndarray                 # (N, T) F of the visual modalities per frame; NaN from a failure on
+    total: np.ndarray                  # (N, T) F of all modalities per frame
+    failed: np.ndarray                 # (N,) bool
+    reason: list[str]                  # (N,) why an episode failed ("" otherwise)
+
+    def per_frame(self, which: str = "visual") -> np.ndarray:
+        return self.visual if which == "visual" else self.total        # (N, T)
+
+    def score(self, which: str = "visual") -> np.ndarray:
+        """(N,) time-averaged F per episode; NaN for failed episodes."""
+        return self.per_frame(which).mean(axis=1)
+
+
+# ---- setup --------------------------------------------------------------------------------------------
+def prepare(config: SelfRecognitionConfig, models: Sequence):
+    """(robot, Perception over [joints model, *visual models], visual modalities); the house error on models of
+    another robot or of a modality that has no visual stream."""
+    from bodyschema.models.analytic import AnalyticModel
+    for m in models:
+        if m.body.robot != config.robot:
+            raise ValueError(must_be(f"{m.modality} model body", f"robot {config.robot!r}", m.body.robot,
+                                     "Evaluate models of the benchmark's robot (or set --robot)."))
+    visual = [m for m in models if m.modality != "joints"]
+    if not visual or any(m.modality not in VISUAL for m in visual):
+        raise ValueError(must_be("model modalities", f"at least one of {VISUAL} (plus optionally joints)",
+                                 [m.modality for m in models]))
+    robot = load_robot(models)                                     # checks joints; camera of the image model
+    proprio = next((m for m in models if m.modality == "joints"), None) or AnalyticModel(robot.name, "joints")
+    sensors, precisions = _sensors(config, [proprio, *visual])
+    perception = Perception(sensors, config.perception, precisions)
+    return robot, perception, [m.modality for m in visual]
+
+
+def _sensors(config: SelfRecognitionConfig, models: Sequence) -> tuple[list, dict[str, float]]:
+    """The models as seen through the simulated sensors, and precision overrides. An exact (analytic) model's only
+    error is the sensor noise: Π = 1/σ². A learned model's precision covers its own error, the noise adds to it:
+    Π = 1/(1/Π_model(μ) + σ²). Modalities in config.perception.precisions keep the configured value."""
+    sigma = {**dict(config.visual_noise), "joints": config.proprio_noise}
+    fixed, seen = {}, []
+    for m in models:
+        s = sigma.get(m.modality, 0.0)
+        exact = getattr(m, "kind", None) == "analytic"
+        if s > 0 and exact and m.modality not in dict(config.perception.precisions):
+            fixed[m.modality] = 1.0 / s ** 2
+        seen.append(NoisySensor(m, s) if s > 0 and not exact else m)
+    return seen, fixed
+
+
+class NoisySensor:
+    """A SensoryModel observed through additive sensor noise σ: precision 1/(1/Π(μ) + σ²); the rest delegated."""
+
+    def __init__(self, model, sigma: float):
+        self.model, self.variance = model, float(sigma) ** 2
+        self.body, self.latent_dim, self.modality = model.body, model.latent_dim, model.modality
+        self.output_shape, self.kind = model.output_shape, getattr(model, "kind", type(model).__name__)
+
+    def predict(self, z):
+        return self.model.predict(z)
+
+    def jacobian(self, z):
+        return self.model.jacobian(z)
+
+    def vjp(self, z, v):
+        return self.model.vjp(z, v)
+
+    def precision(self, z):                                         # (B, *out) output units⁻²
+        return 1.0 / (1.0 / self.model.precision(z) + self.variance)
+
+    def save(self, path):
+        self.model.save(path)
+
+
+# ---- perception through time ---------------------------------------------------------------------------
+def score_episodes(perception: Perception, episodes: Episodes, visual: Sequence[str],
+                   progress: bool = True) -> Scores:
+    """Run perception frame by frame over all episodes at once (warm start: the previous belief); per frame, the
+    free energy at the new belief. Episodes with a non-finite observation or a diverged belief fail."""
+    from tqdm import tqdm
+    n, t = episodes.proprio.shape[:2]
+    streams = {"joints": episodes.proprio, **{m: episodes.visual[m] for m in visual}}
+    scores = Scores(np.full((n, t), np.nan), np.full((n, t), np.nan), np.zeros(n, bool), [""] * n)
+    belief = torch.zeros(n, perception.config.order + 1, perception.latent_dim, dtype=torch.float64)
+    for frame in tqdm(range(t), desc="self-recognition", disable=not progress):
+        _fail_non_finite(scores, streams, frame)
+        rows = np.flatnonzero(~scores.failed)
+        if rows.size == 0:
+            break
+        obs = {m: torch.from_numpy(np.asarray(x[rows, frame], dtype=np.float64)) for m, x in streams.items()}
+        if frame == 0:
+            belief[:, 0] = torch.from_numpy(np.nan_to_num(episodes.proprio[:, 0]))   # start at the joint readings
+        result = perception.infer(obs, belief[rows])
+        for i in rows[result.diverged.numpy()]:
+            scores.failed[i], scores.reason[i] = True, f"perception diverged at frame {frame}"
+        ok = ~result.diverged.numpy()
+        belief[rows[ok]] = result.mu_tilde[ok]
+        total, per_modality = _free_energy(perception, {m: x[ok] for m, x in obs.items()}, result.mu[ok])
+        scores.total[rows[ok], frame] = total
+        scores.visual[rows[ok], frame] = sum(per_modality[m] for m in visual)
+    scores.visual[scores.failed] = np.nan
+    scores.total[scores.failed] = np.nan
+    return scores
+
+
+def _fail_non_finite(scores: Scores, streams: dict[str, np.ndarray], frame: int) -> None:
+    for name, x in streams.items():
+        bad = ~np.isfinite(x[:, frame].reshape(len(x), -1)).all(axis=1) & ~scores.failed
+        for i in np.flatnonzero(bad):
+            scores.failed[i], scores.reason[i] = True, f"non-finite {name} observation at frame {frame}"
+
+
+def _free_energy(perception: Perception, obs: dict[str, torch.Tensor], mu: torch.Tensor):
+    """Laplace F (B,) and ½ εᵀΠε per modality (B,) at the beliefs mu (B, Dz), with the perception's precisions."""
+    pis = {m.modality: (torch.as_tensor(perception.precisions[m.modality], dtype=torch.float64)
+                        .expand(mu.shape[0], *m.output_shape) if m.modality in perception.precisions else None)
+           for m in perception.models}
+    with torch.no_grad():
+        terms = sensory_terms(perception.models, obs, pis, mu, need_hessian=False, need_grad=False)
+    return terms.free_energy.numpy(), {m: e.numpy() for m, e in terms.weighted.items()}
+
+
+# ---- the benchmark --------------------------------------------------------------------------------------
+def run_self_recognition(config: SelfRecognitionConfig = SelfRecognitionConfig(),
+                         models: Sequence | None = None) -> dict[str, Path]:
+    """Episodes → perception → scores → ROC; writes summary.md/csv, episodes.csv and plots to config.out and logs
+    one MLflow run (config.mlflow). Returns name → path of what it wrote."""
+    start = time.perf_counter()
+    models = [resolve_model(s, config.tracking_uri) for s in config.model_specs] if models is None else list(models)
+    robot, perception, visual = prepare(config, models)
+    episodes = make_episodes(config, robot, visual)
+    scores = score_episodes(perception, episodes, visual, config.progress)
+    wall = time.perf_counter() - start
+    per_frame = scores.per_frame(config.score)                           # (N, T)
+    rows, curves, over_time = roc_table(episodes.kind, per_frame, scores.failed, config.sources, episodes.period)
+    per_episode = [{"episode": i, "kind": k, "failed": bool(f), "reason": r, "score_visual": v, "score_total": s}
+                   for i, (k, f, r, v, s) in enumerate(zip(episodes.kind, scores.failed, scores.reason,
+                                                           scores.score("visual"), scores.score("total")))]
+    lines = summary_notes(config, robot.name, visual, episodes.period, rows, scores, wall)
+    paths = write_report(Path(config.out), per_episode, rows, curves, over_time, lines, episodes.kind,
+                         scores.failed, per_frame, episodes.period, config.plots)
+    if config.mlflow:
+        log_mlflow(config, models, rows, wall, paths)
+    return paths
+
