@@ -5,6 +5,7 @@
     bodyschema train --model gpr --data data/nao.zarr --modality ee_xyz
     bodyschema registry list | bodyschema registry promote NAME VERSION
     bodyschema evaluate levels --models models:/bodyschema-nao_arm-ee_xyz-gpr@champion --levels 1 2 3
+    bodyschema evaluate reaching --robot nao_arm | evaluate adaptation jupiter | evaluate self-recognition
     bodyschema report
     bodyschema demo
 """
@@ -20,9 +21,14 @@ import tyro
 
 from bodyschema.datagen.config import DatagenConfig
 from bodyschema.demo import DemoConfig
-from bodyschema.evaluation.levels import LevelsConfig
-from bodyschema.evaluation.report import ReportConfig
-from bodyschema.evaluation.robustness import RobustnessConfig
+from bodyschema.evaluation.jupiter import JupiterConfig, run_jupiter
+from bodyschema.evaluation.levels import LevelsConfig, run_levels
+from bodyschema.evaluation.loop_robustness import LoopRobustnessConfig, run_loop_robustness
+from bodyschema.evaluation.marker_shift import MarkerShiftConfig, run_marker_shift
+from bodyschema.evaluation.reaching import ReachingConfig, run_reaching
+from bodyschema.evaluation.report import ReportConfig, write_report
+from bodyschema.evaluation.robustness import RobustnessConfig, run_robustness
+from bodyschema.evaluation.self_recognition import SelfRecognitionConfig, run_self_recognition
 from bodyschema.training.config import TrainConfig
 
 
@@ -54,7 +60,15 @@ def _command(name: str, kind, description: str):
 
 
 def _group(name: str, description: str, *members):
-    return _command(name, Union[tuple(_command(*m) for m in members)], description)  # noqa: UP007 (tyro: Union)
+    """members: (name, Config, description) triples, or groups built by _group."""
+    built = tuple(_command(*m) if isinstance(m, tuple) else m for m in members)
+    return _command(name, Union[built], description)  # noqa: UP007 (tyro: Union)
+
+
+# Benchmarks and the report: Config → runner returning the paths it wrote (levels: a summary holding them).
+BENCHMARKS = {LevelsConfig: run_levels, RobustnessConfig: run_robustness, ReachingConfig: run_reaching,
+              LoopRobustnessConfig: run_loop_robustness, MarkerShiftConfig: run_marker_shift,
+              JupiterConfig: run_jupiter, SelfRecognitionConfig: run_self_recognition, ReportConfig: write_report}
 
 
 COMMANDS = Union[(  # noqa: UP007
@@ -66,7 +80,13 @@ COMMANDS = Union[(  # noqa: UP007
            ("promote", RegistryPromote, "Move the `champion` alias to NAME's VERSION.")),
     _group("evaluate", "Run an evaluation benchmark.",
            ("levels", LevelsConfig, "Estimation levels 1–3: where is my body? (AIF perception)"),
-           ("robustness", RobustnessConfig, "Joint error vs observation noise and with a broken sensor.")),
+           ("robustness", RobustnessConfig, "Joint error vs observation noise and with a broken sensor."),
+           ("reaching", ReachingConfig, "Closed-loop AIF reaching to image / ee-pixel / ee-position goals vs PD."),
+           ("loop-robustness", LoopRobustnessConfig, "Reaching success vs observation noise and with a sensor broken."),
+           _group("adaptation", "Adaptation in the loop.",
+                  ("marker-shift", MarkerShiftConfig, "(a) The visual marker moves on the hand at run time."),
+                  ("jupiter", JupiterConfig, "(b) Gravity jumps to 24.79 m/s² mid-task: PD vs AIC on the panda.")),
+           ("self-recognition", SelfRecognitionConfig, "Is this me? ROC/AUC of the free energy: own body vs others.")),
     _command("report", ReportConfig, "Gather every benchmark's tables and plots into results/report.md and .html."),
     _command("demo", DemoConfig, "The end-to-end demo: babble, fit, register, evaluate."),
 )]
@@ -101,19 +121,10 @@ def run(config) -> int:
 
         promote(config.name, config.version, tracking=config.tracking_uri)
         print(f"{config.name} v{config.version} is now @champion")
-    elif isinstance(config, LevelsConfig):
-        from bodyschema.evaluation.levels import run_levels
-
-        summary = run_levels(config)
-        print("\n".join(f"{k}: {v}" for k, v in summary.paths.items()))
-    elif isinstance(config, RobustnessConfig):
-        from bodyschema.evaluation.robustness import run_robustness
-
-        print("\n".join(f"{k}: {v}" for k, v in run_robustness(config).items()))
-    elif isinstance(config, ReportConfig):
-        from bodyschema.evaluation.report import write_report
-
-        print("\n".join(f"{k}: {v}" for k, v in write_report(config).items()))
+    elif type(config) in BENCHMARKS:
+        written = BENCHMARKS[type(config)](config)
+        paths = getattr(written, "paths", written)                         # levels: a summary holding its paths
+        print("\n".join(f"{k}: {v}" for k, v in paths.items()))
     elif isinstance(config, DemoConfig):
         from bodyschema.demo import run_demo
 

@@ -9,7 +9,9 @@ import pytest
 from bodyschema.cli import main
 
 SUBCOMMANDS = [["datagen"], ["validate"], ["train"], ["registry", "list"], ["registry", "promote"],
-               ["evaluate", "levels"], ["evaluate", "robustness"], ["report"], ["demo"]]
+               ["evaluate", "levels"], ["evaluate", "robustness"], ["evaluate", "reaching"],
+               ["evaluate", "loop-robustness"], ["evaluate", "adaptation", "marker-shift"],
+               ["evaluate", "adaptation", "jupiter"], ["evaluate", "self-recognition"], ["report"], ["demo"]]
 
 
 @pytest.mark.parametrize("words", SUBCOMMANDS, ids=" ".join)
