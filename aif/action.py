@@ -29,7 +29,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 import torch
 
-from bodyschema.aif.free_energy import JACOBIAN_MAX_OUTPUTS
+from bodyschema.aif.free_energy import JACOBIAN_MAX_OUTPUTS, model_input
 from bodyschema.aif.perception import Perception, PerceptionConfig
 from bodyschema.errors import must_be
 
@@ -172,12 +172,13 @@ class VelocityController:
         for m in self.models:
             if m.modality not in self.config.drive or m.modality not in obs:
                 continue
-            pe = self._precision(m, mu) * (obs[m.modality] - m.predict(mu))           # (b, *out) Π ε
+            z = model_input(m, mu)
+            pe = self._precision(m, mu) * (obs[m.modality] - m.predict(z).to(mu.dtype))  # (b, *out) Π ε
             if int(np.prod(m.output_shape)) <= JACOBIAN_MAX_OUTPUTS:
                 weighted[m.modality] = pe.reshape(len(mu), -1)                       # (b, O)
-                sens[m.modality] = dt * m.jacobian(mu)                               # (b, O, Dq) ∂x/∂a ≈ Δt J
+                sens[m.modality] = dt * m.jacobian(z).to(mu.dtype)                   # (b, O, Dq) ∂x/∂a ≈ Δt J
             else:                                                                     # images: Δt·Jᵀ Π ε by VJP
-                extra -= self.config.k_a * dt * m.vjp(mu, pe)
+                extra -= self.config.k_a * dt * m.vjp(z, pe.to(z.dtype)).to(mu.dtype)
         rate = action_rate(weighted, sens, self.config.k_a) if weighted else torch.zeros_like(mu)
         return rate + extra
 

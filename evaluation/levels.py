@@ -45,9 +45,9 @@ class LevelsConfig:
     seed: int = 0
     out: Path = Path("results/levels")
     noise: tuple[tuple[str, float], ...] = ()   # observation noise σ per modality (m, px, rad, intensity)
-    perception: PerceptionConfig = PerceptionConfig(record=True)
+    perception: PerceptionConfig = PerceptionConfig(record=True, step_control="descent")  # monotone: see perception.py
     multistart: int = 8                # starts per trial for the level-3 remedy (0: off)
-    screen_steps: int = 20             # multi-start: updates before pruning
+    screen_steps: int = 5              # multi-start: updates before pruning (a descent trial converges in ~15)
     keep: int = 2                      # multi-start: starts per trial refined to convergence
     success_deg: float = 1.0           # a trial succeeds when its mean |joint error| is below this
     image_size: tuple[int, int] | None = None   # robot camera (H, W); default: the image model's, else the robot's
