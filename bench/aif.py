@@ -94,7 +94,7 @@ def evaluations_to_plain_error(models, n, noise=None):
         hit = reached.any(0)
         first = torch.where(hit, reached.float().argmax(0) + 1, res.steps)  # evaluations = steps; the plain
         got = first[hit | (res is plain)].double()                         # protocol reaches its error at its end
-        print(f"    {name:24s}: evaluations to reach it median {got.median():.0f}, max {got.max():.0f} "
+        print(f"    {name:32s}: evaluations to reach it median {got.median():.0f}, max {got.max():.0f} "
               f"({hit.float().mean() * 100:.0f}% of trials reach it before the last step); total evaluations/trial "
               f"{res.evaluations / n:.0f}; wall {wall:.2f} s")
 
