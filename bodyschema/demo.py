@@ -1,8 +1,11 @@
-"""The end-to-end demo on embedded defaults: babble → dataset → fit → registry → Jacobian → AIF levels → report.
+"""The end-to-end demo on embedded defaults: babble → dataset → fit → registry → Jacobian → AIF levels → reaching →
+self-recognition → report.
 
 Sized for 2 CPU cores in a few minutes: small datasets for every robot (validated, summarised, a contact sheet
-each), GPR + MDN on nao_arm ee_xyz and a pixel decoder on its 56×80 images, all registered in MLflow; then the
-estimation levels 1–3 with the registered GPR champion loaded back from the registry by URI.
+each), GPR + MDN on nao_arm ee_xyz and a pixel decoder on its 56×80 images, all registered in MLflow; then, with
+the registered GPR champion loaded back from the registry by URI: the estimation levels 1–3, closed-loop reaching
+to end-effector goals (fused with the joint encoder) against a PD baseline, and "is this me?" on its ee stream;
+last, one report page (Markdown + HTML) of every table and plot.
 """
 
 from __future__ import annotations
@@ -22,6 +25,8 @@ class DemoConfig:
     pixel_epochs: int = 30             # pixel decoder epochs: a recognisable arm, not a converged decoder
     trials: int = 100                  # per level and run (the full benchmark uses 500 × 5 runs)
     runs: int = 1
+    reach_targets: int = 20            # closed-loop reaching episodes (the benchmark default is 100)
+    episodes: int = 200                # self-recognition episodes, half of them the robot's own
     seed: int = 0
     tracking_uri: str | None = None    # None: $MLFLOW_TRACKING_URI, else sqlite:///<cwd>/mlflow.db
 
@@ -30,12 +35,16 @@ def run_demo(config: DemoConfig) -> None:
     stores = _datagen(config)
     champions = _train(config, stores["nao_arm"])
     _evaluate(config, champions["gpr"])
+    _act(config, champions["gpr"])
+    from bodyschema.evaluation.report import ReportConfig, write_report
     from bodyschema.training.registry import list_models
 
     print("\n== registry")
     for row in list_models(tracking=config.tracking_uri):
         print(f"  {row}")
-    print(f"\nEverything else is under {config.out.resolve()}")
+    report = write_report(ReportConfig(results=config.out / "results"))
+    print(f"\n== report: {report['html']} (and {report['markdown'].name})")
+    print(f"Everything else is under {config.out.resolve()}")
 
 
 def _datagen(config: DemoConfig) -> dict[str, Path]:
@@ -87,7 +96,24 @@ def _evaluate(config: DemoConfig, gpr_uri: str) -> None:
 
     print(f"\n== AIF perception, levels 1–3, with {gpr_uri} loaded from the registry")
     levels = LevelsConfig(models=(gpr_uri,), trials=config.trials, runs=config.runs, seed=config.seed,
-                          out=config.out / "levels", tracking_uri=config.tracking_uri)
+                          out=config.out / "results" / "levels", tracking_uri=config.tracking_uri)
     summary = run_levels(levels)
     print(summary.paths["summary_md"].read_text())
     print("plots:", ", ".join(str(p) for k, p in summary.paths.items() if str(p).endswith(".png")))
+
+
+def _act(config: DemoConfig, gpr_uri: str) -> None:
+    from bodyschema.evaluation.reaching import ReachingConfig, run_reaching
+    from bodyschema.evaluation.self_recognition import SelfRecognitionConfig, run_self_recognition
+
+    results = config.out / "results"
+    print(f"\n== closed-loop reaching on nao_arm: {config.reach_targets} ee_xyz goals, {gpr_uri} + joint encoder")
+    reaching = ReachingConfig(robot="nao_arm", models=(gpr_uri, "analytic:nao_arm:joints"), goal="ee_xyz",
+                              targets=config.reach_targets, seed=config.seed, out=results / "reaching",
+                              tracking_uri=config.tracking_uri)
+    print(run_reaching(reaching)["summary_md"].read_text())
+    print(f"\n== self-recognition: {config.episodes} babbling episodes, is the ee stream mine? ({gpr_uri})")
+    recognition = SelfRecognitionConfig(robot="nao_arm", models=(gpr_uri,), episodes=config.episodes,
+                                        seed=config.seed, out=results / "self_recognition",
+                                        tracking_uri=config.tracking_uri)
+    print(run_self_recognition(recognition)["summary_md"].read_text())
