@@ -12,7 +12,7 @@ input, diverged belief, unstable physics) is marked failed with its reason and t
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated
 
@@ -24,6 +24,7 @@ import tyro
 from bodyschema.aif.aic import AICConfig, AICController
 from bodyschema.datagen.robot import GRAVITY, Robot
 from bodyschema.errors import must_be
+from bodyschema.evaluation.mlflow_log import log_benchmark, table_metrics
 from bodyschema.evaluation.level_report import write_csv
 from bodyschema.evaluation.levels import MODELS_HELP, check_models_match, resolve_model
 from bodyschema.evaluation.pd import PDConfig, PDController
@@ -233,7 +234,7 @@ def run_jupiter(config: JupiterConfig = JupiterConfig(), models: Sequence | None
         runs.append(run)
     paths = write_report(runs, goals, config)
     if config.mlflow:
-        _log_mlflow(config, runs, paths)
+        log_benchmark(config, "jupiter", table_metrics(summarize(runs), "controller"), paths.values(), models)
     return paths
 
 
@@ -324,27 +325,3 @@ def write_report(runs: Sequence[_Run], goals: np.ndarray, config: JupiterConfig)
     paths["errors_png"] = plot_errors(runs, config, out / "errors.png")
     paths["trajectories_png"] = plot_trajectories(runs, goals[0], config, out / "trajectories.png")
     return paths
-
-
-def _slug(name: str) -> str:
-    return "".join(c if c.isalnum() else "_" for c in name.lower()).strip("_")
-
-
-def _log_mlflow(config: JupiterConfig, runs: Sequence[_Run], paths: dict[str, Path]) -> str:
-    import mlflow
-
-    from bodyschema.training.registry import ensure_experiment, use_tracking
-    use_tracking(config.tracking_uri)
-    params = {k: str(v) for k, v in asdict(config).items() if k not in ("aic", "pd")}
-    params.update({f"aic.{k}": str(v) for k, v in asdict(config.aic).items()})
-    params.update({f"pd.{k}": str(v) for k, v in asdict(config.pd).items()})
-    with mlflow.start_run(experiment_id=ensure_experiment(config.experiment), run_name="jupiter") as run:
-        mlflow.log_params(params)
-        for row in summarize(runs):
-            key = _slug(row["controller"])
-            for name, value in row.items():
-                if isinstance(value, (int, float)) and np.isfinite(value):
-                    mlflow.log_metric(f"{key}.{name}", float(value))
-        for path in paths.values():
-            mlflow.log_artifact(str(path))
-        return run.info.run_id

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Annotated
 
@@ -27,6 +27,7 @@ from bodyschema.aif.multistart import infer_multistart
 from bodyschema.aif.perception import Perception, PerceptionConfig
 from bodyschema.errors import must_be
 from bodyschema.evaluation import level_report
+from bodyschema.evaluation.mlflow_log import log_benchmark, table_metrics
 from bodyschema.datagen.samplers import uniform
 from bodyschema.evaluation.targets import eval_rng, initial_beliefs, make_targets
 
@@ -185,7 +186,8 @@ def run_levels(config: LevelsConfig = LevelsConfig(), models: Sequence | None = 
     summary = LevelsSummary(rows, level_report.aggregate(rows), {k: np.concatenate(v) for k, v in per_trial.items()})
     summary.paths = level_report.write_all(summary, curves, Path(config.out), plots=config.plots)
     if config.mlflow:
-        summary.run_id = _log_mlflow(config, models, summary)
+        summary.run_id = log_benchmark(config, "levels", table_metrics(summary.table, lambda r: f"L{r['level']}"),
+                                       summary.paths.values(), models)
     return summary
 
 
@@ -215,22 +217,3 @@ def broken_sweep(config: LevelsConfig, models: Sequence | None = None, level: in
                       out=Path(config.out) / f"broken_{dead or 'none'}")
         out.append({"broken": dead or "none", **run_levels(cfg, models).table[0]})
     return out
-
-
-def _log_mlflow(config: LevelsConfig, models: Sequence, summary: LevelsSummary) -> str:
-    import mlflow
-
-    from bodyschema.training.registry import ensure_experiment, use_tracking
-    use_tracking(config.tracking_uri)
-    params = {k: str(v) for k, v in asdict(config).items() if k != "perception"}
-    params.update({f"perception.{k}": str(v) for k, v in asdict(config.perception).items()})
-    params["model_kinds"] = ",".join(f"{getattr(m, 'kind', type(m).__name__)}:{m.modality}" for m in models)
-    with mlflow.start_run(experiment_id=ensure_experiment(config.experiment), run_name="levels") as run:
-        mlflow.log_params(params)
-        for row in summary.table:
-            for key, value in row.items():
-                if isinstance(value, (int, float)) and key != "level":
-                    mlflow.log_metric(f"L{row['level'].replace('+', '_')}.{key.replace('/', '.')}", float(value))
-        for path in summary.paths.values():
-            mlflow.log_artifact(str(path))
-        return run.info.run_id

@@ -8,14 +8,14 @@ and, when `mlflow` is on, one MLflow run with them as artifacts.
 
 from __future__ import annotations
 
-import re
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from bodyschema.errors import must_be
 from bodyschema.evaluation import reaching_report
+from bodyschema.evaluation.mlflow_log import log_benchmark, table_metrics
 from bodyschema.evaluation.level_report import write_csv
 from bodyschema.evaluation.levels import resolve_model
 from bodyschema.evaluation.reaching import ReachingConfig, simulate
@@ -82,7 +82,8 @@ def _write(config: LoopRobustnessConfig, base: ReachingConfig, models, noise, br
     paths["summary_md"] = out / "summary.md"
     paths["summary_md"].write_text(_markdown(summary, base, config))
     if config.mlflow:
-        _log_mlflow(config, base, models, summary, paths)
+        metrics = table_metrics(summary, lambda row: row["case"])
+        log_benchmark(config, f"loop-robustness-{base.robot}", metrics, paths.values(), models, base.tracking_uri)
     return paths
 
 
@@ -121,22 +122,3 @@ def plot_broken(rows, path: Path) -> Path:
     ax.set(ylabel="success rate", ylim=(0, 1.05))
     ax.legend(fontsize=8)
     return save_figure(fig, path)
-
-
-def _log_mlflow(config, base, models, summary, paths) -> str:
-    import mlflow
-
-    from bodyschema.training.registry import ensure_experiment, use_tracking
-    use_tracking(base.tracking_uri)
-    experiment = ensure_experiment(config.experiment)
-    with mlflow.start_run(experiment_id=experiment, run_name=f"loop-robustness-{base.robot}") as run:
-        mlflow.log_params({"robot": base.robot, "models": ",".join(base.model_specs), "targets": base.targets,
-                           "modality": config.modality, "sigmas": str(config.sigmas), "seed": base.seed,
-                           "action": str(asdict(base.action))})
-        for row in summary:
-            case = re.sub(r"[^A-Za-z0-9_./ -]", "_", row["case"])       # MLflow's allowed metric-name characters
-            for key in ("success", "goal_success"):
-                mlflow.log_metric(f"{key}/{case}", float(row[key]))
-        for path in paths.values():
-            mlflow.log_artifact(str(path))
-        return run.info.run_id

@@ -10,11 +10,11 @@ shows there). Summary: mean per (shift, visual precision) over the episodes that
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
+from bodyschema.evaluation.mlflow_log import log_benchmark, table_metrics
 from bodyschema.evaluation.level_report import write_csv
 
 SUMMARY_COLUMNS = ("seen_shift_px", "hand_move_mm", "hand_move_px", "correction", "predicted_correction",
@@ -203,25 +203,6 @@ def write_all(config, robot, rows: list[dict], batches: dict, shifts: list[str])
              "correction_png": plot_correction(table, out / "correction_vs_precision.png")}
     paths["summary_md"].write_text(markdown(table, note))
     if config.mlflow:
-        _log_mlflow(config, table, paths)
+        label = lambda row: f"{row['shift']}.pv{row['visual_precision']:g}"   # noqa: E731
+        log_benchmark(config, "marker_shift", table_metrics(table, label), paths.values())
     return paths
-
-
-def _log_mlflow(config, table: list[dict], paths: dict[str, Path]) -> str:
-    import mlflow
-
-    from bodyschema.training.registry import ensure_experiment, use_tracking
-    use_tracking(config.tracking_uri)
-    params = {k: str(v) for k, v in asdict(config).items() if k not in ("perception", "action")}
-    params.update({f"perception.{k}": str(v) for k, v in asdict(config.perception).items()})
-    params.update({f"action.{k}": str(v) for k, v in asdict(config.action).items()})
-    with mlflow.start_run(experiment_id=ensure_experiment(config.experiment), run_name="marker_shift") as run:
-        mlflow.log_params(params)
-        for row in table:
-            prefix = f"{row['shift']}.pv{row['visual_precision']:g}"
-            for key, value in row.items():
-                if key not in ("shift", "visual_precision") and np.isfinite(value):
-                    mlflow.log_metric(f"{prefix}.{key}", float(value))
-        for path in paths.values():
-            mlflow.log_artifact(str(path))
-        return run.info.run_id

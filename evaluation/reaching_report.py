@@ -7,12 +7,12 @@ Writes into config.out: `reaching_episodes.csv` (one row per controller × targe
 
 from __future__ import annotations
 
-from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from bodyschema.evaluation.mlflow_log import log_benchmark, table_metrics
 from bodyschema.evaluation.level_report import write_csv
 from bodyschema.models.scaling import IMAGE_SCALE
 
@@ -143,27 +143,5 @@ def write_all(config, robot, models, modality, episodes, results: dict, walls: d
     goal_px = robot.project(episodes.target_xyz)
     paths["paths_png"] = plot_paths(results, goal_px, robot, out / "image_paths.png", config.path_plots)
     if config.mlflow:
-        log_mlflow(config, models, table, paths)
+        log_benchmark(config, f"reaching-{config.robot}", table_metrics(table, "controller"), paths.values(), models)
     return paths
-
-
-def log_mlflow(config, models, table: list[dict], paths: dict) -> str:
-    import mlflow
-
-    from bodyschema.training.registry import ensure_experiment, use_tracking
-    use_tracking(config.tracking_uri)
-    params = {k: str(v) for k, v in asdict(config).items() if k not in ("action", "perception", "aic")}
-    params.update({f"action.{k}": str(v) for k, v in asdict(config.action).items()})
-    params.update({f"perception.{k}": str(v) for k, v in asdict(config.perception).items()})
-    params.update({f"aic.{k}": str(v) for k, v in asdict(config.aic).items()})
-    params["model_kinds"] = ",".join(f"{getattr(m, 'kind', type(m).__name__)}:{m.modality}" for m in models)
-    experiment = ensure_experiment(config.experiment)
-    with mlflow.start_run(experiment_id=experiment, run_name=f"reaching-{config.robot}") as run:
-        mlflow.log_params(params)
-        for row in table:
-            for key, value in row.items():
-                if isinstance(value, (int, float)) and np.isfinite(value):
-                    mlflow.log_metric(f"{row['controller']}.{key}", float(value))
-        for path in paths.values():
-            mlflow.log_artifact(str(path))
-        return run.info.run_id

@@ -27,8 +27,9 @@ import tyro
 from bodyschema.aif.free_energy import sensory_terms
 from bodyschema.aif.perception import Perception, PerceptionConfig
 from bodyschema.errors import must_be
+from bodyschema.evaluation.mlflow_log import log_benchmark, table_metrics
 from bodyschema.evaluation.levels import MODELS_HELP, load_robot, resolve_model
-from bodyschema.evaluation.self_recognition_report import log_mlflow, roc_table, summary_notes, write_report
+from bodyschema.evaluation.self_recognition_report import roc_table, summary_notes, write_report
 from bodyschema.evaluation.self_recognition_streams import Episodes, make_episodes
 
 SOURCES = ("second_arm", "delayed", "mirrored")
@@ -232,6 +233,7 @@ def run_self_recognition(config: SelfRecognitionConfig = SelfRecognitionConfig()
     paths = write_report(Path(config.out), per_episode, rows, curves, over_time, lines, episodes.kind,
                          scores.failed, per_frame, episodes.period, config.plots)
     if config.mlflow:
-        log_mlflow(config, models, rows, wall, paths)
+        keep = ("comparison", "auc", "threshold", "tpr", "fpr", "fpr_at_pooled", "t_auc99_s", "failed")
+        metrics = table_metrics([{k: r[k] for k in keep} for r in rows], "comparison")
+        log_benchmark(config, "self_recognition", {**metrics, "wall_s": wall}, paths.values(), models)
     return paths
-

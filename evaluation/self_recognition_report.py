@@ -9,7 +9,6 @@ P(other score > self score) + ½ P(tie), the Mann–Whitney U statistic over n_s
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -204,24 +203,3 @@ def write_report(out: Path, episodes_rows: Sequence[Mapping], rows: Sequence[Map
         paths["scores"] = plot_histogram(kinds, scores, failed, rows[0]["threshold"], out / "scores.png")
         paths["free_energy"] = plot_over_time(kinds, per_frame, period, out / "free_energy.png")
     return paths
-
-
-def log_mlflow(config, models: Sequence, rows: Sequence[Mapping], wall: float, paths: Mapping[str, Path]) -> str:
-    """One MLflow run: the config as params, AUC/threshold/TPR/FPR per comparison as metrics, files as artifacts."""
-    import mlflow
-
-    from bodyschema.training.registry import ensure_experiment, use_tracking
-    use_tracking(config.tracking_uri)
-    params = {k: str(v) for k, v in asdict(config).items() if k != "perception"}
-    params.update({f"perception.{k}": str(v) for k, v in asdict(config.perception).items()})
-    params["model_kinds"] = ",".join(f"{getattr(m, 'kind', type(m).__name__)}:{m.modality}" for m in models)
-    with mlflow.start_run(experiment_id=ensure_experiment(config.experiment), run_name="self_recognition") as run:
-        mlflow.log_params(params)
-        for row in rows:
-            for key in ("auc", "threshold", "tpr", "fpr", "fpr_at_pooled", "t_auc99_s", "failed"):
-                if np.isfinite(row[key]):
-                    mlflow.log_metric(f"{row['comparison']}.{key}", float(row[key]))
-        mlflow.log_metric("wall_s", wall)
-        for path in paths.values():
-            mlflow.log_artifact(str(path))
-        return run.info.run_id

@@ -121,4 +121,4 @@ def test_run_jupiter_writes_reproducible_tables_plots_and_an_mlflow_run(tmp_path
     assert "24.79" in paths["summary_md"].read_text()
     import mlflow
     runs = mlflow.search_runs(experiment_names=["bodyschema-adaptation"])
-    assert len(runs) == 1 and "metrics.aic_joints.joint_err_after_deg" in runs.columns
+    assert len(runs) == 1 and "metrics.AIC joints.joint_err_after_deg" in runs.columns
