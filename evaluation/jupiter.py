@@ -27,6 +27,7 @@ from bodyschema.errors import must_be
 from bodyschema.evaluation.mlflow_log import log_benchmark, table_metrics
 from bodyschema.evaluation.level_report import write_csv
 from bodyschema.evaluation.levels import MODELS_HELP, check_models_match, resolve_model
+from bodyschema.evaluation.reaching_loop import control_substeps
 from bodyschema.evaluation.pd import PDConfig, PDController
 from bodyschema.evaluation.targets import eval_rng
 from bodyschema.models.scaling import IMAGE_SCALE
@@ -71,17 +72,7 @@ class JupiterConfig:
             raise ValueError(must_be("jupiter_gravity", "a finite magnitude ≥ 0 in m/s²", self.jupiter_gravity))
         if not (self.spread > 0 and self.settle_deg > 0):
             raise ValueError(must_be("spread and settle_deg", "> 0", (self.spread, self.settle_deg)))
-        control_substeps(self.control_rate, TIMESTEP)
-
-
-def control_substeps(rate_hz: float, timestep: float) -> int:
-    """MuJoCo steps per control tick; the house error unless the control period is a whole number of steps."""
-    steps = 1.0 / (rate_hz * timestep) if rate_hz > 0 and np.isfinite(rate_hz) else 0.0
-    if not (steps >= 1 - 1e-9 and abs(steps - round(steps)) < 1e-6):
-        rates = ", ".join(f"{1 / (n * timestep):g}" for n in (1, 2, 4, 5, 10))
-        raise ValueError(must_be("control_rate", f"a rate whose period is a whole number of {timestep} s MuJoCo "
-                                 "steps", rate_hz, f"A rate above {1 / timestep:g} Hz cannot be met; try {rates} Hz."))
-    return int(round(steps))
+        control_substeps(self.control_rate, TIMESTEP, "control_rate")
 
 
 # ---- episodes ---------------------------------------------------------------------------------------------
@@ -136,7 +127,7 @@ def _simulate(robot: Robot, controller, models: Sequence, starts: np.ndarray, go
               config: JupiterConfig, desc: str) -> dict[str, np.ndarray | list]:
     from tqdm import tqdm
     m = robot.model
-    substeps = control_substeps(config.control_rate, m.opt.timestep)
+    substeps = control_substeps(config.control_rate, m.opt.timestep, "control_rate")
     period = substeps * m.opt.timestep
     datas = [mujoco.MjData(m) for _ in starts]
     for d, q0 in zip(datas, starts):
@@ -213,7 +204,7 @@ def run_jupiter(config: JupiterConfig = JupiterConfig(), models: Sequence | None
     """PD, AIC-unimodal and AIC-multimodal on the same goals and starts; writes tables and plots to config.out."""
     models = [resolve_model(s, config.tracking_uri) for s in config.models] if models is None else list(models)
     robot = load_torque_panda(models)
-    control_substeps(config.control_rate, robot.model.opt.timestep)
+    control_substeps(config.control_rate, robot.model.opt.timestep, "control_rate")
     goals = sample_poses(robot, config.episodes, config.spread, eval_rng(config.seed, 0, "targets"))
     starts = sample_poses(robot, config.episodes, config.spread, eval_rng(config.seed, 0, "starts"))
     limits = robot.model.actuator_ctrlrange.copy()                          # (Dq, 2) N·m

@@ -30,6 +30,7 @@ from bodyschema.aif.perception import PerceptionConfig
 from bodyschema.errors import must_be
 from bodyschema.evaluation import marker_shift_report as report
 from bodyschema.evaluation.levels import MODELS_HELP, load_robot, resolve_model
+from bodyschema.evaluation.reaching_loop import control_substeps
 from bodyschema.evaluation.targets import eval_rng
 
 # Unit direction of each shift in the hand (LForeArm body) frame: x along the forearm towards the marker, y the
@@ -95,16 +96,6 @@ def marker_offsets(shifts: Sequence[str], size: float) -> np.ndarray:
     if unknown:
         raise ValueError(must_be("shift", f"one of {tuple(SHIFTS)}", unknown[0]))
     return size * np.array([SHIFTS[s] for s in shifts], dtype=np.float64)
-
-
-def substeps_per_tick(robot, control_rate: float) -> int:
-    """MuJoCo steps per control period; the house error unless the period is a whole number of them."""
-    ratio = 1.0 / (control_rate * robot.model.opt.timestep)
-    if round(ratio) < 1 or abs(ratio - round(ratio)) > 1e-6:
-        raise ValueError(must_be("control_rate", f"a divisor of {1 / robot.model.opt.timestep:g} Hz "
-                                 f"(whole {robot.model.opt.timestep * 1e3:g} ms MuJoCo steps per period)",
-                                 control_rate, "Try 50, 100 or 250 Hz."))
-    return int(round(ratio))
 
 
 class Arms:
@@ -179,7 +170,7 @@ def simulate(robot, models: Sequence, config: MarkerShiftConfig, q_goal: np.ndar
     "goal_xyz" (B, 3) m, "failed" (B,) bool, "reasons" (B,) str.
     """
     from tqdm import tqdm
-    substeps = substeps_per_tick(robot, config.control_rate)
+    substeps = control_substeps(config.control_rate, robot.model.opt.timestep, "control_rate")
     dt = 1.0 / config.control_rate
     ticks, shift_tick = int(round(config.duration / dt)), int(round(config.shift_time / dt))
     vision = vision_modality(models)

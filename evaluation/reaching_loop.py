@@ -26,14 +26,15 @@ from bodyschema.models.scaling import IMAGE_SCALE
 SENSED = ("joints", "ee_xyz", "ee_pixel", "image")
 
 
-def control_substeps(control_hz: float, timestep: float) -> int:
-    """MuJoCo steps per control period; the house error unless the period is a whole number of steps."""
+def control_substeps(control_hz: float, timestep: float, name: str = "control_hz") -> int:
+    """MuJoCo steps per control period; the house error (about the config field `name`) unless the period is a
+    whole number of steps. Shared by every closed-loop benchmark."""
     ok = isinstance(control_hz, (int, float)) and np.isfinite(control_hz) and control_hz > 0
     ratio = 1.0 / (control_hz * timestep) if ok else float("nan")
     n = int(round(ratio)) if ok else 0
     if n < 1 or abs(ratio - n) > 1e-6 * n:
         rates = ", ".join(f"{1.0 / (k * timestep):g}" for k in (1, 2, 5, 10, 20))
-        raise ValueError(must_be("control_hz", f"a rate whose period is a whole number of MuJoCo steps of "
+        raise ValueError(must_be(name, f"a rate whose period is a whole number of MuJoCo steps of "
                                  f"{timestep * 1e3:g} ms", control_hz, f"Use e.g. {rates} Hz."))
     return n
 

@@ -11,7 +11,8 @@ import pytest
 
 from bodyschema.evaluation.levels import load_robot
 from bodyschema.evaluation.marker_shift import (Arms, MarkerShiftConfig, _render_shifted, goal_poses, marker_offsets,
-                                                run_marker_shift, simulate, substeps_per_tick)
+                                                run_marker_shift, simulate)
+from bodyschema.evaluation.reaching_loop import control_substeps
 from bodyschema.evaluation.marker_shift_report import episode_rows, predicted_correction
 from bodyschema.models.analytic import AnalyticModel
 
@@ -113,7 +114,7 @@ def test_bad_input_raises_the_house_error(robot, models):
         with pytest.raises(ValueError, match="must be"):
             MarkerShiftConfig(**bad)
     with pytest.raises(ValueError, match="control_rate must be"):
-        substeps_per_tick(robot, 300.0)                                           # 1.67 MuJoCo steps
+        control_substeps(300.0, robot.model.opt.timestep, "control_rate")                                           # 1.67 MuJoCo steps
     with pytest.raises(ValueError, match="models must be"):
         run_marker_shift(MarkerShiftConfig(**SHORT), models=[models[1]])          # no proprioception: no conflict
 
