@@ -44,7 +44,7 @@ REACHING_STREAM = 0x4EAC_4100          # second entropy word: reaching targets a
 PURPOSE = {"targets": 0, "starts": 1, "noise": 2}
 ROBOTS = {   # default models, goal sensor, control rate (Hz), duration (s)
     "nao_arm": {"models": ("analytic:nao_arm:ee_pixel", "analytic:nao_arm:joints"), "hz": 50.0, "duration": 3.0},
-    "panda": {"models": ("analytic:panda:ee_xyz",), "hz": 500.0, "duration": 5.0},
+    "panda": {"models": ("analytic:panda:ee_xyz",), "hz": 500.0, "duration": 10.0},   # the Jᵀ attractor is slow
 }
 GOAL_PREFERENCE = ("image", "ee_xyz", "ee_pixel", "joints")   # "auto": the first modality among the models
 
@@ -55,7 +55,7 @@ class ReachingConfig:
     models: Annotated[tuple[str, ...], tyro.conf.arg(aliases=("--model",), help=MODELS_HELP)] = ()  # () = robot's
     goal: str = "auto"                     # goal modality; auto: image > ee_xyz > ee_pixel > joints among the models
     targets: int = 100                     # random reachable targets (episodes per controller)
-    duration: float | None = None          # s per episode; None: 3 (nao_arm), 5 (panda)
+    duration: float | None = None          # s per episode; None: 3 (nao_arm), 10 (panda)
     control_hz: float | None = None        # must divide into whole MuJoCo steps; None: 50 (nao_arm), 500 (panda)
     noise: tuple[tuple[str, float], ...] = ()   # observation noise σ per modality (rad, m, px, intensity)
     broken: tuple[str, ...] = ()           # modalities whose precision is 0 (a dead sensor)
