@@ -4,7 +4,7 @@
     bodyschema validate data/nao.zarr
     bodyschema train --model gpr --data data/nao.zarr --modality ee_xyz
     bodyschema registry list | bodyschema registry promote NAME VERSION
-    bodyschema evaluate levels --models models:/bodyschema-nao_arm-ee_xyz-gpr@champion --levels 1 2 3
+    bodyschema evaluate levels --model models:/bodyschema-nao_arm-ee_xyz-gpr@champion --levels 1 2 3
     bodyschema evaluate reaching --robot nao_arm | evaluate adaptation jupiter | evaluate self-recognition
     bodyschema report
     bodyschema demo

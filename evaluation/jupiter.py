@@ -14,19 +14,17 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Annotated
 
 import mujoco
 import numpy as np
 import torch
-import tyro
 
 from bodyschema.aif.aic import AICConfig, AICController
 from bodyschema.datagen.robot import GRAVITY, Robot
 from bodyschema.errors import must_be
 from bodyschema.evaluation.mlflow_log import log_benchmark, table_metrics
 from bodyschema.evaluation.level_report import write_csv
-from bodyschema.evaluation.levels import MODELS_HELP, check_models_match, resolve_model
+from bodyschema.evaluation.levels import check_models_match, models_field, resolve_models
 from bodyschema.evaluation.reaching_loop import control_substeps
 from bodyschema.evaluation.pd import PDConfig, PDController
 from bodyschema.evaluation.targets import eval_rng
@@ -47,7 +45,7 @@ class JupiterConfig:
     switch_time: float = 6.0           # s; gravity 9.81 → jupiter_gravity here
     jupiter_gravity: float = 24.79     # m/s²
     control_rate: float = 500.0        # Hz; 1 / (rate · 0.002 s) must be a whole number of MuJoCo steps
-    models: Annotated[tuple[str, ...], tyro.conf.arg(help=MODELS_HELP)] = ("analytic:panda:ee_xyz",)
+    models: models_field("analytic:panda:ee_xyz (the multimodal AIC's extra sensor)") = ()
     aic: AICConfig = AICConfig()
     pd: PDConfig = PDConfig()
     spread: float = 0.4                # rad; goals and starts uniform in READY ± spread (inside the joint ranges)
@@ -202,7 +200,7 @@ class _Run:                        # one controller's episodes
 
 def run_jupiter(config: JupiterConfig = JupiterConfig(), models: Sequence | None = None) -> dict[str, Path]:
     """PD, AIC-unimodal and AIC-multimodal on the same goals and starts; writes tables and plots to config.out."""
-    models = [resolve_model(s, config.tracking_uri) for s in config.models] if models is None else list(models)
+    models = resolve_models(config.models, ("analytic:panda:ee_xyz",), config.tracking_uri, models)
     robot = load_torque_panda(models)
     control_substeps(config.control_rate, robot.model.opt.timestep, "control_rate")
     goals = sample_poses(robot, config.episodes, config.spread, eval_rng(config.seed, 0, "targets"))

@@ -36,10 +36,27 @@ MODELS_HELP = ('"models:/<name>@<alias>" (registry), a saved model directory, or
                'several models of one body are fused')
 
 
+DEFAULT_MODELS = ("analytic:planar2:ee_xyz",)
+
+
+def models_field(when_empty: str):
+    """The `models` field of a benchmark config: `--model SPEC`, repeated to fuse several models (a flag that takes
+    one value each time, so a second --model never silently replaces the first); none given: `when_empty`."""
+    return Annotated[tuple[str, ...], tyro.conf.UseAppendAction,
+                     tyro.conf.arg(aliases=("--model",), help=f"{MODELS_HELP}. None given: {when_empty}")]
+
+
+def resolve_models(specs: Sequence[str], when_empty: Sequence[str], tracking_uri: str | None = None,
+                   models: Sequence | None = None) -> list:
+    """The models of a benchmark run: `models` when given as objects, else the specs (or `when_empty`) resolved."""
+    if models is not None:
+        return list(models)
+    return [resolve_model(spec, tracking_uri) for spec in (specs or when_empty)]
+
+
 @dataclass(frozen=True)
 class LevelsConfig:
-    models: Annotated[tuple[str, ...], tyro.conf.arg(aliases=("--model",), help=MODELS_HELP)] = (
-        "analytic:planar2:ee_xyz",)
+    models: models_field(", ".join(DEFAULT_MODELS)) = ()
     levels: tuple[int, ...] = (1, 2, 3)  # 1: one joint off 5–10°, 2: all joints off, 3: another target's pose
     trials: int = 500                  # per run, as in Pixel-AIF
     runs: int = 5                      # runs with different target seeds
@@ -164,7 +181,7 @@ def _broken(perception: Perception) -> set[str]:
 def run_levels(config: LevelsConfig = LevelsConfig(), models: Sequence | None = None) -> LevelsSummary:
     """Levels × runs on held-out targets; writes tables and plots to config.out and logs one MLflow run."""
     from tqdm import tqdm
-    models = [resolve_model(s, config.tracking_uri) for s in config.models] if models is None else list(models)
+    models = resolve_models(config.models, DEFAULT_MODELS, config.tracking_uri, models)
     robot = load_robot(models, config.image_size)
     perception = Perception(models, config.perception)
     has_image = any(m.modality == "image" for m in models)
@@ -208,7 +225,7 @@ def noise_sweep(config: LevelsConfig, modality: str, sigmas: Sequence[float], le
 def broken_sweep(config: LevelsConfig, models: Sequence | None = None, level: int = 2) -> list[dict]:
     """One row per modality set to precision 0 (a dead sensor), plus the intact baseline; plot with
     `level_report.plot_sweep(rows, "broken", path)`."""
-    models = [resolve_model(s, config.tracking_uri) for s in config.models] if models is None else list(models)
+    models = resolve_models(config.models, DEFAULT_MODELS, config.tracking_uri, models)
     out = []
     for dead in (None, *[m.modality for m in models]):
         pcfg = replace(config.perception, record=False,

@@ -19,17 +19,15 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Annotated
 
 import numpy as np
 import torch
-import tyro
 
 from bodyschema.aif.action import ActionConfig, VelocityController
 from bodyschema.aif.perception import PerceptionConfig
 from bodyschema.errors import must_be
 from bodyschema.evaluation import marker_shift_report as report
-from bodyschema.evaluation.levels import MODELS_HELP, load_robot, resolve_model
+from bodyschema.evaluation.levels import load_robot, models_field, resolve_models
 from bodyschema.evaluation.reaching_loop import control_substeps
 from bodyschema.evaluation.targets import eval_rng
 
@@ -43,13 +41,14 @@ GOALS = ("ee_pixel", "joints", "image")
 VISUAL = ("ee_pixel", "image")      # modalities that see the marker
 TARGET_KEY = 0x5417                 # extra seed word: goal poses held out from the levels' and reaching's targets
 
+DEFAULT_MODELS = ("analytic:nao_arm:joints", "analytic:nao_arm:ee_pixel")
+
 
 @dataclass(frozen=True)
 class MarkerShiftConfig:
     """nao_arm holds a goal by active inference while its visual marker is shifted in the hand frame."""
 
-    models: Annotated[tuple[str, ...], tyro.conf.arg(aliases=("--model",), help=MODELS_HELP)] = (
-        "analytic:nao_arm:joints", "analytic:nao_arm:ee_pixel")
+    models: models_field(", ".join(DEFAULT_MODELS)) = ()
     shifts: tuple[str, ...] = ("left", "right", "finger", "forearm")   # hand frame ±y, +x, −x; "none": control
     offset: float = 0.03               # m, size of the shift in the hand frame (a few cm; "forearm" goes 2×)
     episodes: int = 10                 # goal poses per shift (the same poses for every shift and precision)
@@ -151,7 +150,7 @@ def vision_modality(models: Sequence) -> str:
     vision = [m for m in VISUAL if m in modalities]
     if "joints" not in modalities or not vision:
         raise ValueError(must_be("models", "a 'joints' model and an 'ee_pixel' or 'image' model", modalities,
-                                 "e.g. --models analytic:nao_arm:joints analytic:nao_arm:ee_pixel"))
+                                 "e.g. --model analytic:nao_arm:joints --model analytic:nao_arm:ee_pixel"))
     return vision[0]
 
 
@@ -210,7 +209,7 @@ def run_marker_shift(config: MarkerShiftConfig = MarkerShiftConfig(), models: Se
                      ) -> dict[str, Path]:
     """Every shift × visual precision on the same held-out goal poses; writes tables and plots to config.out and
     logs one MLflow run. Returns name → Path of what it wrote."""
-    models = [resolve_model(s, config.tracking_uri) for s in config.models] if models is None else list(models)
+    models = resolve_models(config.models, DEFAULT_MODELS, config.tracking_uri, models)
     vision = vision_modality(models)
     robot = load_robot(models)
     q_goal = goal_poses(robot, config.episodes, config.seed)                     # (E, Dq) rad

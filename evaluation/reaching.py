@@ -21,11 +21,9 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Annotated
 
 import numpy as np
 import torch
-import tyro
 
 from bodyschema.aif.action import ActionConfig, VelocityController
 from bodyschema.aif.aic import AICConfig, AICController
@@ -33,7 +31,7 @@ from bodyschema.aif.perception import PerceptionConfig
 from bodyschema.datagen.samplers import uniform
 from bodyschema.errors import must_be
 from bodyschema.evaluation import reaching_report
-from bodyschema.evaluation.levels import MODELS_HELP, load_robot, resolve_model
+from bodyschema.evaluation.levels import load_robot, models_field, resolve_model
 from bodyschema.evaluation.pd import PDController
 from bodyschema.evaluation.reaching_loop import (Sensors, ServoPolicy, TorquePolicy, VelocityPolicy, control_substeps,
                                                  rollout)
@@ -52,7 +50,7 @@ GOAL_PREFERENCE = ("image", "ee_xyz", "ee_pixel", "joints")   # "auto": the firs
 @dataclass(frozen=True)
 class ReachingConfig:
     robot: str = "nao_arm"                 # "nao_arm" (velocity AIF on servos) | "panda" (AIC torques)
-    models: Annotated[tuple[str, ...], tyro.conf.arg(aliases=("--model",), help=MODELS_HELP)] = ()  # () = robot's
+    models: models_field("the robot's analytic defaults (nao_arm: ee_pixel + joints; panda: ee_xyz)") = ()
     goal: str = "auto"                     # goal modality; auto: image > ee_xyz > ee_pixel > joints among the models
     targets: int = 100                     # random reachable targets (episodes per controller)
     duration: float | None = None          # s per episode; None: 3 (nao_arm), 10 (panda)

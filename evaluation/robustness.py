@@ -10,7 +10,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from bodyschema.evaluation.level_report import markdown, plot_sweep, write_csv
-from bodyschema.evaluation.levels import LevelsConfig, broken_sweep, noise_sweep, resolve_model
+from bodyschema.evaluation.levels import DEFAULT_MODELS, LevelsConfig, broken_sweep, noise_sweep, resolve_models
 
 
 @dataclass(frozen=True)
@@ -25,7 +25,7 @@ class RobustnessConfig:
 
 
 def run_robustness(config: RobustnessConfig, models=None) -> dict[str, Path]:
-    models = [resolve_model(s, config.levels.tracking_uri) for s in config.levels.models] if models is None else list(models)
+    models = resolve_models(config.levels.models, DEFAULT_MODELS, config.levels.tracking_uri, models)
     levels = replace(config.levels, out=config.out)
     config.out.mkdir(parents=True, exist_ok=True)
     noise = noise_sweep(levels, config.modality, config.sigmas, level=config.level, models=models)

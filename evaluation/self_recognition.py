@@ -18,17 +18,15 @@ import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Annotated
 
 import numpy as np
 import torch
-import tyro
 
 from bodyschema.aif.free_energy import sensory_terms
 from bodyschema.aif.perception import Perception, PerceptionConfig
 from bodyschema.errors import must_be
 from bodyschema.evaluation.mlflow_log import log_benchmark, table_metrics
-from bodyschema.evaluation.levels import MODELS_HELP, load_robot, resolve_model
+from bodyschema.evaluation.levels import load_robot, models_field, resolve_model
 from bodyschema.evaluation.self_recognition_report import roc_table, summary_notes, write_report
 from bodyschema.evaluation.self_recognition_streams import Episodes, make_episodes
 
@@ -42,8 +40,7 @@ class SelfRecognitionConfig:
     """Babbling episodes seen by the robot itself or by another source; ROC of "is this me?" on free energy."""
 
     robot: str = "nao_arm"                # the babbling body; every model must be of it
-    models: Annotated[tuple[str, ...], tyro.conf.arg(aliases=("--model",), help=MODELS_HELP + "; empty: "
-                                                     "analytic:<robot>:ee_pixel")] = ()
+    models: models_field("analytic:<robot>:ee_pixel") = ()
     episodes: int = 200                # half self, half others split evenly over `sources`
     sources: tuple[str, ...] = SOURCES    # other sources of the visual stream: second_arm, delayed, mirrored
     steps: int = 40                    # frames per episode

@@ -40,3 +40,13 @@ def test_validate_exit_code_reflects_the_store(tmp_path, capsys):
     assert main(["validate", str(store)]) == 0
     assert main(["validate", str(tmp_path / "missing.zarr")]) != 0
     assert "problem" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("words", [["evaluate", "levels"], ["evaluate", "reaching"], ["evaluate", "self-recognition"],
+                                   ["evaluate", "adaptation", "jupiter"]], ids=" ".join)
+def test_repeated_model_flags_fuse_instead_of_replacing(words):
+    import tyro
+
+    from bodyschema.cli import COMMANDS
+    config = tyro.cli(COMMANDS, args=[*words, "--model", "analytic:nao_arm:ee_xyz", "--model", "analytic:nao_arm:joints"])
+    assert config.models == ("analytic:nao_arm:ee_xyz", "analytic:nao_arm:joints")
