@@ -102,7 +102,7 @@ def evaluations_to_plain_error(models, n, noise=None):
 
 def full_levels(models_spec, n, runs, out, label, precisions=(), noise=()):
     config = LevelsConfig(models=tuple(models_spec), trials=n, runs=runs, out=out / label, mlflow=False,
-                          noise=tuple(noise), perception=PerceptionConfig(record=True, precisions=tuple(precisions)))
+                          noise=tuple(noise), perception=replace(LevelsConfig().perception, precisions=tuple(precisions)))
     t = time.perf_counter()
     summary = run_levels(config)
     wall = time.perf_counter() - t
@@ -136,7 +136,7 @@ def train_pixel(robot_name: str, n: int, size: tuple[int, int], epochs: int):
 
 
 def pixel_levels(model, n, runs, out, label, extra=()):
-    config = LevelsConfig(trials=n, runs=runs, out=out / label, mlflow=False, perception=PerceptionConfig(record=True))
+    config = LevelsConfig(trials=n, runs=runs, out=out / label, mlflow=False)
     t = time.perf_counter()
     summary = run_levels(config, models=[model, *extra])
     print(f"[4] {label}: full levels benchmark ({n} trials × {runs} runs) wall {time.perf_counter() - t:.1f} s")
