@@ -6,12 +6,12 @@
 Integration: "local_linear" (default) takes Ozaki's step Δt φ₁(Δt 𝓙) u̇ with the Gauss–Newton flow Jacobian
 𝓙 = D ⊗ I − k_z H (generalized.py): each step is precision-normalised — a damped Newton step that needs no
 tuning of Δt to the sensory precision — and converges in tens of steps; "implicit" is the linearly implicit
-Euler step (same limits, a solve instead of an exponential); "euler" is the plain Δt·u̇ of the Pixel-AIF protocol. With step_control "descent" (order 0: F is then a Lyapunov
-function of the flow) a step that raises F is undone and that trial's Δt shrinks ×0.1 (it regrows ×2 on accepted
-steps, up to config.dt): the Gauss–Newton step becomes Levenberg–Marquardt-like, monotone, and a trial stops once
-even a step below `tol` does not descend, instead of jittering at the float32 noise floor of a learned model.
-A step of the joints is capped at `max_step` rad (trust region), the belief is clamped
-to the joint limits, and every trial stops on its own: trials that converged (moved < tol) or diverged (F
+Euler step (same limits, a solve instead of an exponential); "euler" is the plain Δt·u̇ of the Pixel-AIF
+protocol. With step_control "descent" (order 0: F is then a Lyapunov function of the flow) a step that raises F
+is undone and that trial's Δt shrinks ×0.1 (it regrows ×2 on accepted steps, up to config.dt): the Gauss–Newton
+step becomes Levenberg–Marquardt-like, monotone, and a trial stops once even a step below `tol` does not
+descend, instead of jittering at the float32 noise floor of a learned model. A step of the joints is capped
+at `max_step` rad (trust region), the belief is clamped to the joint limits, and every trial stops on its own: trials that converged (moved < tol) or diverged (F
 or the step not finite, an Euler step > divergence_step rad, or the precision-weighted prediction error E = F + ½ln|Π|
 grown above divergence_ratio · max(E at the start, 1) — an unstable update bouncing between the joint limits)
 leave the active batch and are never evaluated again. Batched and per-trial runs perform the same arithmetic row by row.
@@ -256,7 +256,7 @@ class Perception:
             converged[active[done]] = True
             active = active[~bad & ~done]
         keep = torch.nonzero(~diverged).squeeze(-1)
-        if keep.numel():
+        if keep.numel() and not descent:                                   # descent: F at u is already known
             free[keep] = self._terms(sensors, u[keep], keep, False, need_grad=False)[0]
             evaluations += keep.numel()
         traj = None
