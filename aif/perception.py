@@ -11,10 +11,12 @@ protocol. With step_control "descent" (order 0: F is then a Lyapunov function of
 is undone and that trial's Δt shrinks ×0.1 (it regrows ×2 on accepted steps, up to config.dt): the Gauss–Newton
 step becomes Levenberg–Marquardt-like, monotone, and a trial stops once even a step below `tol` does not
 descend, instead of jittering at the float32 noise floor of a learned model. A step of the joints is capped
-at `max_step` rad (trust region), the belief is clamped to the joint limits, and every trial stops on its own: trials that converged (moved < tol) or diverged (F
-or the step not finite, an Euler step > divergence_step rad, or the precision-weighted prediction error E = F + ½ln|Π|
-grown above divergence_ratio · max(E at the start, 1) — an unstable update bouncing between the joint limits)
-leave the active batch and are never evaluated again. Batched and per-trial runs perform the same arithmetic row by row.
+at `max_step` rad (trust region), the belief is clamped to the joint limits, and every trial stops on its own:
+trials that converged (moved < tol) or diverged (F or the step not finite, an Euler step > divergence_step rad, or
+the precision-weighted prediction error E = F + ½ln|Π| grown above divergence_ratio · max(E at the start, 1) — an
+unstable update bouncing between the joint limits) leave the active batch and are never evaluated again. Batched
+and per-trial runs perform the same arithmetic row by row (bit-equal for float64 models; a float32 network may
+round differently at another batch size).
 """
 
 from __future__ import annotations
