@@ -245,6 +245,12 @@ class Perception:
             new = ua + du
             new[:, 0] = torch.minimum(torch.maximum(new[:, 0], self.low), self.high)
             moved = (new - ua).abs().amax(dim=(1, 2))                      # (b_a,)
+            if descent:                                                    # a step whose predicted gain is below
+                step = (new - ua).reshape(len(ua), -1)                     # F's float noise cannot be verified:
+                gain = -(grad.reshape(len(ua), -1) * step).sum(-1)         # converged (−gᵀΔ − ½ ΔᵀHΔ)
+                if hess is not None:
+                    gain = gain - 0.5 * torch.einsum("bi,bij,bj->b", step, hess, step)
+                moved = torch.where(gain <= DESCENT_SLACK * f_a.abs(), torch.zeros_like(moved), moved)
             if trajectory is not None:
                 self._record(trajectory, b, active, ua, f_a, errors)
             free[active] = torch.where(torch.isfinite(f_a), f_a, free[active])
