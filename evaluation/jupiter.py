@@ -23,9 +23,9 @@ from bodyschema.aif.aic import AICConfig, AICController
 from bodyschema.datagen.robot import GRAVITY, Robot
 from bodyschema.errors import must_be
 from bodyschema.evaluation.mlflow_log import log_benchmark, table_metrics
-from bodyschema.evaluation.level_report import write_csv
 from bodyschema.evaluation.levels import check_models_match, models_field, resolve_models
 from bodyschema.evaluation.reaching_loop import control_substeps
+from bodyschema.evaluation.jupiter_report import summarize, write_report
 from bodyschema.evaluation.pd import PDConfig, PDController
 from bodyschema.evaluation.targets import eval_rng
 from bodyschema.models.scaling import IMAGE_SCALE
@@ -224,93 +224,4 @@ def run_jupiter(config: JupiterConfig = JupiterConfig(), models: Sequence | None
     paths = write_report(runs, goals, config)
     if config.mlflow:
         log_benchmark(config, "jupiter", table_metrics(summarize(runs), "controller"), paths.values(), models)
-    return paths
-
-
-# ---- tables and plots -----------------------------------------------------------------------------------
-SUMMARY_COLUMNS = ("joint_err_before_deg", "joint_err_after_deg", "joint_peak_after_deg", "settle_s",
-                   "ee_err_before_mm", "ee_err_after_mm", "ee_peak_after_mm")
-
-
-def summarize(runs: Sequence[_Run]) -> list[dict]:
-    """One row per controller: the mean over its non-failed episodes; settle_s over the episodes that settled."""
-    table = []
-    for run in runs:
-        ok = [r for r in run.rows if not r["failed"]]
-        row = {"controller": run.name, "episodes": len(run.rows), "failed": len(run.rows) - len(ok)}
-        for key in SUMMARY_COLUMNS:
-            values = np.array([r[key] for r in ok], dtype=float)
-            row[key] = float(np.nanmean(values)) if np.isfinite(values).any() else float("nan")
-        row["settled"] = float(np.mean([np.isfinite(r["settle_s"]) for r in ok])) if ok else float("nan")
-        table.append(row)
-    return table
-
-
-def markdown(table: Sequence[dict], config: JupiterConfig) -> str:
-    columns = (*SUMMARY_COLUMNS, "settled", "failed")
-    lines = ["| controller | " + " | ".join(columns) + " |", "|" + "---|" * (len(columns) + 1)]
-    lines += [f"| {r['controller']} | " + " | ".join(f"{r[c]:.3g}" for c in columns) + " |" for r in table]
-    aic, pd = config.aic, config.pd
-    return "\n".join([
-        f"# Jupiter: gravity {GRAVITY} → {config.jupiter_gravity} m/s² at t = {config.switch_time} s (torque panda)",
-        "", *lines, "",
-        f"{config.episodes} episodes hold random joint goals (ready pose ± {config.spread} rad) at "
-        f"{config.control_rate:g} Hz; joint error = mean |q − q_d| over joints. before / after: mean error over the "
-        f"last {config.steady_window} s before the switch / of the run; peak: after the switch.",
-        f"settle_s: time after the switch until the joint error stays below {config.settle_deg}° (mean over the "
-        "episodes that settled, `settled` = their fraction).",
-        f"Gains: PD K_p = {'/'.join(f'{k:g}' for k in pd.kp)} N·m/rad plus Earth-gravity compensation; AIC "
-        f"κ_a Π_q̇ = {aic.k_a * aic.pi_qd:g} N·m/rad (acts as P) and κ_a Π_q = {aic.k_a * aic.pi_q:g} N·m/(rad·s) "
-        "(integral).", ""])
-
-
-def plot_errors(runs: Sequence[_Run], config: JupiterConfig, path: Path) -> Path:
-    """Median and inter-quartile band over episodes of the joint and ee error vs time, the switch marked."""
-    from bodyschema.training.plots import plt, save_figure
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4))
-    for ax, key, unit in ((axes[0], "joint", "deg"), (axes[1], "ee", "mm")):
-        for run in runs:
-            err = np.maximum(getattr(run, key), 1e-4)                       # (T, B); log axis floor
-            q25, q50, q75 = np.nanpercentile(err, [25, 50, 75], axis=1)
-            ax.plot(run.t, q50, label=run.name)
-            ax.fill_between(run.t, q25, q75, alpha=0.2)
-        ax.axvline(config.switch_time, color="k", ls="--", lw=0.8, label=f"g → {config.jupiter_gravity} m/s²")
-        ax.set(yscale="log", xlabel="time (s)", ylabel=f"{key} error ({unit}), median and IQR")
-        ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8)
-    return save_figure(fig, path)
-
-
-def plot_trajectories(runs: Sequence[_Run], goal: np.ndarray, config: JupiterConfig, path: Path) -> Path:
-    """Every joint of episode 0 under each controller, the goal dashed, the switch marked."""
-    from bodyschema.training.plots import plt, save_figure
-    dq = len(goal)
-    fig, axes = plt.subplots(2, (dq + 1) // 2, figsize=(3.2 * ((dq + 1) // 2), 6), squeeze=False)
-    for j, ax in enumerate(axes.flat):
-        if j >= dq:
-            ax.axis("off")
-            continue
-        for run in runs:
-            ax.plot(run.t, np.rad2deg(run.q[:, 0, j]), label=run.name, lw=1)
-        ax.axhline(np.rad2deg(goal[j]), color="k", ls=":", lw=0.8)
-        ax.axvline(config.switch_time, color="k", ls="--", lw=0.6)
-        ax.set(title=f"joint{j + 1}", xlabel="time (s)", ylabel="q (deg)")
-    axes.flat[0].legend(fontsize=7)
-    return save_figure(fig, path)
-
-
-def write_report(runs: Sequence[_Run], goals: np.ndarray, config: JupiterConfig) -> dict[str, Path]:
-    out = Path(config.out)
-    out.mkdir(parents=True, exist_ok=True)
-    table = summarize(runs)
-    paths = {"summary_csv": write_csv(table, out / "summary.csv"),
-             "episodes_csv": write_csv([r for run in runs for r in run.rows], out / "episodes.csv")}
-    every = max(1, int(round(0.01 * config.control_rate)))                 # 100 Hz time series
-    series = [{"controller": run.name, "t_s": float(run.t[i]), "joint_err_deg_median": float(np.median(run.joint[i])),
-               "ee_err_mm_median": float(np.median(run.ee[i]))} for run in runs for i in range(0, len(run.t), every)]
-    paths["timeseries_csv"] = write_csv(series, out / "timeseries.csv")
-    paths["summary_md"] = out / "summary.md"
-    paths["summary_md"].write_text(markdown(table, config))
-    paths["errors_png"] = plot_errors(runs, config, out / "errors.png")
-    paths["trajectories_png"] = plot_trajectories(runs, goals[0], config, out / "trajectories.png")
     return paths
