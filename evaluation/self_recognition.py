@@ -145,6 +145,8 @@ class NoisySensor:
         self.model, self.variance = model, float(sigma) ** 2
         self.body, self.latent_dim, self.modality = model.body, model.latent_dim, model.modality
         self.output_shape, self.kind = model.output_shape, getattr(model, "kind", type(model).__name__)
+        if hasattr(model, "compute_dtype"):                         # a network keeps its fast float32 path
+            self.compute_dtype = model.compute_dtype
 
     def predict(self, z):
         return self.model.predict(z)
