@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from bodyschema.aif.free_energy import check_models
+from bodyschema.aif.free_energy import check_models, model_input
 from bodyschema.aif.generalized import implicit_step, shift, shift_matrix
 from bodyschema.aif.priors import attractor_flow
 from bodyschema.errors import must_be
@@ -221,12 +221,13 @@ class AICController:
         """Per extra model with Π > 0: (model, ε = x − g(μ) (b, O), Π (b, O), J (b, O, Dq))."""
         b = mu.shape[0]
         for m in self._live:
-            eps = (observations[m.modality] - m.predict(mu)).reshape(b, -1)
+            z = model_input(m, mu)
+            eps = (observations[m.modality] - m.predict(z).to(mu.dtype)).reshape(b, -1)
             if m.modality in self._fixed:
                 pi = torch.full_like(eps, self._fixed[m.modality])
             else:
-                pi = m.precision(mu).reshape(b, -1) * self.config.model_precision_scale
-            yield m, eps, pi, m.jacobian(mu)
+                pi = m.precision(z).to(mu.dtype).reshape(b, -1) * self.config.model_precision_scale
+            yield m, eps, pi, m.jacobian(z).to(mu.dtype)
 
     def _attractor(self, mu: torch.Tensor, inputs: _Inputs):
         """f(μ) (b, Dq) and A = ∂f/∂μ (b, Dq, Dq) of the goal attractor."""
@@ -235,7 +236,8 @@ class AICController:
             eye = torch.eye(self.dq, dtype=mu.dtype).expand(mu.shape[0], -1, -1)
             return beta * (inputs.goal - mu), -beta * eye
         model = next(m for m in self.models if m.modality == self._goal_name)
-        return attractor_flow(model.predict(mu), model.jacobian(mu), inputs.goal, beta)
+        z = model_input(model, mu)
+        return attractor_flow(model.predict(z).to(mu.dtype), model.jacobian(z).to(mu.dtype), inputs.goal, beta)
 
     # ---- input checks -----------------------------------------------------------------------------------
     def _check_state(self, x, name: str, batch: int | None = None) -> torch.Tensor:
