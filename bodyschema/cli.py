@@ -88,7 +88,7 @@ COMMANDS = Union[(  # noqa: UP007
                   ("jupiter", JupiterConfig, "(b) Gravity jumps to 24.79 m/s² mid-task: PD vs AIC on the panda.")),
            ("self-recognition", SelfRecognitionConfig, "Is this me? ROC/AUC of the free energy: own body vs others.")),
     _command("report", ReportConfig, "Gather every benchmark's tables and plots into results/report.md and .html."),
-    _command("demo", DemoConfig, "The end-to-end demo: babble, fit, register, evaluate."),
+    _command("demo", DemoConfig, "The end-to-end demo: babble, fit, register, perceive, reach, recognise, report."),
 )]
 
 
