@@ -35,8 +35,7 @@ from bodyschema.evaluation.levels import load_robot, models_field, resolve_model
 from bodyschema.evaluation.pd import PDController
 from bodyschema.evaluation.reaching_loop import (Sensors, ServoPolicy, TorquePolicy, VelocityPolicy, control_substeps,
                                                  rollout)
-from bodyschema.evaluation.targets import EVAL_STREAM
-from bodyschema.models.scaling import IMAGE_SCALE
+from bodyschema.evaluation.targets import EVAL_STREAM, sense
 
 REACHING_STREAM = 0x4EAC_4100          # second entropy word: reaching targets are their own stream
 PURPOSE = {"targets": 0, "starts": 1, "noise": 2}
@@ -125,15 +124,7 @@ def goal_modality(config: ReachingConfig, models) -> str:
 
 def make_goal(robot, modality: str, q: np.ndarray) -> torch.Tensor:
     """What the goal sensor reads at poses q (N, Dq) rad: joints rad, ee_xyz m, ee_pixel px, image in [0, 1]."""
-    if modality == "joints":
-        x = q
-    elif modality == "ee_xyz":
-        x = robot.fk(q)
-    elif modality == "ee_pixel":
-        x = robot.project(robot.fk(q))
-    else:
-        x = robot.render(q).astype(np.float64) / IMAGE_SCALE
-    return torch.from_numpy(np.asarray(x, dtype=np.float64))
+    return torch.from_numpy(sense(robot, modality, q))
 
 
 def check_goal(robot, modality: str, goal, output_shape: tuple[int, ...]) -> None:

@@ -14,7 +14,7 @@ import torch
 
 from bodyschema.evaluation.mlflow_log import log_benchmark, table_metrics
 from bodyschema.evaluation.level_report import write_csv
-from bodyschema.models.scaling import IMAGE_SCALE
+from bodyschema.evaluation.targets import sense
 
 SUMMARY_COLUMNS = ("episodes", "success", "goal_success", "ee_err_mm", "ee_err_median_mm", "joint_err_deg",
                    "time_to_reach_s", "failed", "wall_s")
@@ -37,14 +37,14 @@ def goal_errors(config, robot, modality: str, goal: torch.Tensor, q: np.ndarray)
     if modality == "joints":
         err = np.rad2deg(np.abs(q - x)).mean(axis=1)
         return err, err < 1.0
+    reached = sense(robot, modality, q)                                   # what the goal sensor reads at q
     if modality == "ee_xyz":
-        err = 1e3 * np.linalg.norm(robot.fk(q) - x, axis=1)
+        err = 1e3 * np.linalg.norm(reached - x, axis=1)
         return err, err < config.success_mm
     if modality == "ee_pixel":
-        err = np.linalg.norm(robot.project(robot.fk(q)) - x, axis=1)
+        err = np.linalg.norm(reached - x, axis=1)
         return err, err < config.pixel_tolerance
-    image = robot.render(q).astype(np.float64) / IMAGE_SCALE
-    err = ((image - x) ** 2).reshape(len(q), -1).mean(axis=1)
+    err = ((reached - x) ** 2).reshape(len(q), -1).mean(axis=1)
     return err, err < config.image_mse_threshold
 
 

@@ -19,8 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bodyschema.evaluation.targets import EVAL_STREAM
-from bodyschema.models.scaling import IMAGE_SCALE
+from bodyschema.evaluation.targets import EVAL_STREAM, sense
 
 SELF = "self"
 STREAM_WORD = 0x5E1F                       # second entropy word: self-recognition streams, apart from levels'
@@ -81,21 +80,12 @@ def make_episodes(config, robot, modalities: Sequence[str]) -> Episodes:
     noise = {**dict(config.visual_noise), "joints": config.proprio_noise}
     visual = {}
     for m in modalities:
-        x = sense(robot, m, seen.reshape(n * t, dq))                  # (N·T, *out)
+        x = sense(robot, m, seen.reshape(n * t, dq), np.float32)      # (N·T, *out); float32 images
         x = x.reshape(n, t, *x.shape[1:])
         x[mirrored] = mirror(robot, m, x[mirrored].reshape(-1, *x.shape[2:])).reshape(x[mirrored].shape)
         visual[m] = _noisy(x, noise.get(m, 0.0), config.seed, "visual_noise", m == "image").astype(np.float32)
     proprio = _noisy(own, noise["joints"], config.seed, "proprio_noise", False)
     return Episodes(kinds, own, proprio, visual, period)
-
-
-def sense(robot, modality: str, q: np.ndarray) -> np.ndarray:
-    """What the camera sees of the arm at poses q (M, Dq) rad: ee_pixel (M, 2) px, ee_xyz (M, 3) m, or images
-    (M, H, W[, C]) as intensity in [0, 1], scaled as the training data."""
-    if modality == "image":
-        return robot.render(q).astype(np.float32) / np.float32(IMAGE_SCALE)   # float32: images are large
-    xyz = robot.fk(q)                                               # (M, 3) m
-    return robot.project(xyz) if modality == "ee_pixel" else xyz
 
 
 def mirror(robot, modality: str, x: np.ndarray) -> np.ndarray:

@@ -46,6 +46,17 @@ class Targets:
         return {m: torch.from_numpy(np.asarray(self.observations[m], dtype=np.float64)) for m in modalities}
 
 
+def sense(robot, modality: str, q: np.ndarray, image_dtype=np.float64) -> np.ndarray:
+    """What a sensor of `modality` reads with the arm at poses q (N, Dq) rad: joints rad, ee_xyz m, ee_pixel px,
+    or images as intensity in [0, 1] scaled as the training data (in `image_dtype`: float32 halves long streams)."""
+    if modality == "joints":
+        return np.asarray(q, dtype=np.float64)
+    if modality == "image":
+        return robot.render(q).astype(image_dtype) / image_dtype(IMAGE_SCALE)
+    xyz = robot.fk(q)                                                      # (N, 3) m
+    return robot.project(xyz) if modality == "ee_pixel" else xyz
+
+
 def make_targets(robot, n: int, rng: np.random.Generator, image: bool = False,
                  noise: Mapping[str, float] | None = None, noise_rng: np.random.Generator | None = None) -> Targets:
     """n poses from `robot.sampling_ranges` and what the simulator senses there, with optional Gaussian noise

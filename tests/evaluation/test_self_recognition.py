@@ -13,7 +13,8 @@ import torch
 from bodyschema.evaluation.self_recognition import (NoisySensor, SelfRecognitionConfig, prepare, run_self_recognition,
                                                     score_episodes)
 from bodyschema.evaluation.self_recognition_report import auc, average_ranks, best_threshold, roc_curve
-from bodyschema.evaluation.self_recognition_streams import episode_kinds, make_episodes, mirror, sense
+from bodyschema.evaluation.self_recognition_streams import episode_kinds, make_episodes, mirror
+from bodyschema.evaluation.targets import sense
 from bodyschema.models.analytic import AnalyticModel
 
 SHORT = SelfRecognitionConfig(episodes=24, steps=4, mlflow=False, progress=False, plots=False)
