@@ -17,7 +17,7 @@ from bodyschema.errors import must_be
 from bodyschema.evaluation import reaching_report
 from bodyschema.evaluation.mlflow_log import log_benchmark, table_metrics
 from bodyschema.evaluation.level_report import write_csv
-from bodyschema.evaluation.levels import resolve_model
+from bodyschema.evaluation.levels import resolve_models
 from bodyschema.evaluation.reaching import ReachingConfig, simulate
 
 COLUMNS = ("success", "goal_success", "ee_err_mm", "ee_err_median_mm", "time_to_reach_s", "failed")
@@ -43,7 +43,7 @@ class LoopRobustnessConfig:
 
 def run_loop_robustness(config: LoopRobustnessConfig = LoopRobustnessConfig(), models=None) -> dict[str, Path]:
     base = replace(config.reaching, baseline=False, mlflow=False, noise=(), broken=(), frozen=())
-    models = [resolve_model(s, base.tracking_uri) for s in base.model_specs] if models is None else list(models)
+    models = resolve_models(base.models, base.default_models, base.tracking_uri, models)
     names = [m.modality for m in models] + (["joints"] if base.robot == "panda" else [])
     if config.modality not in names:
         raise ValueError(must_be("modality", f"one of the sensed modalities {names}", config.modality))

@@ -31,7 +31,7 @@ from bodyschema.aif.perception import PerceptionConfig
 from bodyschema.datagen.samplers import uniform
 from bodyschema.errors import must_be
 from bodyschema.evaluation import reaching_report
-from bodyschema.evaluation.levels import load_robot, models_field, resolve_model
+from bodyschema.evaluation.levels import load_robot, models_field, resolve_models
 from bodyschema.evaluation.pd import PDController
 from bodyschema.evaluation.reaching_loop import (Sensors, ServoPolicy, TorquePolicy, VelocityPolicy, control_substeps,
                                                  rollout)
@@ -87,8 +87,8 @@ class ReachingConfig:
                 raise ValueError(must_be(f"noise[{name!r}]", "a standard deviation ≥ 0", sigma))
 
     @property
-    def model_specs(self) -> tuple[str, ...]:
-        return self.models or ROBOTS[self.robot]["models"]
+    def default_models(self) -> tuple[str, ...]:
+        return ROBOTS[self.robot]["models"]
 
     @property
     def rate(self) -> float:
@@ -224,7 +224,7 @@ def simulate(config: ReachingConfig, models=None):
 def prepare(config: ReachingConfig, models=None):
     """Resolve and check the models, load the robot, build the episodes. → robot, models, goal modality,
     episodes, sensed modalities."""
-    models = [resolve_model(s, config.tracking_uri) for s in config.model_specs] if models is None else list(models)
+    models = resolve_models(config.models, config.default_models, config.tracking_uri, models)
     if any(m.body.robot != config.robot for m in models):
         bad = next(m for m in models if m.body.robot != config.robot)
         raise ValueError(must_be(f"{bad.modality} model body", f"of robot {config.robot!r}", bad.body.robot,

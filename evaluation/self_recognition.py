@@ -26,7 +26,7 @@ from bodyschema.aif.free_energy import sensory_terms
 from bodyschema.aif.perception import Perception, PerceptionConfig
 from bodyschema.errors import must_be
 from bodyschema.evaluation.mlflow_log import log_benchmark, table_metrics
-from bodyschema.evaluation.levels import load_robot, models_field, resolve_model
+from bodyschema.evaluation.levels import load_robot, models_field, resolve_models
 from bodyschema.evaluation.self_recognition_report import roc_table, summary_notes, write_report
 from bodyschema.evaluation.self_recognition_streams import Episodes, make_episodes
 
@@ -84,8 +84,8 @@ class SelfRecognitionConfig:
             raise ValueError(must_be("score", f"one of {SCORES}", self.score))
 
     @property
-    def model_specs(self) -> tuple[str, ...]:
-        return self.models or (f"analytic:{self.robot}:ee_pixel",)
+    def default_models(self) -> tuple[str, ...]:
+        return (f"analytic:{self.robot}:ee_pixel",)
 
 
 @dataclass
@@ -218,7 +218,7 @@ def run_self_recognition(config: SelfRecognitionConfig = SelfRecognitionConfig()
     """Episodes → perception → scores → ROC; writes summary.md/csv, episodes.csv and plots to config.out and logs
     one MLflow run (config.mlflow). Returns name → path of what it wrote."""
     start = time.perf_counter()
-    models = [resolve_model(s, config.tracking_uri) for s in config.model_specs] if models is None else list(models)
+    models = resolve_models(config.models, config.default_models, config.tracking_uri, models)
     robot, perception, visual = prepare(config, models)
     episodes = make_episodes(config, robot, visual)
     scores = score_episodes(perception, episodes, visual, config.progress)
