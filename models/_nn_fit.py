@@ -4,9 +4,10 @@
 - `build`: construct a module without touching the global RNG and initialise it from a `torch.Generator`.
 - `train`: the one minibatch loop (seeded shuffling, Adam, early stopping on the validation loss keeping the
   best weights, a checkpoint written every epoch from which a killed run resumes bit-for-bit, tqdm bar).
-- `NetModel`: mixin giving a `BaseSensoryModel` its float32/float64 inference copies of the network and the
-  autograd derivatives: Jacobian by forward mode (`vmap(jacfwd)`: Dz JVPs, cheap when outputs ≫ Dz) and a
-  VJP as one backward over the whole batch.
+- `NetHolder`: mixin holding a trained network: its float32/float64 inference copies, its device (`to`),
+  its saved state (the image encoder is one).
+- `NetModel`: `NetHolder` for a `BaseSensoryModel`, with the autograd derivatives: Jacobian by forward mode
+  (`vmap(jacfwd)`: Dz JVPs, cheap when outputs ≫ Dz) and a VJP as one backward over the whole batch.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from torch import nn
 from tqdm.auto import tqdm
 
 from bodyschema.errors import must_be
+from bodyschema.models.device import check_device
 from bodyschema.models.scaling import IMAGE_SCALE
 
 _INIT_LAYERS = (nn.Linear, nn.Conv2d, nn.ConvTranspose2d)
@@ -138,19 +140,26 @@ def train(module: nn.Module, loss_fn: Callable[..., torch.Tensor], data: tuple[t
           settings: TrainSettings, gen: torch.Generator, *, val: tuple[torch.Tensor, ...] | None = None,
           on_epoch: Callable[[int, dict], None] | None = None, progress: bool = True,
           checkpoint: str | Path | None = None, param_groups: list[dict] | None = None,
-          desc: str = "fit") -> dict[str, float]:
+          desc: str = "fit", device: str | torch.device = "cpu") -> dict[str, float]:
     """Minimise `loss_fn(module, *batch)` (a mean over the batch); leaves the best weights in `module`.
 
     The score is the validation loss when `val` is given, else the train loss. `checkpoint` is rewritten
     atomically after every epoch (before `on_epoch`), and resumed from when it exists at the start.
+    The module and the data live on `device` while training; the module is back on the CPU on return
+    (models are saved and shipped on CPU; `NetModel.to` moves them for inference). The shuffling stays on
+    the CPU generator, so a seed gives the same minibatches on every device.
     """
+    device = check_device(device)
+    module.to(device)
+    data = tuple(d.to(device) for d in data)
+    val = tuple(d.to(device) for d in val) if val is not None else None
     n = data[0].shape[0]
     opt = torch.optim.Adam(param_groups or module.parameters(), lr=settings.lr, weight_decay=settings.weight_decay)
     fingerprint = {"n": n, "shapes": [list(d.shape[1:]) for d in data], **asdict(settings)}
     state = {"epoch": -1, "best": math.inf, "best_epoch": -1, "bad": 0,
              "best_weights": _clone(module.state_dict()), "metrics": {}}
     if checkpoint is not None and Path(checkpoint).is_file():
-        state = _resume(Path(checkpoint), module, opt, gen, fingerprint)
+        state = _resume(Path(checkpoint), module, opt, gen, fingerprint, device)
     bar = tqdm(total=settings.epochs, initial=state["epoch"] + 1, desc=desc, disable=not progress, leave=False)
     for epoch in range(state["epoch"] + 1, settings.epochs):
         if state["bad"] >= settings.patience:
@@ -184,7 +193,7 @@ def train(module: nn.Module, loss_fn: Callable[..., torch.Tensor], data: tuple[t
             on_epoch(epoch, dict(metrics))
     bar.close()
     module.load_state_dict(state["best_weights"])
-    module.eval()
+    module.eval().to("cpu")
     return {"best_loss": state["best"], "best_epoch": state["best_epoch"], "epochs_run": state["epoch"] + 1}
 
 
@@ -211,22 +220,23 @@ def _save_checkpoint(path: Path, state: dict, module, opt, gen, fingerprint) -> 
     os.replace(tmp, path)   # atomic: a kill mid-write leaves the previous checkpoint intact
 
 
-def _resume(path: Path, module, opt, gen, fingerprint) -> dict:
-    saved = torch.load(path, weights_only=True)
+def _resume(path: Path, module, opt, gen, fingerprint, device: torch.device) -> dict:
+    saved = torch.load(path, weights_only=True, map_location=device)   # a checkpoint resumes on any device
     if saved.get("fingerprint") != fingerprint:
         raise ValueError(must_be("checkpoint", f"from a run with the same data and settings {fingerprint}",
                                  saved.get("fingerprint"), f"Delete {str(path)!r} or pass another checkpoint path."))
     module.load_state_dict(saved["weights"])
     opt.load_state_dict(saved["optimizer"])
-    gen.set_state(saved["rng"])
+    gen.set_state(saved["rng"].cpu())
     return {k: saved[k] for k in ("epoch", "best", "best_epoch", "bad", "best_weights", "metrics")}
 
 
-# ---- inference plumbing for BaseSensoryModel subclasses ----------------------------------------------
-class NetModel:
-    """Mixin: the subclass sets `self.net_` (float32, trained) and implements `_outputs(net, u)`, u in [-1, 1]."""
+# ---- inference plumbing -----------------------------------------------------------------------------
+class NetHolder:
+    """Mixin: a trained network `self.net_` (float32) with its dtype copies, its device, and its saved state."""
 
     net_: nn.Module | None = None
+    device = torch.device("cpu")    # where the network is evaluated (`to`); trained models arrive on the CPU
     compute_dtype = torch.float32   # what inference should feed: the weights' dtype (the float64 copy is for
                                     # derivative checks: ~10× slower on CPU and no more accurate than its weights)
 
@@ -234,8 +244,21 @@ class NetModel:
     def is_fitted(self) -> bool:
         return self.net_ is not None
 
+    def to(self, device: str | torch.device) -> "NetHolder":
+        """Evaluate the network on `device` ("cpu", "cuda", "cuda:N") from now on; inputs may stay on any
+        device and results come back on the caller's. Learned tensors (`name_`) move along. Returns self."""
+        device = check_device(device)
+        for name, value in list(vars(self).items()):
+            if name.endswith("_") and isinstance(value, torch.Tensor):
+                setattr(self, name, value.to(device))
+        if self.net_ is not None:
+            self._nets = {dtype: net.to(device) for dtype, net in self._nets.items()}
+            self.net_ = self._nets[torch.float32]
+        self.device = device
+        return self
+
     def _set_net(self, net: nn.Module) -> None:
-        net = net.eval().requires_grad_(False)   # inference: no weight gradients in VJP/Jacobian graphs
+        net = net.eval().requires_grad_(False).to(self.device)   # inference: no weight gradients in VJP graphs
         self.net_ = net
         self._nets = {torch.float32: net}
 
@@ -244,12 +267,29 @@ class NetModel:
             self._nets[dtype] = copy.deepcopy(self.net_).to(dtype)
         return self._nets[dtype]
 
+    def _state(self) -> dict[str, torch.Tensor]:
+        return {f"net.{k}": v for k, v in self.net_.state_dict().items()}
+
+    def _restore_net(self, factory: Callable[[], nn.Module], state: dict[str, torch.Tensor]) -> None:
+        with torch.device("meta"):
+            net = factory()
+        net = net.to_empty(device="cpu")
+        net.load_state_dict({k[4:]: v for k, v in state.items() if k.startswith("net.")})
+        self._set_net(net)
+
+
+class NetModel(NetHolder):
+    """Mixin for a `BaseSensoryModel` whose g is a network: the subclass implements `_outputs(net, u)`, u in
+    [-1, 1], and gets predict, the Jacobian and the VJP by autograd, on the model's device."""
+
     def _outputs(self, net: nn.Module, u: torch.Tensor) -> torch.Tensor:
         raise NotImplementedError
 
     def _g(self, z: torch.Tensor, net: nn.Module | None = None) -> torch.Tensor:
-        """g(z) with z in rad, scaled inside so autograd derivatives are w.r.t. rad. # (B, Dz) → (B, *out)"""
-        return self._outputs(net or self._net(z.dtype), self.body.to_unit(z))
+        """g(z) with z in rad, scaled inside so autograd derivatives are w.r.t. rad; evaluated on the model's
+        device, returned on z's (the copies are differentiable, and no-ops on one device). # (B, Dz) → (B, *out)"""
+        u = self.body.to_unit(z.to(self.device))
+        return self._outputs(net or self._net(z.dtype), u).to(z.device)
 
     def _predict(self, z: torch.Tensor) -> torch.Tensor:
         with torch.no_grad():
@@ -281,13 +321,3 @@ class NetModel:
             return grad
 
         return out.detach(), vjp
-
-    def _state(self) -> dict[str, torch.Tensor]:
-        return {f"net.{k}": v for k, v in self.net_.state_dict().items()}
-
-    def _restore_net(self, factory: Callable[[], nn.Module], state: dict[str, torch.Tensor]) -> None:
-        with torch.device("meta"):
-            net = factory()
-        net = net.to_empty(device="cpu")
-        net.load_state_dict({k[4:]: v for k, v in state.items() if k.startswith("net.")})
-        self._set_net(net)

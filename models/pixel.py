@@ -7,6 +7,11 @@ the channels as the resolution doubles (so little work at full resolution), ELU 
 finite-difference checks and gradient descent), channels_last for oneDNN, and the exact image size by a
 centre crop of the last stage (any H, W; C = 1 or more). The precision is one fixed number per pixel: a
 hyper-parameter, or 1/σ² with σ² the mean squared residual on the validation set (train set without one).
+
+Two named capacities (`size`): "lean" (FC 64, channels 32/16/8) and "pixel_aif", the size of Pixel-AIF's NAO
+decoder (FC 4→512→1120 = 16×7×10 at 56×80, transposed convolutions 16→64→16→C, each but the last followed by a
+3×3 convolution of the same width, which Pixel-AIF adds against checkerboard artifacts). Unlike Pixel-AIF it
+keeps ELU for ReLU and has no dropout: the AIF update differentiates g, and a seed must give one model.
 """
 
 from __future__ import annotations
@@ -23,6 +28,12 @@ from bodyschema.models.contract import BaseSensoryModel, register_kind
 from bodyschema.models.scaling import BodySpec
 
 
+SIZES = {   # name → capacity; an explicit fc_hidden / channels / refine overrides the preset's value
+    "lean": {"fc_hidden": 64, "channels": (32, 16, 8), "refine": False},      # 56×80: 7×10×32 → … → 56×80
+    "pixel_aif": {"fc_hidden": 512, "channels": (16, 64, 16), "refine": True},  # 56×80: 7×10×16 = 1120 → …
+}
+
+
 def image_layout(output_shape: tuple[int, ...]) -> tuple[int, int, int]:
     """(H, W) or (H, W, C) → (H, W, C); raises the house error otherwise."""
     if len(output_shape) not in (2, 3) or min(output_shape) < 1:
@@ -35,7 +46,7 @@ class PixelDecoderNet(nn.Module):
     """u (B, Dz) in [-1, 1] → image (B, *output_shape) in (0, 1)."""
 
     def __init__(self, latent_dim: int, output_shape: tuple[int, ...], fc_hidden: int,
-                 channels: tuple[int, ...], kernel: int = 4):
+                 channels: tuple[int, ...], kernel: int = 4, refine: bool = False):
         super().__init__()
         self.output_shape = tuple(output_shape)
         self.h, self.w, c_out = image_layout(self.output_shape)
@@ -49,6 +60,8 @@ class PixelDecoderNet(nn.Module):
             stages.append(nn.ConvTranspose2d(a, b, kernel, stride=2, padding=(kernel - 2) // 2))
             if i < len(channels) - 1:
                 stages.append(nn.ELU())
+                if refine:   # same-size 3×3 smoothing after an upsampling (Pixel-AIF's layout)
+                    stages += [nn.Conv2d(b, b, 3, padding=1), nn.ELU()]
         self.up = nn.Sequential(*stages)
 
     def forward(self, u):
@@ -70,26 +83,36 @@ class PixelDecoder(NetModel, BaseSensoryModel):
     kind = "pixel"
 
     def __init__(self, body: BodySpec, modality: str = "image", output_shape: tuple[int, ...] = (56, 80), *,
-                 fc_hidden: int = 64,
-                 channels: tuple[int, ...] = (32, 16, 8),   # 56×80: 7×10×32 → 14×20×16 → 28×40×8 → 56×80
+                 size: str = "lean",                        # a capacity preset of SIZES
+                 fc_hidden: int | None = None,              # None: the preset's
+                 channels: tuple[int, ...] | None = None,   # one ×2 upsampling per entry; None: the preset's
+                 refine: bool | None = None,                # 3×3 conv after each upsampling; None: the preset's
                  precision: float | None = None,            # None: 1/σ² from the validation residuals
                  epochs: int = 100, batch_size: int = 64, lr: float = 2e-3, patience: int = 10,
                  weight_decay: float = 0.0):
         super().__init__(body, modality, output_shape)
         image_layout(self.output_shape)
+        if size not in SIZES:
+            raise ValueError(must_be("size", f"one of {sorted(SIZES)}", size))
+        preset = SIZES[size]
+        fc_hidden = preset["fc_hidden"] if fc_hidden is None else fc_hidden
+        channels = preset["channels"] if channels is None else tuple(channels)
         if not channels or min(channels) < 1 or fc_hidden < 1:
             raise ValueError(must_be("channels and fc_hidden", "a non-empty tuple of positive ints and > 0",
                                      (channels, fc_hidden)))
         if precision is not None and not precision > 0:
             raise ValueError(must_be("precision", "> 0 or None (fitted)", precision))
-        self.fc_hidden, self.channels, self.fixed_precision = fc_hidden, tuple(channels), precision
+        self.size, self.fc_hidden, self.channels, self.fixed_precision = size, fc_hidden, tuple(channels), precision
+        self.refine = bool(preset["refine"] if refine is None else refine)
         self.settings = TrainSettings(epochs, batch_size, lr, patience, weight_decay)
         self.precision_: float | None = None
         self.fit_info_: dict = {}
 
     # ---- fit ------------------------------------------------------------------------------------------
-    def fit(self, q, x, *, seed: int = 0, val=None, on_epoch=None, progress: bool = True, checkpoint=None):
-        """Train on q (N, Dz) rad, x (N, *output_shape) by the per-pixel squared error (`_nn_fit.train`); self."""
+    def fit(self, q, x, *, seed: int = 0, val=None, on_epoch=None, progress: bool = True, checkpoint=None,
+            device: str = "cpu"):
+        """Train on q (N, Dz) rad, x (N, *output_shape) by the per-pixel squared error (`_nn_fit.train`) on
+        `device`; self (its network on the CPU: `to(device)` for inference elsewhere)."""
         q, x = check_fit_data(q, x, self.latent_dim, self.output_shape)     # (N, Dz), (N, *out) in [0, 1]
         val = check_val(val, self.latent_dim, self.output_shape)
         gen = torch.Generator().manual_seed(seed)
@@ -97,25 +120,27 @@ class PixelDecoder(NetModel, BaseSensoryModel):
         to_unit = self.body.to_unit
         self.fit_info_ = train(net, _mse, (to_unit(q), x), self.settings, gen,
                                val=(to_unit(val[0]), val[1]) if val is not None else None,
-                               on_epoch=on_epoch, progress=progress, checkpoint=checkpoint, desc="fit pixel")
-        self._set_net(net)
+                               on_epoch=on_epoch, progress=progress, checkpoint=checkpoint, desc="fit pixel",
+                               device=device)
         q_res, x_res = val if val is not None else (q, x)
-        self.residual_var_ = evaluate(net, _mse, (to_unit(q_res), x_res), self.settings.batch_size)
+        self.residual_var_ = evaluate(net, _mse, (to_unit(q_res), x_res), self.settings.batch_size)   # on CPU
         self.precision_ = self.fixed_precision or 1.0 / max(self.residual_var_, 1e-8)
+        self._set_net(net)
         return self
 
     def _factory(self) -> PixelDecoderNet:
-        return PixelDecoderNet(self.latent_dim, self.output_shape, self.fc_hidden, self.channels)
+        return PixelDecoderNet(self.latent_dim, self.output_shape, self.fc_hidden, self.channels, refine=self.refine)
 
     # ---- hooks ----------------------------------------------------------------------------------------
     def _outputs(self, net, u):
         return net(u)
 
     def _precision(self, z):
-        return torch.full((z.shape[0], *self.output_shape), self.precision_, dtype=z.dtype)
+        return torch.full((z.shape[0], *self.output_shape), self.precision_, dtype=z.dtype, device=z.device)
 
     def _config(self):
-        return {"fc_hidden": self.fc_hidden, "channels": list(self.channels), "precision": self.fixed_precision,
+        return {"size": self.size, "fc_hidden": self.fc_hidden, "channels": list(self.channels),
+                "refine": self.refine, "precision": self.fixed_precision,
                 "epochs": self.settings.epochs, "batch_size": self.settings.batch_size, "lr": self.settings.lr,
                 "patience": self.settings.patience, "weight_decay": self.settings.weight_decay}
 

@@ -68,6 +68,65 @@ class TestPixelDecoder(SensoryModelContract):
         return tiny_decoder()
 
 
+class TestPixelAIFSizedDecoder(TestPixelDecoder):
+    """The "pixel_aif" capacity (FC 512, 3×3 refinement convolutions) under the same contract, at 8×12 px."""
+
+    def make_model(self, seed):
+        q = joint_angles(128, seed=0)
+        with one_thread():
+            return tiny_decoder(size="pixel_aif", fc_hidden=None, channels=None, epochs=4).fit(
+                q, blob_images(q), seed=seed, progress=False)
+
+    def make_unfitted_model(self):
+        return tiny_decoder(size="pixel_aif", fc_hidden=None, channels=None)
+
+
+def test_pixel_aif_size_has_pixel_aifs_layout_at_56x80():
+    net = PixelDecoder(ToyPlanarArm().body, "image", (56, 80), size="pixel_aif")._factory()
+    assert [m.out_features for m in net.fc if isinstance(m, torch.nn.Linear)] == [512, 1120]
+    ups = [(m.in_channels, m.out_channels) for m in net.up if isinstance(m, torch.nn.ConvTranspose2d)]
+    assert ups == [(16, 64), (64, 16), (16, 1)]
+    refines = [(m.in_channels, m.kernel_size) for m in net.up if isinstance(m, torch.nn.Conv2d)
+               and not isinstance(m, torch.nn.ConvTranspose2d)]
+    assert refines == [(64, (3, 3)), (16, (3, 3))]
+    assert net(torch.zeros(2, 2)).shape == (2, 56, 80)
+
+
+def test_size_is_saved_and_explicit_values_override_the_preset(tmp_path):
+    model = TestPixelAIFSizedDecoder().make_model(seed=0)
+    model.save(tmp_path / "m")
+    loaded = PixelDecoder.load(tmp_path / "m")
+    assert (loaded.size, loaded.fc_hidden, loaded.channels, loaded.refine) == ("pixel_aif", 512, (16, 64, 16), True)
+    override = PixelDecoder(ToyPlanarArm().body, "image", HW, size="pixel_aif", fc_hidden=32, refine=False)
+    assert (override.fc_hidden, override.channels, override.refine) == (32, (16, 64, 16), False)
+    with pytest.raises(ValueError, match=r"size must be one of \['lean', 'pixel_aif'\]. Got 'huge'"):
+        PixelDecoder(ToyPlanarArm().body, "image", HW, size="huge")
+
+
+def test_to_cpu_is_a_no_op_that_keeps_outputs_bit_for_bit():
+    model = TestPixelDecoder().make_model(seed=0)
+    z = joint_angles(3, seed=5)
+    v = torch.randn(3, *HW, generator=torch.Generator().manual_seed(0))
+    before = (model.predict(z), model.jacobian(z), model.vjp(z, v), model.precision(z))
+    assert model.to("cpu") is model and model.device == torch.device("cpu")
+    after = (model.predict(z), model.jacobian(z), model.vjp(z, v), model.precision(z))
+    for a, b in zip(before, after):
+        torch.testing.assert_close(a, b, rtol=0, atol=0)
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="checks the message on a machine without CUDA")
+def test_cuda_without_cuda_raises_the_house_error():
+    model = TestPixelDecoder().make_model(seed=0)
+    with pytest.raises(ValueError, match=r"device must be 'cpu' or an available CUDA device. Got 'cuda'. CUDA is "
+                                         r"not available on this machine: use --device cpu"):
+        model.to("cuda")
+    with pytest.raises(ValueError, match=r"device must be .*Got 'gpu'"):
+        model.to("gpu")
+    q = joint_angles(16, seed=0)
+    with pytest.raises(ValueError, match=r"device must be 'cpu' or an available CUDA device"):
+        tiny_decoder().fit(q, blob_images(q), progress=False, device="cuda:1")
+
+
 @pytest.fixture
 def tiny_threads():
     with one_thread():
