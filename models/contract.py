@@ -22,7 +22,7 @@ FLOAT_DTYPES = (torch.float32, torch.float64)
 FORMAT_VERSION = 1
 MODEL_KINDS: dict[str, type["BaseSensoryModel"]] = {}
 SHIPPED_KINDS = {"analytic": "analytic", "gpr": "gpr", "sklearn_gpr": "sklearn_gpr", "mdn": "mdn",  # kind → module
-                 "pixel": "pixel", "mm_member": "multimodal"}
+                 "pixel": "pixel", "mm_member": "multimodal", "encoder": "encoder"}
 
 
 @runtime_checkable
@@ -147,7 +147,7 @@ class BaseSensoryModel:
 
 
 def load_model(path: str | Path) -> BaseSensoryModel:
-    """Load any saved model kind from a directory written by `save`."""
+    """Load any saved model kind from a directory written by `save` (a SensoryModel, or an image encoder)."""
     path = Path(path)
     meta_file = path / "meta.json"
     if not meta_file.is_file():

@@ -1,0 +1,158 @@
+"""Amortized image encoder x → z (kind "encoder"): one forward pass from a camera image to joint angles in rad.
+
+The inverse direction of the sensory models: where perception searches for the z whose predicted image
+matches the observation, the encoder regresses z directly (a starting belief for perception, or a baseline for
+it). It is *not* a `SensoryModel` (no predict / jacobian / vjp / precision), so perception refuses it; it shares
+their persistence (`meta.json` + `state.pt` read with `weights_only=True`, `load_model`) and their body spec, so
+callers check `encoder.body` against the robot. Net: stride-2 convolutions (each halves H and W), a fully
+connected head, tanh to the unit box and the body's `from_unit` to rad, so an estimate never leaves the scaled
+joint range. Trained by the squared error in that unit space (every joint weighs the same, whatever its range).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import nn
+
+from bodyschema.errors import NotFittedError, must_be
+from bodyschema.models._nn_fit import NetHolder, TrainSettings, build, check_fit_data, check_val, train
+from bodyschema.models.contract import BaseSensoryModel, register_kind
+from bodyschema.models.pixel import fast_layout, image_layout
+from bodyschema.models.scaling import IMAGE_SCALE, BodySpec
+
+FLOATS = (torch.float32, torch.float64)
+CHUNK = 512   # images per forward in `encode`
+
+
+class EncoderNet(nn.Module):
+    """image (B, H, W) or (B, H, W, C) in [0, 1] → u (B, Dz) in (-1, 1)."""
+
+    def __init__(self, latent_dim: int, image_shape: tuple[int, ...], channels: tuple[int, ...], fc_hidden: int):
+        super().__init__()
+        h, w, c = image_layout(image_shape)
+        stages = []
+        for a, b in zip((c, *channels[:-1]), channels):
+            stages += [nn.Conv2d(a, b, 4, stride=2, padding=1), nn.ELU()]   # (h, w) → (h // 2, w // 2)
+            h, w = h // 2, w // 2
+        if min(h, w) < 1:
+            raise ValueError(must_be("image_shape", f"at least {2 ** len(channels)} px high and wide for "
+                                                    f"{len(channels)} stride-2 stages", tuple(image_shape),
+                                     "Use fewer `channels` for small images."))
+        self.conv = nn.Sequential(*stages)
+        self.head = nn.Sequential(nn.Linear(channels[-1] * h * w, fc_hidden), nn.ELU(),
+                                  nn.Linear(fc_hidden, latent_dim), nn.Tanh())
+
+    def forward(self, x):
+        if x.ndim == 3:
+            x = x[..., None]                                             # (B, H, W, 1)
+        y = self.conv(x.permute(0, 3, 1, 2))                             # (B, C_n, h, w); NHWC memory: free
+        return self.head(y.flatten(1))                                   # (B, Dz)
+
+
+@register_kind
+class ImageEncoder(NetHolder):
+    kind = "encoder"
+
+    def __init__(self, body: BodySpec, modality: str = "image", image_shape: tuple[int, ...] = (56, 80), *,
+                 channels: tuple[int, ...] = (16, 32, 64),   # 56×80 → 28×40×16 → 14×20×32 → 7×10×64
+                 fc_hidden: int = 128,
+                 epochs: int = 100, batch_size: int = 64, lr: float = 2e-3, patience: int = 10,
+                 weight_decay: float = 0.0):
+        self.body, self.latent_dim, self.modality = body, body.latent_dim, modality
+        self.image_shape = tuple(int(s) for s in image_shape)
+        self.input_shape = self.image_shape                  # per-sample input x (the pyfunc's signature)
+        self.output_shape = (self.latent_dim,)               # per-sample output z, rad
+        image_layout(self.image_shape)
+        if not channels or min(channels) < 1 or fc_hidden < 1:
+            raise ValueError(must_be("channels and fc_hidden", "a non-empty tuple of positive ints and > 0",
+                                     (channels, fc_hidden)))
+        self.channels, self.fc_hidden = tuple(channels), fc_hidden
+        self.settings = TrainSettings(epochs, batch_size, lr, patience, weight_decay)
+        self.fit_info_: dict = {}
+
+    # ---- fit ------------------------------------------------------------------------------------------
+    def fit(self, q, x, *, seed: int = 0, val=None, on_epoch=None, progress: bool = True, checkpoint=None,
+            device: str = "cpu"):
+        """Train on joint angles q (N, Dz) rad and their images x (N, *image_shape) by the squared error of the
+        unit-box joint angles, on `device`; self. Same argument order as the sensory models (q, x)."""
+        q, x = check_fit_data(q, x, self.latent_dim, self.image_shape)      # (N, Dz), (N, *image) in [0, 1]
+        val = check_val(val, self.latent_dim, self.image_shape)
+        gen = torch.Generator().manual_seed(seed)
+        net = fast_layout(build(self._factory, gen))
+        to_unit = self.body.to_unit
+        self.fit_info_ = train(net, _unit_mse, (x, to_unit(q)), self.settings, gen,
+                               val=(val[1], to_unit(val[0])) if val is not None else None, on_epoch=on_epoch,
+                               progress=progress, checkpoint=checkpoint, desc="fit encoder", device=device)
+        self._set_net(net)
+        return self
+
+    def _factory(self) -> EncoderNet:
+        return EncoderNet(self.latent_dim, self.image_shape, self.channels, self.fc_hidden)
+
+    # ---- inference ------------------------------------------------------------------------------------
+    def encode(self, images) -> torch.Tensor:
+        """Joint angles of the robot in `images`. (N, *image_shape) uint8 0–255 or float in [0, 1], torch or
+        numpy → (N, Dz) rad on the images' device; float32 (float64 for float64 images), computed in float32."""
+        self._require_fitted()
+        x = self._check_images(images)                                     # (N, *image_shape)
+        out_dtype = x.dtype if x.dtype in FLOATS else torch.float32
+        scale = IMAGE_SCALE if x.dtype == torch.uint8 else 1.0
+        with torch.no_grad():   # in chunks: activations of a whole dataset would not fit in memory
+            u = torch.cat([self.net_(x[i:i + CHUNK].to(self.device, torch.float32) / scale)
+                           for i in range(0, len(x), CHUNK)])               # (N, Dz) in (-1, 1)
+        return self.body.from_unit(u.to(x.device, out_dtype))           # (N, Dz) rad
+
+    # ---- validation -----------------------------------------------------------------------------------
+    def _require_fitted(self) -> None:
+        if not self.is_fitted:
+            raise NotFittedError(f"This {type(self).__name__} is not fitted yet. Call `fit` before using it.")
+
+    def _check_images(self, images) -> torch.Tensor:
+        if not isinstance(images, (torch.Tensor, np.ndarray)):
+            raise TypeError(must_be("images", "a torch.Tensor or numpy array", type(images).__name__))
+        if str(images.dtype).removeprefix("torch.") not in ("uint8", "float32", "float64"):
+            raise TypeError(must_be("images.dtype", "uint8 (0–255) or float32/float64 in [0, 1]", images.dtype))
+        x = torch.from_numpy(np.ascontiguousarray(images)) if isinstance(images, np.ndarray) else images
+        want, h, w = self.image_shape, *self.image_shape[:2]
+        c = want[2] if len(want) == 3 else 1
+        shape = f"(N, {', '.join(map(str, want))})"
+        if tuple(x.shape[:2]) == (h, w) and x.ndim in (2, 3):
+            raise ValueError(must_be("images", f"a batch of shape {shape}", tuple(x.shape),
+                                     "Add a batch axis with images[None] for one image."))
+        if x.ndim not in (3, 4) or tuple(x.shape[1:3]) != (h, w):
+            raise ValueError(must_be("images", f"of shape {shape}: the size the encoder was trained on",
+                                     tuple(x.shape), "Render with the training camera."))
+        if (x.shape[3] if x.ndim == 4 else 1) != c:
+            raise ValueError(must_be("images", f"{c}-channel, of shape {shape}", tuple(x.shape),
+                                     "Use the colour mode (grayscale or RGB) the encoder was trained on."))
+        x = x.reshape(len(x), *want)                                        # (N, H, W, 1) ↔ (N, H, W) for C = 1
+        if x.dtype in FLOATS and not (torch.isfinite(x).all() and x.min() >= 0 and x.max() <= 1):
+            raise ValueError(must_be("images", "finite intensities in [0, 1] (or uint8 0–255)",
+                                     f"values in [{float(x.min()):.3g}, {float(x.max()):.3g}]"))
+        return x
+
+    # ---- persistence: the models' format, so `load_model` and the registry return an encoder -------------
+    def save(self, path) -> None:
+        BaseSensoryModel.save(self, path)
+
+    @classmethod
+    def load(cls, path) -> "ImageEncoder":
+        return BaseSensoryModel.load(path)
+
+    def _config(self) -> dict:
+        return {"image_shape": list(self.image_shape), "channels": list(self.channels), "fc_hidden": self.fc_hidden,
+                "epochs": self.settings.epochs, "batch_size": self.settings.batch_size, "lr": self.settings.lr,
+                "patience": self.settings.patience, "weight_decay": self.settings.weight_decay}
+
+    @classmethod
+    def _from_saved(cls, body, modality, output_shape, config, state):
+        config = {**config, "channels": tuple(config["channels"])}
+        model = cls(body, modality, tuple(config.pop("image_shape")), **config)
+        model._restore_net(lambda: fast_layout(model._factory()), state)
+        return model
+
+
+def _unit_mse(net: nn.Module, x: torch.Tensor, u: torch.Tensor) -> torch.Tensor:
+    """Mean squared error of the unit-box joint angles. x (B, *image), u (B, Dz)."""
+    return (net(x) - u).pow(2).mean()
