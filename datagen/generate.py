@@ -4,14 +4,15 @@ N samples are split into fixed-size shards (a shard = one Zarr chunk of rows; fo
 split depending on the config only, never on the worker count. Shard i draws from
 `np.random.SeedSequence([seed, i])`, so the same config gives byte-identical arrays for any workers and backend.
 Each worker builds its own Robot (once per process), writes its own chunks straight into the store and then its
-shard's done marker; the root attr `complete=True` is written last. Rerunning skips done shards.
+shard's done marker holding the shard's checksum; the root attr `complete=True` is written last. Rerunning skips
+done shards and rewrites those whose chunks are missing, unreadable or differ from their checksum (`integrity`).
+Before anything is built or written, `guards` checks the shard count, disk, memory and (with images) rendering.
 """
 
 from __future__ import annotations
 
-import math
-import os
 import shutil
+import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,11 +22,15 @@ from bodyschema.datagen.robot import Robot  # first: sets MUJOCO_GL before mujoc
 import numpy as np  # noqa: E402
 from tqdm.auto import tqdm  # noqa: E402
 
+from bodyschema.datagen.backends import run_loky, run_ray  # noqa: E402
 from bodyschema.datagen.config import DatagenConfig  # noqa: E402
+from bodyschema.datagen.guards import check_resources, n_shards, probe_render  # noqa: E402
+from bodyschema.datagen.integrity import clear_shard, failing_shards, shard_digest  # noqa: E402
+from bodyschema.datagen.reach import arm_reach  # noqa: E402
 from bodyschema.datagen.samplers import Babbler, sample_kinematic  # noqa: E402
-from bodyschema.datagen.store import (SCHEMA_VERSION, StoreWriteError, create_store, features,  # noqa: E402
-                                      mark_complete, mark_shard_done, now, open_store, shards_done, versions,
-                                      write_shard)
+from bodyschema.datagen.store import (SCHEMA_VERSION, StoreWriteError, create_store, drop_shard_marks,  # noqa: E402
+                                      features, mark_complete, mark_shard_done, now, open_store, shards_done,
+                                      versions, write_shard)
 from bodyschema.errors import must_be  # noqa: E402
 
 
@@ -93,7 +98,7 @@ def sampling_ranges(config: DatagenConfig, robot: Robot) -> np.ndarray:
 
 
 def run_shard(path: str, config_dict: dict, shard: Shard) -> int:
-    """Sample, observe and write one shard, then its done marker. Returns the rows written."""
+    """Sample, observe and write one shard, then its done marker with its checksum. Returns the rows written."""
     config = DatagenConfig.from_dict(config_dict)
     robot, babbler = _robot(config)
     rng = np.random.default_rng(np.random.SeedSequence([config.seed, shard.index]))
@@ -106,15 +111,17 @@ def run_shard(path: str, config_dict: dict, shard: Shard) -> int:
     arrays.update({k: v for k, v in observed.items() if k not in arrays})  # babbling keeps its simulated touch
     try:
         root = open_store(Path(path), mode="r+")
+        clear_shard(Path(path), root, shard.index)  # a damaged leftover (killed run, repair) is never read back
         write_shard(root, shard.start, arrays)
-        mark_shard_done(root, shard.index)
+        mark_shard_done(root, shard.index, shard_digest(root, shard.start, shard.stop))  # of the bytes as stored
     except OSError as e:  # raised here, in the worker, so a network error elsewhere is never called "disk full"
         raise StoreWriteError.from_os_error(path, e) from e
     return shard.stop - shard.start
 
 
 # ---- the job --------------------------------------------------------------------------------------------------
-def _attrs(config: DatagenConfig, robot: Robot, ranges: np.ndarray, shards: list[Shard], feats: dict) -> dict:
+def _attrs(config: DatagenConfig, robot: Robot, ranges: np.ndarray, shards: int, feats: dict) -> dict:
+    base, reach = arm_reach(robot.model)  # the physical bounds validate_store checks ee_xyz and jacobian against
     if config.sampler == "uniform":
         params = {"low": ranges[:, 0].tolist(), "high": ranges[:, 1].tolist(), "touch": "at rest at q"}
     elif config.sampler == "gaussian":
@@ -125,7 +132,7 @@ def _attrs(config: DatagenConfig, robot: Robot, ranges: np.ndarray, shards: list
         params = {"targets": "uniform in sampling_ranges", "hold_s": list(config.hold_s),
                   "record_hz": config.record_hz, "rate_hz": b.rate_hz, "stride_steps": b.stride,
                   "timestep_s": float(robot.model.opt.timestep), "episode_len": config.episode_len(),
-                  "n_episodes": sum(len(s.episode_lengths) for s in shards), "actuators": "position",
+                  "n_episodes": -(-config.n // config.episode_len()), "actuators": "position",
                   "gravity_m_s2": float(-robot.model.opt.gravity[2]), "start": "at rest, uniform in sampling_ranges",
                   "touch": "simulated contact force at the recorded instant"}
     return {"schema_version": SCHEMA_VERSION, "robot": robot.name, "mjcf_sha256": robot.mjcf_sha256,
@@ -135,22 +142,17 @@ def _attrs(config: DatagenConfig, robot: Robot, ranges: np.ndarray, shards: list
             "image_size": list(robot.image_size), "channels": robot.channels, "images": config.images,
             "sampler": config.sampler, "sampler_params": params, "seed": config.seed, "config": config.to_dict(),
             "versions": versions(), "created_at": now(), "n": config.n, "chunk_len": chunk_len(config),
-            "n_shards": len(shards), "features": feats}
+            "n_shards": shards, "features": feats, "reach_m": reach, "base_m": base.tolist()}
 
 
-def _check_location(path: Path, feats: dict, n: int) -> None:
-    """Fail before any work when the output cannot be written or the disk cannot hold the raw data."""
+def _check_location(path: Path) -> None:
+    """Fail before any work when the output cannot be written (disk space is checked earlier, in guards)."""
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         with tempfile.NamedTemporaryFile(dir=path.parent, prefix=".bodyschema-probe-"):
             pass
     except OSError as e:
         raise StoreWriteError.from_os_error(path, e) from e
-    need = n * sum(np.dtype(f["dtype"]).itemsize * math.prod(f["shape"]) for f in feats.values())  # raw bytes
-    free = shutil.disk_usage(path.parent).free
-    if free < need:
-        raise OSError(must_be("free space at the output location", f">= {need / 1e6:.1f} MB (uncompressed data)",
-                              f"{free / 1e6:.1f} MB free at {path.parent}", "Free space or choose another --out."))
 
 
 def _prepare(path: Path, config: DatagenConfig, feats: dict, attrs: dict) -> None:
@@ -177,6 +179,10 @@ def _prepare(path: Path, config: DatagenConfig, feats: dict, attrs: dict) -> Non
                 raise FileExistsError(must_be("out", "a new path or a store made with the same config",
                                               f"a store at {path} made with a different config (differs in {diff})",
                                               "Pass --overwrite to replace it, or choose another --out."))
+            if old["schema_version"] != SCHEMA_VERSION:  # schema 1 recorded no shard checksums: cannot be checked
+                raise FileExistsError(must_be("out", f"a store of schema {SCHEMA_VERSION} to resume",
+                                              f"schema {old['schema_version']} at {path}",
+                                              "Pass --overwrite to regenerate it (same config, same data)."))
             if old.get("created"):
                 return  # resume
     try:
@@ -185,34 +191,16 @@ def _prepare(path: Path, config: DatagenConfig, feats: dict, attrs: dict) -> Non
         raise StoreWriteError.from_os_error(path, e) from e
 
 
-def _run_loky(jobs: list, workers: int, bar: tqdm) -> None:
-    from joblib import Parallel, delayed
-
-    for _ in Parallel(n_jobs=workers, backend="loky", return_as="generator_unordered")(
-            delayed(run_shard)(*job) for job in jobs):
-        bar.update(1)
-
-
-def _run_ray(jobs: list, workers: int, bar: tqdm) -> None:
-    import ray
-
-    started = not ray.is_initialized()
-    if started:
-        if os.environ.get("RAY_ADDRESS"):
-            ray.init()  # connect to the cluster named by RAY_ADDRESS (its nodes need bodyschema installed)
-        else:  # a local instance on this machine only
-            ray.init(address="local", num_cpus=workers, include_dashboard=False, _node_ip_address="127.0.0.1",
-                     log_to_driver=False, configure_logging=False)
-    try:
-        task = ray.remote(num_cpus=1, max_retries=0)(run_shard)
-        pending = [task.remote(*job) for job in jobs]
-        while pending:
-            done, pending = ray.wait(pending, num_returns=1)
-            ray.get(done)
-            bar.update(len(done))
-    finally:
-        if started:
-            ray.shutdown()
+def _repair(path: Path, root) -> None:
+    """Forget the done shards whose chunks are missing, unreadable or differ from their checksum: they rerun."""
+    faults = failing_shards(path, root)
+    if faults:
+        try:
+            drop_shard_marks(root, sorted(faults))
+        except OSError as e:
+            raise StoreWriteError.from_os_error(path, e) from e
+        print(f"datagen: rewriting {len(faults)} damaged shard(s) of {path}: "
+              + ", ".join(f"{i} ({why})" for i, why in sorted(faults.items())[:10]), file=sys.stderr)
 
 
 def generate(config: DatagenConfig, progress: bool = True) -> Path:
@@ -221,22 +209,27 @@ def generate(config: DatagenConfig, progress: bool = True) -> Path:
     robot = Robot.load(config.robot, image_size=config.image_size, rgb=config.rgb, gravity=config.gravity)
     try:
         ranges = sampling_ranges(config, robot)
-        shards = plan_shards(config)
         has_touch = robot.touch(ranges.mean(axis=1)[None]) is not None
         image_shape = (*robot.image_size, 3) if robot.channels == 3 else tuple(robot.image_size)
         feats = features(robot.dq, image_shape if config.images else None, has_touch, not config.kinematic)
-        attrs = _attrs(config, robot, ranges, shards, feats)
+        check_resources(config, feats, chunk_len(config), path)  # O(1): before any per-shard list or any write
+        attrs = _attrs(config, robot, ranges, n_shards(config, chunk_len(config)), feats)
+        if config.images:
+            probe_render(robot)  # an unusable MUJOCO_GL fails here, not as a store full of NaN
     finally:
         robot.close()
-    _check_location(path, feats, config.n)
+    _check_location(path)
+    shards = plan_shards(config)
     try:
         _prepare(path, config, feats, attrs)
-        done = shards_done(open_store(path))
-        jobs = [(str(path), config.to_dict(), s) for s in shards if not done[s.index]]
+        root = open_store(path, mode="r+")
+        _repair(path, root)
+        done, config_dict = shards_done(root), config.to_dict()
+        jobs = [(str(path), config_dict, s) for s in shards if not done[s.index]]
         with tqdm(total=len(shards), initial=len(shards) - len(jobs), unit="shard", disable=not progress,
                   desc=f"datagen {config.robot}/{config.sampler} -> {path.name}") as bar:
             if jobs:
-                (_run_ray if config.backend == "ray" else _run_loky)(jobs, config.workers, bar)
+                (run_ray if config.backend == "ray" else run_loky)(run_shard, jobs, config.workers, bar.update)
         root = open_store(path, mode="r+")
         missing = np.flatnonzero(~shards_done(root))
         if missing.size:

@@ -4,10 +4,13 @@ Layout of one store (a directory `*.zarr`), all data arrays sharing the first (s
     q (N, Dq) f32 rad · ee_xyz (N, 3) f32 m · ee_pixel (N, 2) f32 px · jacobian (N, 3, Dq) f32 m/rad
     image (N, H, W[, 3]) u8 (when rendered) · touch (N, 1) f32 N (robots with a touch sensor)
     babbling only: qvel (N, Dq) f32 rad/s · episode (N,) i32 · t (N,) f32 s since the episode start
-    shard_done (n_shards,) u8 — bookkeeping, one chunk per shard, 1 once that shard's data are written.
+    shard_done (n_shards,) u64 — bookkeeping, one chunk per shard: 0 until the shard's data are written, then
+    the shard's checksum (`integrity.shard_digest` of its rows of every array, read back as stored), so a chunk
+    deleted, truncated or changed later is found by `validate_store` and rewritten by the next `datagen` run.
 The sample-axis chunk length equals the shard length, so each worker writes whole chunks of its own: no locks.
 Root attrs hold the metadata (robot, camera, sampler, seed, config, versions); `complete=True` is written last.
-Float arrays are filled with NaN, so a sample never written shows up as NaN in `validate_store`.
+Float arrays are filled with NaN, so a sample never written shows up as NaN in `validate_store`; every chunk is
+written even when it equals the fill value (`write_empty_chunks`), so a chunk file missing is always a defect.
 """
 
 from __future__ import annotations
@@ -24,14 +27,15 @@ from zarr.codecs import ZstdCodec
 
 from bodyschema.errors import must_be
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2  # 2: shard_done holds a per-shard checksum (1: a bare 0/1 flag); attrs reach_m, base_m
 DONE = "shard_done"
 COMPRESSORS = [ZstdCodec(level=1, checksum=True)]  # checksum: a flipped byte in a chunk is an error, not noise
 # Attrs every complete store carries (validate_store checks them).
 REQUIRED_ATTRS = ("schema_version", "robot", "mjcf_sha256", "dq", "joint_names", "joint_limits", "sampling_ranges",
                   "camera_name", "intrinsics", "extrinsics", "image_size", "channels", "images", "sampler",
                   "sampler_params", "seed", "config", "versions", "created_at", "n", "chunk_len", "n_shards",
-                  "features", "complete")
+                  "features", "complete", "reach_m", "base_m")
+WRITE_ALL_CHUNKS = {"array.write_empty_chunks": True}  # zarr skips fill-valued chunks by default: never missing
 
 
 class StoreWriteError(OSError):
@@ -98,7 +102,7 @@ def create_store(path: Path, feats: dict[str, dict[str, Any]], n: int, chunk_len
         root.create_array(name, shape=shape, chunks=(chunk_len, *spec["shape"]), dtype=spec["dtype"],
                           fill_value=fill_value(spec["dtype"]), compressors=COMPRESSORS,
                           attributes={"unit": spec["unit"], "names": spec["names"]})
-    root.create_array(DONE, shape=(n_shards,), chunks=(1,), dtype="uint8", fill_value=0, compressors=None)
+    root.create_array(DONE, shape=(n_shards,), chunks=(1,), dtype="uint64", fill_value=0, compressors=None)
     root.attrs["created"] = True
     return root
 
@@ -114,18 +118,38 @@ def open_store(path: Path, mode: str = "r") -> zarr.Group:
 
 def write_shard(root: zarr.Group, start: int, arrays: dict[str, np.ndarray]) -> None:
     """Write one shard's arrays at rows [start, start + len) — whole chunks, owned by this shard only."""
-    for name, values in arrays.items():
-        root[name][start:start + len(values)] = values
+    with zarr.config.set(WRITE_ALL_CHUNKS):
+        for name, values in arrays.items():
+            root[name][start:start + len(values)] = values
 
 
-def mark_shard_done(root: zarr.Group, shard: int) -> None:
-    """Record that shard `shard` is fully written (its own chunk of `shard_done`)."""
-    root[DONE][shard] = 1
+def mark_shard_done(root: zarr.Group, shard: int, digest: int) -> None:
+    """Record that shard `shard` is fully written, with its checksum (nonzero), in its own chunk of `shard_done`."""
+    if not 0 < digest < 2 ** 64:
+        raise ValueError(must_be("shard digest", "an integer in [1, 2**64)", digest))
+    root[DONE][shard] = np.uint64(digest)
+
+
+def drop_shard_marks(root: zarr.Group, shards) -> None:
+    """Forget shards (their data failed a check) and the completion marker, so the next run rewrites them."""
+    root.attrs["complete"] = False
+    for shard in shards:
+        root[DONE][int(shard)] = 0
+
+
+def shard_digests(root: zarr.Group) -> np.ndarray:
+    """(n_shards,) uint64: each shard's recorded checksum, 0 for a shard not done."""
+    return np.asarray(root[DONE][:]).astype(np.uint64)
 
 
 def shards_done(root: zarr.Group) -> np.ndarray:
     """(n_shards,) bool: which shards have finished."""
-    return np.asarray(root[DONE][:]).astype(bool)
+    return shard_digests(root) != 0
+
+
+def has_checksums(root: zarr.Group) -> bool:
+    """True when the done markers hold checksums (schema 2); schema-1 stores hold a bare 0/1 flag."""
+    return DONE in root.array_keys() and root[DONE].dtype == np.uint64
 
 
 def mark_complete(root: zarr.Group) -> None:

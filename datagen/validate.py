@@ -1,8 +1,13 @@
 """`validate_store`: every problem of a dataset store at once (as LeRobot's `validate_frame`), and a summary.
 
-Checks: the completion marker and per-shard markers, required attrs, each array's presence, dtype and shape,
-that first axes agree, every chunk readable (Zstd checksums catch corrupted bytes), no NaN/inf, q inside the
-recorded ranges, and ee_pixel equal to ee_xyz projected through the stored intrinsics and extrinsics.
+Checks, all reported together:
+- completeness: the completion marker, every shard's done marker, every expected chunk file of every array on disk
+  (Zarr would read a missing chunk as fill values: zeros for images) and, per done shard, the checksum in its
+  marker equal to the one of its rows as stored now (`integrity`);
+- layout: required attrs, each array's presence, dtype (image uint8, ...) and shape, first axes agreeing;
+- content, per chunk of rows: readable (Zstd checksums catch corrupted bytes), finite, and physical: q inside the
+  recorded ranges, ee_xyz within the arm's reach of its base, |each Jacobian column| <= the reach (m/rad),
+  ee_pixel equal to ee_xyz projected through the stored camera, touch and t >= 0, episode >= 0.
 Arrays are read one chunk of rows at a time, so memory stays small for image datasets.
 """
 
@@ -14,12 +19,16 @@ import numpy as np
 import zarr
 
 from bodyschema.datagen.camera import project
-from bodyschema.datagen.store import DONE, REQUIRED_ATTRS, features, open_store
+from bodyschema.datagen.integrity import block_digest, data_arrays, missing_chunks
+from bodyschema.datagen.store import DONE, REQUIRED_ATTRS, features, has_checksums, open_store
 from bodyschema.errors import must_be
 
 PIXEL_TOL = 0.05  # px; float32 storage of ee_xyz/ee_pixel gives ~1e-4 px, a real shift is >= 0.1 px
 RANGE_TOL = 1e-5  # rad; float32 rounding of the range ends
+REACH_TOL = 1e-4  # m (and m/rad); float32 rounding is ~1e-7 m, while the reach bound is reached only at full stretch
 RESUME_HINT = "Rerun the same `bodyschema datagen` command to resume it."
+REPAIR_HINT = "Rerun the same `bodyschema datagen` command: it rewrites the damaged shards."
+REGENERATE_HINT = "The generator wrote impossible values; regenerate with --overwrite and report it."
 
 
 def _expected_features(attrs: dict) -> dict[str, dict]:
@@ -68,62 +77,144 @@ def _check_layout(root: zarr.Group, attrs: dict, problems: list[str]) -> dict[st
     return usable
 
 
-def _check_content(usable: dict[str, zarr.Array], attrs: dict, problems: list[str]) -> None:
-    """Read every chunk of rows once: readability, finiteness, q ranges, pixel/xyz consistency."""
+class _Tally:
+    """Rows failing one check: count, first row and worst value, summed over the chunks of rows."""
+
+    def __init__(self) -> None:
+        self.rows: dict[str, list] = {}
+
+    def add(self, key: str, bad: np.ndarray, start: int, worst: np.ndarray | None = None) -> None:
+        if not bad.any():
+            return
+        entry = self.rows.setdefault(key, [0, start + int(np.argmax(bad)), 0.0])
+        entry[0] += int(bad.sum())
+        if worst is not None:
+            entry[2] = max(entry[2], float(np.max(worst[bad])))
+
+
+def _check_values(block: dict[str, np.ndarray], attrs: dict, start: int, tally: _Tally) -> None:
+    """Finiteness and physical range of one chunk of rows; NaN/inf rows are counted once, as not finite."""
+    finite = {}
+    for name, values in block.items():
+        if values.dtype.kind == "f":
+            finite[name] = np.isfinite(values.reshape(len(values), -1)).all(axis=1)
+            tally.add(f"finite:{name}", ~finite[name], start)
+    ok = {name: finite.get(name, np.ones(len(v), bool)) for name, v in block.items()}
+    if "episode" in block:
+        tally.add("episode", block["episode"] < 0, start)
+    for name in ("touch", "t"):
+        if name in block:
+            tally.add(f"nonneg:{name}", (block[name].reshape(len(block[name]), -1) < 0).any(axis=1) & ok[name], start)
+    q_range = _q_range(attrs)
+    if "q" in block and q_range is not None and q_range.shape == (block["q"].shape[1], 2):
+        q = block["q"]
+        out = ((q < q_range[:, 0] - RANGE_TOL) | (q > q_range[:, 1] + RANGE_TOL)).any(axis=1)
+        tally.add("q", out & ok["q"], start)
+    reach, base = attrs.get("reach_m"), attrs.get("base_m")
+    if reach is not None and base is not None:
+        if "ee_xyz" in block:
+            dist = np.linalg.norm(block["ee_xyz"].astype(float) - np.asarray(base, float), axis=1)  # (B,) m
+            tally.add("reach:ee_xyz", ~(dist <= reach + REACH_TOL) & ok["ee_xyz"], start, dist)
+        if "jacobian" in block:
+            with np.errstate(over="ignore", invalid="ignore"):
+                norms = np.linalg.norm(block["jacobian"].astype(float), axis=1).max(axis=1)  # (B,) m/rad
+            tally.add("reach:jacobian", ~(norms <= reach + REACH_TOL) & ok["jacobian"], start, norms)
+    K, E = attrs.get("intrinsics"), attrs.get("extrinsics")
+    if "ee_xyz" in block and "ee_pixel" in block and K is not None and E is not None:
+        with np.errstate(all="ignore"):
+            err = np.abs(project(np.asarray(K, float), np.asarray(E, float), block["ee_xyz"].astype(float))
+                         - block["ee_pixel"]).max(axis=1)
+        tally.add("pixel", ~(err <= PIXEL_TOL) & ok["ee_xyz"] & ok["ee_pixel"], start, np.nan_to_num(err))
+
+
+def _q_range(attrs: dict) -> np.ndarray | None:
+    key = "sampling_ranges" if attrs.get("sampler") in ("uniform", "gaussian") else "joint_limits"
+    return np.asarray(attrs[key], float) if key in attrs else None
+
+
+def _report_values(tally: _Tally, attrs: dict, problems: list[str]) -> None:
+    ranges_key = "sampling_ranges" if attrs.get("sampler") in ("uniform", "gaussian") else "joint_limits"
+    reach, base = attrs.get("reach_m"), attrs.get("base_m")
+    for key, (count, row, worst) in tally.rows.items():
+        kind, _, name = key.partition(":")
+        where = f"{count} rows, first at row {row}"
+        if kind == "finite":
+            problems.append(must_be(name, "finite", f"{count} rows with NaN/inf, first at row {row}",
+                                    "NaN marks samples never written: " + RESUME_HINT))
+        elif kind == "episode":
+            problems.append(must_be("episode", ">= 0", f"negative values, first at row {row}", RESUME_HINT))
+        elif kind == "nonneg":
+            problems.append(must_be(name, ">= 0", f"negative values in {where}", REGENERATE_HINT))
+        elif kind == "q":
+            problems.append(must_be("q", f"inside the recorded {ranges_key} (+-{RANGE_TOL} rad)",
+                                    f"{count} rows outside, first at row {row}"))
+        elif key == "reach:ee_xyz":
+            problems.append(must_be("ee_xyz", f"within the arm's reach, {reach:.4f} m of its base {base} m",
+                                    f"{where}, up to {worst:.4g} m away", REGENERATE_HINT))
+        elif key == "reach:jacobian":
+            problems.append(must_be("jacobian", f"columns of norm <= the arm's reach {reach:.4f} m/rad",
+                                    f"{where}, up to {worst:.4g} m/rad", REGENERATE_HINT))
+        elif kind == "pixel":
+            problems.append(must_be("ee_pixel", f"ee_xyz projected through attrs intrinsics/extrinsics "
+                                    f"(+-{PIXEL_TOL} px)", f"{count} rows off by up to {worst:.3g} px, first at row {row}"))
+
+
+def _done_digests(root: zarr.Group, problems: list[str]) -> np.ndarray | None:
+    """(n_shards,) uint64 recorded checksums (0: not done), reporting shards not done; None if unreadable."""
+    if DONE not in root.array_keys():
+        return None
+    try:
+        digests = np.asarray(root[DONE][:])
+    except Exception as e:  # noqa: BLE001
+        problems.append(f"{DONE} is unreadable: {type(e).__name__}: {e}.")
+        return None
+    if not digests.all():
+        problems.append(must_be("every shard", "done", f"shards {np.flatnonzero(digests == 0).tolist()[:20]} not done",
+                                RESUME_HINT))
+    if not has_checksums(root):
+        problems.append(must_be(DONE, "a checksum per shard (schema 2)", f"{digests.dtype} flags (schema 1)",
+                                "Its shards cannot be checked; regenerate with `bodyschema datagen --overwrite`."))
+        return None
+    return digests.astype(np.uint64)
+
+
+def _check_content(path: Path, root: zarr.Group, usable: dict[str, zarr.Array], attrs: dict,
+                   digests: np.ndarray | None, problems: list[str]) -> None:
+    """Chunk files on disk, then every chunk of rows once: readable, checksum, finite and physical values."""
     if not usable:
         return
     n = next(iter(usable.values())).shape[0]
     step = int(attrs.get("chunk_len") or next(iter(usable.values())).chunks[0])
-    ranges_key = "sampling_ranges" if attrs.get("sampler") in ("uniform", "gaussian") else "joint_limits"
-    q_range = np.asarray(attrs[ranges_key], float) if ranges_key in attrs else None
-    K = np.asarray(attrs["intrinsics"], float) if "intrinsics" in attrs else None
-    E = np.asarray(attrs["extrinsics"], float) if "extrinsics" in attrs else None
-    nonfinite = {}  # name -> [count, first row]
-    q_out, pix_err, ints_bad = [0, None], [0, 0.0, None], {}
-    for start in range(0, n, step):
-        stop = min(n, start + step)
-        block = {}
+    done = digests != 0 if digests is not None else np.ones(-(-n // step), bool)
+    gone = {name: [i for i in rows if i < len(done) and done[i]]
+            for name, rows in missing_chunks(path, root, sorted(usable)).items()}
+    skip = set()
+    for name, rows in gone.items():
+        if rows:
+            problems.append(must_be(f"{name} chunks", "on disk for every done shard", f"{len(rows)} missing, "
+                                    f"shards {rows[:20]}", "Zarr reads them as fill values: " + REPAIR_HINT))
+            skip.update(rows)
+    checksum = digests is not None and set(usable) == set(data_arrays(root)) | set(_expected_features(attrs))
+    tally, mismatched = _Tally(), []
+    for shard, start in enumerate(range(0, n, step)):
+        if shard in skip:
+            continue
+        stop, block = min(n, start + step), {}
         for name, arr in usable.items():
             try:
                 block[name] = np.asarray(arr[start:stop])
             except Exception as e:  # noqa: BLE001 - any decoding failure is a corrupt chunk
                 problems.append(must_be(f"{name} rows {start}:{stop}", "readable", f"{type(e).__name__}: {e}",
-                                        "Its chunk file is corrupt or truncated; regenerate with --overwrite."))
-        for name, values in block.items():
-            if values.dtype.kind == "f":
-                bad = ~np.isfinite(values.reshape(len(values), -1)).all(axis=1)
-                if bad.any():
-                    entry = nonfinite.setdefault(name, [0, start + int(np.argmax(bad))])
-                    entry[0] += int(bad.sum())
-            elif name == "episode" and (values < 0).any():
-                ints_bad.setdefault(name, start + int(np.argmax(values < 0)))
-        if "q" in block and q_range is not None and q_range.shape == (block["q"].shape[1], 2):
-            q = block["q"]
-            out = ((q < q_range[:, 0] - RANGE_TOL) | (q > q_range[:, 1] + RANGE_TOL)).any(axis=1)
-            out &= np.isfinite(q).all(axis=1)  # NaN/inf are reported once, as not finite
-            if out.any():
-                q_out[0] += int(out.sum())
-                q_out[1] = q_out[1] if q_out[1] is not None else start + int(np.argmax(out))
-        if "ee_xyz" in block and "ee_pixel" in block and K is not None and E is not None:
-            with np.errstate(all="ignore"):
-                err = np.abs(project(K, E, block["ee_xyz"].astype(float)) - block["ee_pixel"]).max(axis=1)
-            finite = np.isfinite(block["ee_xyz"]).all(axis=1) & np.isfinite(block["ee_pixel"]).all(axis=1)
-            bad = ~(err <= PIXEL_TOL) & finite  # NaN/inf rows are reported once, as not finite
-            if bad.any():
-                pix_err[0] += int(bad.sum())
-                pix_err[1] = max(pix_err[1], float(np.nanmax(np.where(bad, err, 0.0))))
-                pix_err[2] = pix_err[2] if pix_err[2] is not None else start + int(np.argmax(bad))
-    for name, (count, row) in nonfinite.items():
-        problems.append(must_be(f"{name}", "finite", f"{count} rows with NaN/inf, first at row {row}",
-                                "NaN marks samples never written: " + RESUME_HINT))
-    for name, row in ints_bad.items():
-        problems.append(must_be(f"{name}", ">= 0", f"negative values, first at row {row}", RESUME_HINT))
-    if q_out[0]:
-        problems.append(must_be("q", f"inside the recorded {ranges_key} (+-{RANGE_TOL} rad)",
-                                f"{q_out[0]} rows outside, first at row {q_out[1]}"))
-    if pix_err[0]:
-        problems.append(must_be("ee_pixel", f"ee_xyz projected through attrs intrinsics/extrinsics (+-{PIXEL_TOL} px)",
-                                f"{pix_err[0]} rows off by up to {pix_err[1]:.3g} px, first at row {pix_err[2]}"))
+                                        "Its chunk file is corrupt or truncated: " + REPAIR_HINT))
+        if checksum and shard < len(digests) and digests[shard] and len(block) == len(usable):
+            if block_digest(block) != int(digests[shard]):
+                mismatched.append(shard)
+        _check_values(block, attrs, start, tally)
+    if mismatched:
+        problems.append(must_be("every done shard", f"equal to the checksum in its {DONE} marker",
+                                f"{len(mismatched)} differ, shards {mismatched[:20]}",
+                                "Its chunks changed after they were written: " + REPAIR_HINT))
+    _report_values(tally, attrs, problems)
 
 
 def validate_store(path: str | Path) -> list[str]:
@@ -140,16 +231,9 @@ def validate_store(path: str | Path) -> list[str]:
     if attrs.get("complete") is not True:
         problems.append(must_be("store", "complete (attr complete=True, written last)", "no completion marker",
                                 RESUME_HINT))
-    if DONE in root.array_keys():
-        try:
-            done = np.asarray(root[DONE][:]).astype(bool)
-            if not done.all():
-                problems.append(must_be("every shard", "done", f"shards {np.flatnonzero(~done).tolist()[:20]} not done",
-                                        RESUME_HINT))
-        except Exception as e:  # noqa: BLE001
-            problems.append(f"{DONE} is unreadable: {type(e).__name__}: {e}.")
+    digests = _done_digests(root, problems)
     usable = _check_layout(root, attrs, problems)
-    _check_content(usable, attrs, problems)
+    _check_content(Path(path), root, usable, attrs, digests, problems)
     return problems
 
 
@@ -166,9 +250,13 @@ def summarize_store(path: str | Path, check: bool = True) -> str:
         arr = root[name]
         lines.append(f"  {name:<10} {str(tuple(arr.shape)):<22} {str(arr.dtype):<8} {arr.attrs.get('unit', '')}")
     if "ee_xyz" in root.array_keys():
-        xyz = np.asarray(root["ee_xyz"][:])
-        lo, hi = np.nanmin(xyz, axis=0), np.nanmax(xyz, axis=0)
-        lines.append("  ee_xyz box (m): " + ", ".join(f"{c} [{l:+.3f}, {h:+.3f}]" for c, l, h in zip("xyz", lo, hi)))
+        try:
+            xyz = np.asarray(root["ee_xyz"][:])
+            xyz = xyz[np.isfinite(xyz).all(axis=1)]
+            lo, hi = xyz.min(axis=0), xyz.max(axis=0)
+            lines.append("  ee_xyz box (m): " + ", ".join(f"{c} [{l:+.3f}, {h:+.3f}]" for c, l, h in zip("xyz", lo, hi)))
+        except Exception as e:  # noqa: BLE001 - a damaged or empty array is listed by validate_store below
+            lines.append(f"  ee_xyz box (m): unavailable ({type(e).__name__})")
     size = sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
     lines.append(f"  on disk: {size / 1e6:.2f} MB · versions {a.get('versions')}")
     if check:

@@ -39,7 +39,7 @@ def test_a_shard_writes_only_its_own_chunk_files(store):
     path, root = store
     rows = {"q": np.ones((4, 2), np.float32), "image": np.full((4, 8, 8), 7, np.uint8)}
     write_shard(root, 4, rows)
-    mark_shard_done(root, 1)
+    mark_shard_done(root, 1, digest=12345)
     assert sorted(p.name for p in (path / "q" / "c").iterdir()) == ["1"]
     assert sorted(p.name for p in (path / DONE / "c").iterdir()) == ["1"]
     again = open_store(path)

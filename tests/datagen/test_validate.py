@@ -1,4 +1,9 @@
-"""`validate_store` catches each kind of damage (one test per kind) and reports all of them at once."""
+"""`validate_store` catches each kind of damage (one test per kind) and reports all of them at once.
+
+Damage to values comes two ways: a chunk changed after it was written (its shard's checksum no longer matches), or
+a generator that wrote impossible values with a matching checksum (`rewrite(..., as_written=True)`): the value
+checks must catch the second kind on their own.
+"""
 
 import json
 import shutil
@@ -12,6 +17,8 @@ from bodyschema.datagen.config import DatagenConfig
 from bodyschema.datagen.contact_sheet import write_contact_sheet
 from bodyschema.datagen.generate import generate
 from bodyschema.datagen.camera import project
+from bodyschema.datagen.integrity import shard_digest
+from bodyschema.datagen.store import mark_shard_done
 from bodyschema.datagen.validate import summarize_store, validate_store
 
 
@@ -24,6 +31,15 @@ def valid(tmp_path_factory):
 @pytest.fixture
 def copy(valid, tmp_path):
     return shutil.copytree(valid, tmp_path / "copy.zarr")
+
+
+def rewrite(path, name, rows: slice, values, as_written=True):
+    """Write `values` at `rows` of array `name`; as_written: also record the touched shards' new checksums."""
+    root = zarr.open_group(str(path), mode="r+")
+    root[name][rows] = values
+    step, n = root.attrs["chunk_len"], root.attrs["n"]
+    for shard in range(rows.start // step, (rows.stop - 1) // step + 1) if as_written else ():
+        mark_shard_done(root, shard, shard_digest(root, shard * step, min(n, (shard + 1) * step)))
 
 
 def one_problem(path, *words):
@@ -58,22 +74,69 @@ def test_first_axes_disagree(copy):
 
 
 def test_nan_in_a_float_array(copy):
-    zarr.open_group(str(copy), mode="r+")["q"][5] = np.nan
+    rewrite(copy, "q", slice(5, 6), np.nan)
     one_problem(copy, "q must be finite", "first at row 5")
 
 
 def test_q_outside_the_recorded_ranges(copy):
-    root = zarr.open_group(str(copy), mode="r+")
-    q = root["q"][:]
-    q[7, 0] = root.attrs["sampling_ranges"][0][1] + 0.01
-    root["q"][:] = q
+    root = zarr.open_group(str(copy), mode="r")
+    q = root["q"][7:8]
+    q[0, 0] = root.attrs["sampling_ranges"][0][1] + 0.01
+    rewrite(copy, "q", slice(7, 8), q)
     one_problem(copy, "q must be inside the recorded sampling_ranges", "first at row 7")
 
 
 def test_ee_pixel_shifted_from_the_projection(copy):
-    root = zarr.open_group(str(copy), mode="r+")
-    root["ee_pixel"][10:12] = root["ee_pixel"][10:12] + np.float32(0.5)
+    rewrite(copy, "ee_pixel", slice(10, 12), zarr.open_group(str(copy))["ee_pixel"][10:12] + np.float32(0.5))
     one_problem(copy, "ee_pixel must be ee_xyz projected", "2 rows", "first at row 10")
+
+
+def test_a_huge_jacobian_is_beyond_the_arms_reach(copy):
+    rewrite(copy, "jacobian", slice(20, 21), np.float32(3e38))  # finite, but no arm moves 3e38 m per rad
+    problem = one_problem(copy, "jacobian must be columns of norm <= the arm's reach", "first at row 20")
+    reach = zarr.open_group(str(copy)).attrs["reach_m"]
+    assert f"{reach:.4f} m/rad" in problem and 0.5 < reach < 0.6  # planar2: links 0.3 + 0.25 m (+ hand)
+
+
+def test_a_huge_jacobian_changed_after_writing_also_breaks_its_shards_checksum(copy):
+    rewrite(copy, "jacobian", slice(20, 21), np.float32(3e38), as_written=False)
+    problems = validate_store(copy)
+    assert len(problems) == 2, problems
+    assert any("jacobian must be columns of norm" in p for p in problems)
+    assert any("checksum" in p and "shards [1]" in p for p in problems)
+
+
+def test_ee_xyz_beyond_the_arms_reach(copy):
+    xyz = zarr.open_group(str(copy))["ee_xyz"][30:31]
+    rewrite(copy, "ee_xyz", slice(30, 31), xyz * 3)
+    problems = validate_store(copy)
+    assert any("ee_xyz must be within the arm's reach" in p and "first at row 30" in p for p in problems), problems
+
+
+def test_negative_touch(tmp_path):
+    path = generate(DatagenConfig(robot="panda", n=32, shard_size=16, images=False, out=tmp_path / "t.zarr"),
+                    progress=False)
+    assert validate_store(path) == []
+    rewrite(path, "touch", slice(3, 4), -1.0)
+    one_problem(path, "touch must be >= 0", "first at row 3")
+
+
+def test_a_value_changed_after_writing_breaks_only_its_shards_checksum(copy):
+    q = zarr.open_group(str(copy))["q"][33:34]
+    rewrite(copy, "q", slice(33, 34), q * np.float32(0.5), as_written=False)  # still a plausible pose
+    one_problem(copy, "checksum in its shard_done marker", "1 differ", "shards [2]", "rewrites the damaged shards")
+
+
+def test_a_deleted_chunk_is_missing_not_zeros(copy):
+    (copy / "image" / "c" / "1" / "0" / "0").unlink()  # reads back as 16 black images
+    one_problem(copy, "image chunks must be on disk for every done shard", "1 missing", "shards [1]", "rewrites")
+
+
+def test_a_store_without_checksums_cannot_be_proven_complete(copy):
+    root = zarr.open_group(str(copy), mode="r+")
+    del root["shard_done"]
+    root.create_array("shard_done", data=np.ones(3, np.uint8), chunks=(1,))  # schema 1: a bare flag
+    one_problem(copy, "shard_done must be a checksum per shard", "schema 1")
 
 
 def test_missing_completion_marker(copy):
