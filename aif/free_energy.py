@@ -2,7 +2,8 @@
 
     F_x = Σ_m ½ ε_mᵀ Π_m ε_m − ½ ln|Π_m|,   ε_m = x_m − g_m(μ)        (Friston 2010, Laplace free energy;
                                                                       Pixel-AIF, Sancaktar et al. 2020, eq. 4)
-    ∂F_x/∂μ = −Σ_m J_mᵀ Π_m ε_m                                        (J_m = ∂g_m/∂μ)
+    ∂F_x/∂μ = −Σ_m J_mᵀ Π_m ε_m + (∂Π_m/∂μ)ᵀ(½ ε_m² − ½ Π_m⁻¹)       (J_m = ∂g_m/∂μ; the second term only
+                                                                      where Π_m = Π_m(μ): GPR, MDN)
     H_x     =  Σ_m J_mᵀ Π_m J_m                                        (Gauss–Newton curvature)
 Constants (2π) are dropped. Π_m is diagonal; entries with Π = 0 (a broken sensor) leave F, its gradient and
 its log-determinant. Low-dimensional outputs use `model.jacobian` once for both gradient and curvature.
@@ -105,6 +106,7 @@ def sensory_terms(models: Sequence[SensoryModel], observations: Mapping[str, tor
         x = observations[m.modality].to(mu.dtype)                          # (B, *out)
         z = model_input(m, mu)
         pi = precisions.get(m.modality)
+        varies = pi is None and getattr(m, "precision_varies", False)     # Π(μ): its derivative enters ∂F/∂μ
         pi = m.precision(z).to(mu.dtype) if pi is None else pi.to(mu.dtype)  # (B, *out)
         n_out = x[0].numel()
         small = n_out <= jacobian_max_outputs
@@ -121,6 +123,9 @@ def sensory_terms(models: Sequence[SensoryModel], observations: Mapping[str, tor
                 jt_pe = torch.einsum("bod,bo->bd", jac, pe) if small else \
                     m.vjp(z, pe.reshape(x.shape).to(z.dtype)).to(mu.dtype)
             grad -= jt_pe                                                  # −Jᵀ Π ε
+            if varies:                                                     # + (∂Π/∂μ)ᵀ (½ε² − ½Π⁻¹)
+                w = 0.5 * eps.pow(2) - 0.5 * torch.where(pi > 0, 1.0 / pi.clamp_min(1e-300), torch.zeros_like(pi))
+                grad += m.precision_vjp(z, w.reshape(x.shape).to(z.dtype)).to(mu.dtype)
         term = 0.5 * (pe * eps).sum(-1)
         logdet = torch.where(pi > 0, pi.clamp_min(1e-300).log(), torch.zeros_like(pi)).sum(-1)
         free += term - 0.5 * logdet

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import torch
 
+from bodyschema.aif import descent
 from bodyschema.aif.free_energy import check_models, check_observations, model_input, sensory_terms
 from bodyschema.aif.generalized import implicit_step, local_linear_step, shift, shift_matrix
 from bodyschema.aif.priors import PRIORS, attractor_flow, prior_terms
@@ -34,6 +35,7 @@ from bodyschema.errors import must_be
 INTEGRATORS = ("local_linear", "implicit", "euler")
 STEPS = {"local_linear": local_linear_step, "implicit": implicit_step}
 STEP_CONTROLS = ("descent", "none")
+METHODS = ("flow", *descent.DESCENT_METHODS)
 DESCENT_SLACK = 1e-7     # relative rise of F still accepted: float32 models evaluate F to ~1e-7
 DT_GROW, DT_SHRINK = 2.0, 0.1   # Δt of a trial after an accepted / a rejected step (never above config.dt)
 
@@ -57,6 +59,11 @@ class PerceptionConfig:
     precision_update: str = "step"  # "step": Π from model.precision(μ) at every step; "initial": at μ0 only
     record: bool = False           # keep the trajectory of μ̃, F and the prediction errors
     step_control: str = "none"     # "descent": a step that raises F is undone and that trial's Δt shrinks (order 0)
+    method: str = "flow"           # "flow": generalized filtering (integrator above); order 0 only: "lm"
+                                   # (Levenberg–Marquardt) or "adam" (adaptive first-order flow): descent.py
+    damping: float = 1.0           # lm: initial λ relative to diag H; large = short gradient-like first steps
+    lr: float = 0.02               # adam: initial step per joint, rad
+    patience: int = 5              # adam: steps without a new best F before the step halves
 
     def __post_init__(self):
         for name in ("dt", "k_z", "prior_precision", "attractor_gain", "tol", "divergence_step"):
@@ -80,6 +87,16 @@ class PerceptionConfig:
         if self.step_control == "descent" and self.order > 0:
             raise ValueError(must_be("step_control", "'none' when order > 0", self.step_control,
                                      "With generalized motion the Dμ̃ term makes F no Lyapunov function of the flow."))
+        if self.method not in METHODS:
+            raise ValueError(must_be("method", f"one of {METHODS}", self.method))
+        if self.method != "flow" and self.order > 0:
+            raise ValueError(must_be("method", "'flow' when order > 0", self.method,
+                                     "lm and adam minimise F at order 0 (static perception)."))
+        for name in ("damping", "lr"):
+            if not getattr(self, name) > 0:
+                raise ValueError(must_be(name, "positive", getattr(self, name)))
+        if self.patience < 1:
+            raise ValueError(must_be("patience", "at least 1", self.patience))
         if self.precision_update not in ("step", "initial"):
             raise ValueError(must_be("precision_update", "'step' or 'initial'", self.precision_update))
 
@@ -181,6 +198,8 @@ class Perception:
         u = self._initial_belief(mu0)                                      # (B, K, Dz)
         b, k, dz = u.shape
         sensors = self._resolve(observations, u[:, 0], goal)
+        if cfg.method != "flow":
+            return self._descend(sensors, u[:, 0])
         dmat = shift_matrix(cfg.order, dz)                                 # (K·Dz, K·Dz)
         need_h = cfg.integrator != "euler"
         steps = torch.zeros(b, dtype=torch.long)
@@ -274,6 +293,25 @@ class Perception:
                                 evaluations, traj)
 
     # ---- internals --------------------------------------------------------------------------------------
+    def _descend(self, sensors: _Sensors, mu0: torch.Tensor) -> PerceptionResult:
+        """Order 0 by Levenberg–Marquardt or Adam (descent.py) on the same F, gradient and curvature."""
+        cfg = self.config
+
+        def objective(rows, mu, need_grad, need_hess):
+            free, grad, hess, errors = self._terms(sensors, mu[:, None], rows, need_hess, need_grad=need_grad)
+            return descent.Terms(free, grad[:, 0] if need_grad else None, hess, errors)
+
+        common = dict(max_steps=cfg.max_steps, tol=cfg.tol, max_step=cfg.max_step, record=cfg.record)
+        if cfg.method == "lm":
+            r = descent.levenberg_marquardt(objective, mu0, self.low, self.high, damping=cfg.damping, **common)
+        else:
+            r = descent.adam(objective, mu0, self.low, self.high, lr=cfg.lr, patience=cfg.patience, **common)
+        traj = None if r.trajectory is None else \
+            {name: torch.stack(rows) if rows else torch.empty(0, len(mu0)) for name, rows in r.trajectory.items()}
+        diverged_step = torch.where(r.diverged, 0, -1)
+        return PerceptionResult(r.mu.clone(), r.mu[:, None].clone(), r.steps, r.converged, r.diverged, diverged_step,
+                                r.free, r.evaluations, traj)
+
     def _initial_belief(self, mu0) -> torch.Tensor:
         k, dz = self.config.order + 1, self.latent_dim
         if not isinstance(mu0, torch.Tensor) or mu0.ndim not in (2, 3) or mu0.shape[-1] != dz \

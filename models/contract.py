@@ -47,6 +47,8 @@ def register_kind(cls):
 
 class BaseSensoryModel:
     kind: ClassVar[str] = "base"
+    # True when Π depends on z (GPR predictive variance, MDN mixture): F = ½εᵀΠ(z)ε − ½ln|Π(z)| then needs ∂Π/∂z
+    precision_varies: ClassVar[bool] = False
 
     def __init__(self, body: BodySpec, modality: str, output_shape: tuple[int, ...]):
         self.body = body
@@ -72,6 +74,14 @@ class BaseSensoryModel:
         z = self._check_z(z)
         return self._precision(z).to(z.dtype)
 
+    def precision_vjp(self, z: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+        """(∂Π/∂z)ᵀ v for the diagonal precision: (B, Dz), (B, *out) → (B, Dz); zero when Π is constant."""
+        z = self._check_z(z)
+        v = self._check_v(v, z)
+        if not self.precision_varies:
+            return torch.zeros_like(z)
+        return self._precision_vjp(z, v).to(z.dtype)
+
     @property
     def is_fitted(self) -> bool:
         return True
@@ -90,6 +100,14 @@ class BaseSensoryModel:
 
     def _precision(self, z: torch.Tensor) -> torch.Tensor:
         raise NotImplementedError
+
+    def _precision_vjp(self, z: torch.Tensor, v: torch.Tensor) -> torch.Tensor:
+        # By autograd through `_precision` (torch models); a model computed outside torch overrides this.
+        with torch.enable_grad():
+            zg = z.detach().requires_grad_(True)
+            pi = self._precision(zg)                                       # (B, *out)
+            (grad,) = torch.autograd.grad(pi, zg, v.to(pi.dtype))
+        return grad                                                        # (B, Dz)
 
     def _config(self) -> dict:
         """JSON-serializable hyper-parameters needed to rebuild the model."""

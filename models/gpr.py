@@ -67,6 +67,7 @@ class GPRModel(BaseSensoryModel):
     """Exact GP sensory model, kind "gpr". `__init__` stores hyper-parameters only; `fit` learns."""
 
     kind = "gpr"
+    precision_varies = True      # 1 / (predictive variance + noise) at z
 
     def __init__(self, body: BodySpec, modality: str, output_shape: tuple[int, ...], *,
                  hyper_points: int = 500,     # MLL fitted on this many samples: O(m³) per step, 500 takes seconds

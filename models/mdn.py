@@ -47,6 +47,7 @@ class MDNNet(nn.Module):
 @register_kind
 class MDNModel(NetModel, BaseSensoryModel):
     kind = "mdn"
+    precision_varies = True      # 1 / mixture variance at z
 
     def __init__(self, body: BodySpec, modality: str, output_shape: tuple[int, ...], *,
                  hidden: tuple[int, ...] = (64, 64),
@@ -102,7 +103,8 @@ class MDNModel(NetModel, BaseSensoryModel):
         return torch.einsum("bk,bko->bo", weights, means)
 
     def _precision(self, z):
-        with torch.no_grad():
+        # Differentiable in z (precision_vjp by autograd); no graph is built unless z requires grad.
+        with torch.set_grad_enabled(z.requires_grad):
             logits, means, stds = self._net(z.dtype)(self.body.to_unit(z))
             point = self._point(logits, means)                           # (B, O)
             pi = logits.softmax(-1)[..., None]                           # (B, K, 1)

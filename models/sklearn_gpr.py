@@ -47,6 +47,7 @@ class SklearnGPRModel(BaseSensoryModel):
     """scikit-learn GP sensory model, kind "sklearn_gpr". `__init__` stores hyper-parameters only."""
 
     kind = "sklearn_gpr"
+    precision_varies = True      # 1 / predictive std² at z
 
     def __init__(self, body: BodySpec, modality: str, output_shape: tuple[int, ...], *,
                  hyper_points: int = 500,     # LML fitted on this many samples (sklearn's gradient is O(m²·D) memory)
@@ -147,6 +148,19 @@ class SklearnGPRModel(BaseSensoryModel):
         """1 / std² from scikit-learn's predictive std (latent + white noise), output units⁻². # (B, *out)"""
         _, std = self.regressor_.predict(self._unit(z).numpy(), return_std=True)     # (B, O) or (B,)
         return torch.from_numpy(1.0 / np.asarray(std) ** 2).reshape(z.shape[0], *self.output_shape)
+
+    def _precision_vjp(self, z, v):
+        # sklearn computes outside torch: central differences of Π, step 2e-4 of each joint's range (Π cancels digits).
+        z = z.to(torch.float64)
+        steps = 2e-4 * (torch.tensor(self.body.q_high) - torch.tensor(self.body.q_low)).to(torch.float64)   # (Dz,) rad
+        v = v.reshape(v.shape[0], -1).to(torch.float64)                                # (B, O)
+        out = torch.empty_like(z)
+        for d, h in enumerate(steps):
+            shift = torch.zeros_like(z)
+            shift[:, d] = h
+            dpi = (self._precision(z + shift) - self._precision(z - shift)).reshape(v.shape) / (2 * h)   # (B, O)
+            out[:, d] = (dpi * v).sum(-1)
+        return out
 
     # ---- persistence --------------------------------------------------------------------------------
     def _config(self):

@@ -20,6 +20,8 @@ from bodyschema.errors import NotFittedError
 
 FD_STEP = 1e-6            # rad; central differences in float64
 FD_RTOL = 1e-4            # relative Jacobian error allowed against finite differences
+PRECISION_FD_STEP = 1e-3  # rad; a GP's Π = 1/(s − ‖L⁻¹k‖²) cancels digits: a smaller step differences rounding noise
+PRECISION_FD_RTOL = 1e-3
 _FITTED: dict[type, object] = {}   # one fitted model per concrete test class
 
 
@@ -70,6 +72,22 @@ class SensoryModelContract:
         fd = torch.stack(columns, dim=-1)                              # (B, O, Dz)
         rel = (jac - fd).norm() / fd.norm().clamp_min(1e-12)
         assert rel < self.fd_rtol, f"Jacobian differs from finite differences: relative error {rel:.2e}"
+
+    def test_precision_vjp_matches_central_finite_differences(self, model):
+        # (∂Π/∂z)ᵀ v: what makes ∂F/∂μ the gradient of F when Π depends on z (zero for a constant Π).
+        z = self.make_inputs(self.batch, torch.float64)
+        gen = torch.Generator().manual_seed(2)
+        v = torch.randn(self.batch, *model.output_shape, generator=gen, dtype=torch.float64)
+        fd = torch.zeros_like(z)
+        for d in range(model.latent_dim):
+            step = torch.zeros_like(z)
+            step[:, d] = PRECISION_FD_STEP
+            dpi = (model.precision(z + step) - model.precision(z - step)) / (2 * PRECISION_FD_STEP)   # (B, *out)
+            fd[:, d] = (dpi * v).reshape(self.batch, -1).sum(-1)
+        got = model.precision_vjp(z, v)
+        assert got.shape == z.shape and got.dtype == z.dtype
+        rel = (got - fd).norm() / fd.norm().clamp_min(1e-12)
+        assert rel < PRECISION_FD_RTOL or (got - fd).norm() < 1e-9, f"precision VJP off by {rel:.2e} (relative)"
 
     def test_vjp_equals_jacobian_transpose_times_v(self, model):
         z = self.make_inputs(self.batch, torch.float64)
