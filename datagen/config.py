@@ -20,6 +20,7 @@ ROBOTS = ("planar2", "nao_arm", "panda")  # must equal bodyschema.datagen.robot.
 SAMPLERS = ("uniform", "gaussian", "babble")
 BACKENDS = ("loky", "ray")
 KINEMATIC_SAMPLERS = ("uniform", "gaussian")
+WORKSPACES = ("full", "camera")  # must equal every robot's ROBOT_DEFAULTS[...]["workspaces"] names (tested)
 IMAGE_SIDE_RANGE = (8, 1024)  # px; below 8 nothing is visible, above 1024 one sample is > 3 MB
 EXECUTION_FIELDS = ("workers", "backend", "out", "overwrite")  # how, not what: excluded from identity()
 
@@ -39,7 +40,9 @@ class DatagenConfig:
     seed: int = 0  # shard i draws from SeedSequence([seed, i]); same seed -> byte-identical arrays
     out: Path | None = None  # the .zarr store to write; None: data/<robot>_<sampler>_<n>.zarr
     overwrite: bool = False  # replace an existing store made with another config (refused otherwise)
-    ranges: tuple[tuple[float, float], ...] | None = None  # (lo, hi) rad per joint; None: the robot's own ranges
+    workspace: Literal["full", "camera"] | None = None  # the robot's named joint box to sample; None: "camera"
+    # (the poses its camera sees) when images are rendered, "full" (the whole kinematic box) with --no-images
+    ranges: tuple[tuple[float, float], ...] | None = None  # (lo, hi) rad per joint; None: the workspace's; wins
     gravity: float | None = None  # m/s^2 magnitude, pointing down; None: 9.81 (0 or 3.7 for adaptation studies)
     shard_size: int | None = None  # samples per shard = Zarr chunk rows; None: 512 with images, 16384 without
     # (~1-3 MB chunks: small enough for progress and resume, large enough that Zarr calls cost nothing)
@@ -72,6 +75,9 @@ class DatagenConfig:
                 problems.append(must_be("image_size", f"(H, W) with integers in [{lo}, {hi}] px, or None", size))
             else:
                 fix("image_size", tuple(size))
+        if self.workspace is not None and self.workspace not in WORKSPACES:
+            problems.append(must_be("workspace", f"one of {WORKSPACES} or None", self.workspace,
+                                    "None picks camera with images, full with --no-images."))
         if self.ranges is not None:
             try:
                 ranges = tuple((float(a), float(b)) for a, b in self.ranges)
@@ -110,6 +116,13 @@ class DatagenConfig:
     def store_path(self) -> Path:
         """Where the store goes: `out`, or data/<robot>_<sampler>_<n>.zarr."""
         return self.out if self.out is not None else Path("data") / f"{self.robot}_{self.sampler}_{self.n}.zarr"
+
+    @property
+    def workspace_name(self) -> str:
+        """The robot workspace sampled from: `workspace`, or "camera" with images and "full" without."""
+        if self.workspace is not None:
+            return self.workspace
+        return "camera" if self.images else "full"
 
     @property
     def kinematic(self) -> bool:

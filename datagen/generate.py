@@ -90,9 +90,9 @@ def release_robots() -> None:
 
 
 def sampling_ranges(config: DatagenConfig, robot: Robot) -> np.ndarray:
-    """(Dq, 2) rad: the config's override (checked against the MJCF limits) or the robot's defaults."""
+    """(Dq, 2) rad: the config's override (checked against the MJCF limits) or its robot workspace's box."""
     if config.ranges is None:
-        return np.asarray(robot.sampling_ranges, float)
+        return np.asarray(robot.workspaces[config.workspace_name], float)
     robot.check_ranges(config.ranges)
     return np.asarray(config.ranges, float)
 
@@ -137,7 +137,9 @@ def _attrs(config: DatagenConfig, robot: Robot, ranges: np.ndarray, shards: int,
                   "touch": "simulated contact force at the recorded instant"}
     return {"schema_version": SCHEMA_VERSION, "robot": robot.name, "mjcf_sha256": robot.mjcf_sha256,
             "dq": robot.dq, "joint_names": list(robot.joint_names), "joint_limits": robot.joint_limits.tolist(),
-            "sampling_ranges": ranges.tolist(), "camera_name": robot.camera_name,
+            "sampling_ranges": ranges.tolist(),
+            "workspace": None if config.ranges is not None else config.workspace_name,  # None: explicit ranges
+            "camera_name": robot.camera_name,
             "intrinsics": robot.intrinsics().tolist(), "extrinsics": robot.extrinsics().tolist(),
             "image_size": list(robot.image_size), "channels": robot.channels, "images": config.images,
             "sampler": config.sampler, "sampler_params": params, "seed": config.seed, "config": config.to_dict(),

@@ -7,6 +7,7 @@ dynamics on `robot.data` keeps its state. The renderer is created lazily (first 
 cheap to build in a worker process and its GL context belongs to the process that renders.
 `fk`/`jacobian` call MuJoCo per pose (the reference); `observe` and the analytic model use the same hinge
 recursion vectorized over the batch (`chain.HingeChain`, equal to 1e-12) when the batch is large.
+Each robot names its workspaces (joint boxes, `robot.workspaces`); `sampling_ranges` is the one it was loaded with.
 """
 
 from __future__ import annotations
@@ -32,16 +33,27 @@ LIMIT_TOLERANCE = 0.05         # rad; the simulator's soft joint limits let reco
 GRAVITY = 9.81                 # m/s², default magnitude (downward, −z)
 VECTORIZE_FROM = 256           # poses; smaller batches call MuJoCo per pose (numpy's per-op cost dominates)
 
-# Per robot: camera, default image (H, W), default babbling ranges in rad (inside the MJCF limits).
+# Per robot: camera, default image (H, W) and named workspaces: joint boxes in rad (inside the MJCF limits) that
+# sampling draws from. "full" is the kinematic workspace; "camera" the poses the camera sees (= "full" when it
+# sees everything). Robot.load picks one (DEFAULT_WORKSPACE unless told), datagen picks by images / --no-images.
 _PANDA_LIMITS = np.array([[-2.8973, 2.8973], [-1.7628, 1.7628], [-2.8973, 2.8973], [-3.0718, -0.0698],
                           [-2.8973, 2.8973], [-0.0175, 3.7525], [-2.8973, 2.8973]])
 _PANDA_RANGES = _PANDA_LIMITS + np.array([1.0, -1.0]) * 0.05 * np.diff(_PANDA_LIMITS, axis=1)   # 5 % in
+_PLANAR2_RANGES = [[-2.5, 2.5], [-2.5, 2.5]]
+# nao_arm "full": the span of Pixel-AIF's data (Sancaktar et al. 2020). "camera": that box cut, face by face, to
+# where the ee stays inside CameraBottom's 56 x 80 image for ~91 % of uniform poses (bench/camera.py): the arm
+# pitched down > 0.58 rad leaves the bottom of the image, a bent elbow (< -0.88) brings the hand to the face.
+_NAO_FULL = [[-0.115, 1.146], [-0.314, 0.815], [-1.585, 1.094], [-1.411, -0.044]]
+_NAO_CAMERA = [[-0.115, 0.58], [0.07, 0.815], [-1.585, 1.07], [-0.88, -0.044]]
 ROBOT_DEFAULTS = {
-    "planar2": {"camera": "eye", "image_size": (64, 64), "ranges": [[-2.5, 2.5], [-2.5, 2.5]]},
-    "nao_arm": {"camera": "eye", "image_size": (56, 80),   # as Pixel-AIF (Sancaktar et al. 2020)
-                "ranges": [[-0.115, 1.146], [-0.314, 0.815], [-1.585, 1.094], [-1.411, -0.044]]},
-    "panda": {"camera": "eye", "image_size": (128, 128), "ranges": _PANDA_RANGES.tolist()},
+    "planar2": {"camera": "eye", "image_size": (64, 64),
+                "workspaces": {"full": _PLANAR2_RANGES, "camera": _PLANAR2_RANGES}},
+    "nao_arm": {"camera": "CameraBottom", "image_size": (56, 80),   # as Pixel-AIF (Sancaktar et al. 2020)
+                "workspaces": {"full": _NAO_FULL, "camera": _NAO_CAMERA}},
+    "panda": {"camera": "eye", "image_size": (128, 128),
+              "workspaces": {"full": _PANDA_RANGES.tolist(), "camera": _PANDA_RANGES.tolist()}},
 }
+DEFAULT_WORKSPACE = "camera"   # a Robot renders and projects: by default it samples the poses its camera sees
 _OPENCV_FROM_MUJOCO_CAM = np.diag([1.0, -1.0, -1.0])   # MuJoCo camera: x right, y up, looks along −z
 
 
@@ -53,7 +65,7 @@ class Robot:
     """One robot arm: model + data, named joints, a fixed camera, and batched kinematic queries."""
 
     def __init__(self, name: str, model: mujoco.MjModel, mjcf_sha256: str, image_size: tuple[int, int],
-                 rgb: bool, sampling_ranges: np.ndarray, camera_name: str):
+                 rgb: bool, workspaces: dict[str, np.ndarray], workspace: str, camera_name: str):
         self.name = name
         self.model = model
         self.data = mujoco.MjData(model)                  # for the caller's dynamics
@@ -77,8 +89,11 @@ class Robot:
         self._touch_adr = int(model.sensor_adr[touch[0]]) if touch else None
         self._position_actuated = bool(model.nu) and bool(np.all(model.actuator_biastype ==
                                                                  mujoco.mjtBias.mjBIAS_AFFINE))
-        self.check_ranges(sampling_ranges)
-        self.sampling_ranges = np.array(sampling_ranges, dtype=np.float64)         # (Dq, 2) rad
+        for box in workspaces.values():
+            self.check_ranges(box)
+        self.workspaces = {k: np.array(box, dtype=np.float64) for k, box in workspaces.items()}  # name → (Dq, 2) rad
+        self.workspace = workspace                                                  # the one sampled from
+        self.sampling_ranges = self.workspaces[workspace].copy()                    # (Dq, 2) rad
         self._renderer = None
         self._chain = HingeChain(model, self._site)
         self._camera_pose()
@@ -86,11 +101,22 @@ class Robot:
     # ---- construction --------------------------------------------------------------------------------
     @classmethod
     def load(cls, name: str, image_size: tuple[int, int] | None = None, rgb: bool = False,
-             gravity: float | None = None, actuators: str = "position") -> "Robot":
-        """Build a shipped robot. gravity: m/s² magnitude pointing down (None = 9.81)."""
+             gravity: float | None = None, actuators: str = "position", workspace: str | None = None,
+             camera: str | None = None) -> "Robot":
+        """Build a shipped robot. gravity: m/s² magnitude pointing down (None = 9.81).
+
+        workspace: which named joint box of `ROBOT_DEFAULTS[name]["workspaces"]` becomes `sampling_ranges`;
+        None = DEFAULT_WORKSPACE ("camera": the poses the camera sees, what rendering and ee_pixel need).
+        Kinematics-only callers that want the whole reach pass "full" (datagen does with --no-images).
+        camera: an MJCF camera name; None = the robot's default camera (other cameras serve as baselines).
+        """
         if name not in ROBOT_NAMES:
             raise ValueError(must_be("robot", f"one of {ROBOT_NAMES}", name))
         defaults = ROBOT_DEFAULTS[name]
+        workspace = DEFAULT_WORKSPACE if workspace is None else workspace
+        if workspace not in defaults["workspaces"]:
+            raise ValueError(must_be("workspace", f"one of {tuple(defaults['workspaces'])} for {name}", workspace,
+                                     "Pass ranges explicitly for another joint box."))
         image_size = _check_image_size(defaults["image_size"] if image_size is None else image_size)
         if actuators not in ACTUATOR_KINDS:
             raise ValueError(must_be("actuators", f"one of {ACTUATOR_KINDS}", actuators))
@@ -107,8 +133,12 @@ class Robot:
                 act.forcelimited, act.ctrlrange = mujoco.mjtLimited.mjLIMITED_FALSE, force
         model = spec.compile()
         model.opt.gravity[:] = (0.0, 0.0, -float(gravity))
-        return cls(name, model, hashlib.sha256(text).hexdigest(), image_size, rgb,
-                   np.array(defaults["ranges"]), defaults["camera"])
+        cameras = tuple(model.camera(c).name for c in range(model.ncam))
+        camera = defaults["camera"] if camera is None else camera
+        if camera not in cameras:
+            raise ValueError(must_be("camera", f"one of {cameras} for {name}", camera))
+        return cls(name, model, hashlib.sha256(text).hexdigest(), image_size, rgb, defaults["workspaces"],
+                   workspace, camera)
 
     def check_ranges(self, ranges) -> None:
         """Raise the house ValueError unless `ranges` (Dq, 2) rad are ordered and inside the joint limits."""
@@ -280,7 +310,7 @@ class Robot:
 
     def __repr__(self) -> str:
         return (f"Robot({self.name!r}, joints={list(self.joint_names)}, image_size={self.image_size}, "
-                f"channels={self.channels}, camera={self.camera_name!r})")
+                f"channels={self.channels}, camera={self.camera_name!r}, workspace={self.workspace!r})")
 
     # ---- validation ----------------------------------------------------------------------------------
     def check_q(self, q) -> np.ndarray:
