@@ -3,7 +3,7 @@
 The fields that change the trained model (kind, modality, data, seed, split, hyper-parameters) form the
 run's identity (`identity()`); its hash keys the run directory, so a killed run started again with the same
 config resumes from its checkpoint. The fields that only change *where* results go or how they are shown
-(tracking URI, experiment, run root, progress, register) are left out of the hash.
+(tracking URI, experiment, run root, progress, register, device) are left out of the hash.
 """
 
 from __future__ import annotations
@@ -27,10 +27,11 @@ MODEL_KINDS: dict[str, tuple[str, str]] = {
     "mdn": ("bodyschema.models.mdn", "MDNModel"),
     "pixel": ("bodyschema.models.pixel", "PixelDecoder"),
     "multimodal": ("bodyschema.models.multimodal", "MultimodalModel"),
+    "encoder": ("bodyschema.models.encoder", "ImageEncoder"),   # the inverse: image → joint angles
 }
-DEFAULT_MODALITY = {"pixel": "image", "multimodal": "ee_xyz,image"}   # every other kind defaults to "ee_xyz"
+DEFAULT_MODALITY = {"pixel": "image", "multimodal": "ee_xyz,image", "encoder": "image"}   # else "ee_xyz"
 MODALITIES = ("ee_xyz", "ee_pixel", "image", "touch", "jacobian", "joints")
-NON_IDENTITY_FIELDS = ("tracking_uri", "experiment", "run_root", "progress", "register")
+NON_IDENTITY_FIELDS = ("tracking_uri", "experiment", "run_root", "progress", "register", "device")
 
 
 def kind_not_available(kind: object) -> str:
@@ -41,7 +42,7 @@ def kind_not_available(kind: object) -> str:
 class TrainConfig:
     """Train one sensory model g(z) on one dataset, log it to MLflow and register it."""
 
-    model: str  # model kind: gpr | sklearn-gpr | mdn | pixel | multimodal
+    model: str  # model kind: gpr | sklearn-gpr | mdn | pixel | multimodal | encoder (image → joint angles)
     data: Path  # the Zarr store written by `bodyschema datagen`
     modality: str | None = None  # what g predicts; None: "image" (pixel), "ee_xyz,image" (multimodal), else "ee_xyz"
     seed: int = 0  # split and model init; same seed and data -> same model
@@ -53,6 +54,7 @@ class TrainConfig:
     run_root: Path = Path("runs")  # checkpoints, saved model and plots, in <run_root>/<kind>-<modality>-<hash>
     register: bool = True  # register the model and maybe move the `champion` alias; False: log the run only
     progress: bool = True  # progress bars (off in tests and batch jobs)
+    device: str = "cpu"  # cpu | cuda | cuda:N: where the network kinds (pixel, encoder) train; saved on CPU either way
 
     def __post_init__(self) -> None:
         def fix(name: str, value: Any) -> None:
@@ -81,6 +83,12 @@ class TrainConfig:
             problems.append(must_be("hyper", "a dict of name -> value", self.hyper))
         if not isinstance(self.experiment, str) or not self.experiment:
             problems.append(must_be("experiment", "a non-empty name", self.experiment))
+        try:
+            from bodyschema.models.device import check_device   # imports torch: only when a config is built
+
+            check_device(self.device)
+        except ValueError as error:
+            problems.append(str(error))
         if problems:
             raise ValueError("\n".join(problems))
 
@@ -147,7 +155,8 @@ def build_model(kind: str, body, output_shapes: dict[str, tuple[int, ...]], hype
     cls = model_class(kind)
     params = inspect.signature(cls).parameters
     if not any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
-        accepted = [p for p in params if p not in ("self", "body", "modality", "output_shape", "output_shapes")]
+        accepted = [p for p in params
+                    if p not in ("self", "body", "modality", "output_shape", "output_shapes", "image_shape")]
         unknown = sorted(set(hyper) - set(accepted))
         if unknown:
             raise ValueError(must_be("hyper", f"names accepted by {cls.__name__}: {accepted}", unknown))

@@ -3,7 +3,8 @@
 One call is one MLflow run. Steps: resolve tracking; load, validate and split the dataset; build the model
 from the kind table; fit it with a checkpoint in `<run_root>/<kind>-<modality>-<config hash>/` (a killed run
 started again with the same config resumes there, and continues the same MLflow run); score it on the
-held-out split (`val_rmse` in output units decides the champion); save, plot, log, register.
+held-out split (`val_rmse` in output units decides the champion; joint degrees for an image encoder, kind
+"encoder", registered as `bodyschema-{robot}-image-encoder`); save, plot, log, register.
 An exception anywhere before registration ends the run FAILED and registers nothing; Ctrl-C ends it KILLED.
 A multimodal model registers one SensoryModel per modality, `bodyschema-{robot}-{modality}-multimodal`.
 """
@@ -28,6 +29,7 @@ from mlflow.data.dataset_source_registry import resolve_dataset_source
 from mlflow.data.meta_dataset import MetaDataset
 from mlflow.exceptions import MlflowException
 
+from bodyschema.errors import must_be
 from bodyschema.training import plots
 from bodyschema.training.config import NON_IDENTITY_FIELDS, TrainConfig, build_model
 from bodyschema.training.data import Dataset, Split, as_float, load_dataset
@@ -95,6 +97,10 @@ def train(config: TrainConfig) -> TrainResult:
                         max_train=config.max_train, progress=config.progress)
     shapes = {m: data.output_shape(m) for m in data.modalities}
     model = build_model(config.model, data.body, shapes, config.hyper_values())
+    on_device = "device" in inspect.signature(model.fit).parameters     # the network kinds train on a GPU
+    if config.device != "cpu" and not on_device:
+        raise ValueError(must_be("device", f"'cpu' for model kind {config.model!r}", config.device,
+                                 "Only the network kinds (pixel, encoder) train on CUDA."))
     multi = hasattr(model, "members")              # MultimodalModel: one SensoryModel per modality
     members = dict(model.members) if multi else {config.modality: model}
     run_dir = config.run_dir(data.sha256)
@@ -120,6 +126,8 @@ def train(config: TrainConfig) -> TrainResult:
         fit_kwargs = dict(seed=config.seed, val=val, on_epoch=on_epoch, progress=config.progress)
         if "checkpoint" in inspect.signature(model.fit).parameters:
             fit_kwargs["checkpoint"] = run_dir / "checkpoint.pt"
+        if on_device:
+            fit_kwargs["device"] = config.device
         t0 = time.perf_counter()
         try:
             model.fit(data.train.q, train_x, **fit_kwargs)
@@ -158,6 +166,8 @@ def train(config: TrainConfig) -> TrainResult:
 def _score_and_plot(member, data: Dataset, modality: str, seed: int, out: Path,
                     prefix: str) -> tuple[dict[str, float], dict[str, Path]]:
     """Held-out and (a subset of) training scores of one member, and its prediction plot."""
+    if hasattr(member, "encode"):
+        return _score_encoder(member, data, modality, seed, out)
     image = data.is_image(modality)
     dtype = torch.float32 if image else torch.float64       # GP means in float64; images: float32 is plenty
     val_pred = predict_batched(member, data.val.q, dtype=dtype)
@@ -174,6 +184,20 @@ def _score_and_plot(member, data: Dataset, modality: str, seed: int, out: Path,
         plot = {f"{prefix}val_scatter": plots.prediction_scatter(target, val_pred, out / f"{stem}val_scatter.png",
                                                                  UNITS.get(modality, "?"), title)}
     return scores, plot
+
+
+def _score_encoder(encoder, data: Dataset, modality: str, seed: int, out: Path):
+    """An encoder (image → q) is scored on the joint angles, in deg: val_rmse over all joints decides its champion."""
+    sub = _subset(data.train, 2000, seed)
+    splits = {"val": data.val, "train": sub}
+    pred = {k: np.degrees(encoder.encode(split.xs[modality]).numpy()) for k, split in splits.items()}   # (N, Dz)
+    target = {k: np.degrees(split.q) for k, split in splits.items()}
+    scores = {**score(pred["val"], target["val"], "val"), **score(pred["train"], target["train"], "train")}
+    if not math.isfinite(scores[METRIC]):
+        raise FloatingPointError(f"{METRIC} is {scores[METRIC]}: the fit diverged; nothing is registered.")
+    path = out / "val_joints.png"
+    return scores, {"val_joints": plots.prediction_scatter(target["val"], pred["val"], path, "deg",
+                                                           f"{out.parent.name} joint angles from {modality}")}
 
 
 def _log_and_register(client, member, model_dir: Path, config: TrainConfig, data: Dataset, val_rmse: float,

@@ -121,3 +121,47 @@ def test_training_score_subset_keeps_rows_aligned(kin_store):
     index = {row: i for i, row in enumerate(split.rows)}
     np.testing.assert_array_equal(sub.xs["ee_xyz"], split.x[[index[r] for r in sub.rows]])
     np.testing.assert_array_equal(sub.q, split.q[[index[r] for r in sub.rows]])
+
+
+def test_an_image_encoder_is_scored_in_joint_degrees_registered_and_loaded_back(workdir, image_store):
+    from bodyschema.models.encoder import ImageEncoder
+    from bodyschema.training.config import TrainConfig
+
+    hyper = {"epochs": "3", "channels": "[8, 8]", "fc_hidden": "16"}
+    result = train(TrainConfig(model="encoder", data=image_store, hyper=hyper, progress=False))
+    data = load_dataset(image_store, "image")
+    assert result.registered_name == "bodyschema-planar2-image-encoder" and result.champion
+    assert set(result.plots) == {"loss_curves", "val_joints"}
+    encoder = load(f"models:/{result.registered_name}@champion", expect_body=data.body, expect_modality="image")
+    assert isinstance(encoder, ImageEncoder) and encoder.image_shape == (16, 16)
+    err = np.degrees(encoder.encode(data.val.x).numpy()) - np.degrees(data.val.q)   # (N, 2) deg
+    assert np.sqrt(np.mean(err ** 2)) == pytest.approx(result.metrics["val_rmse"], rel=1e-5)
+    version = _client(workdir).get_model_version(result.registered_name, result.model_version)
+    assert float(version.tags["val_rmse"]) == result.metrics["val_rmse"], "the champion is chosen in degrees"
+
+
+def test_device_is_checked_at_the_config_and_left_out_of_the_run_identity(kin_store, tiny_kind, monkeypatch):
+    from bodyschema.training.config import TrainConfig
+
+    config = tiny_config(kin_store)
+    assert config.device == "cpu" and "device" not in config.identity("sha")
+    with pytest.raises(ValueError, match=r"device must be .*Got 'gpu'"):
+        tiny_config(kin_store, device="gpu")
+    if not torch.cuda.is_available():
+        with pytest.raises(ValueError, match=r"device must be 'cpu' or an available CUDA device. Got 'cuda'. CUDA "
+                                             r"is not available on this machine: use --device cpu"):
+            TrainConfig(model="pixel", data=kin_store, device="cuda")
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)     # a one-GPU machine, as far as checks go
+    monkeypatch.setattr(torch.cuda, "device_count", lambda: 1)
+    with pytest.raises(ValueError, match=r"Got 'cuda:1'. This machine has 1 CUDA device"):
+        tiny_config(kin_store, device="cuda:1")
+    gpu = tiny_config(kin_store, device="cuda:0")
+    assert gpu.config_hash("sha") == config.config_hash("sha"), "the device does not change the trained model"
+
+
+def test_a_kind_without_device_support_refuses_cuda_before_any_run(workdir, kin_store, tiny_kind, monkeypatch):
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(torch.cuda, "device_count", lambda: 1)
+    with pytest.raises(ValueError, match=r"device must be 'cpu' for model kind 'tiny'. Got 'cuda'"):
+        train(tiny_config(kin_store, device="cuda"))
+    assert not (workdir / "runs").exists(), "refused before a run directory or MLflow run exists"
