@@ -3,10 +3,11 @@
 Prints, measured in the same run:
   1. batched update of N trials vs a per-trial loop of the same math (wall time, ratio, max |Δμ|), for analytic
      oracles and for the --model problem (the 56×80 pixel decoder: "models:/bodyschema-nao_arm-image-pixel@champion");
-  2. model evaluations per trial to reach the final joint error of the plain protocol (Euler, Δt 0.1, k_z 1,
-     5000 steps; Pixel-AIF) vs the default update (local linearization, Gauss–Newton curvature), both on the
-     same F (unit precisions, so that the plain protocol is stable where it can be); for the --model problem on a
-     subset of the trials (--plain-trials);
+  2. for an image decoder given with --model: every perception update side by side — Pixel-AIF's plain protocol
+     with its own precisions (Euler Δt 0.1, Σ_v = 2·10⁴, at level 3 2·10³ then ×10 once the image MSE ≤ 0.01;
+     5000 steps, on --plain-trials trials), the Gauss–Newton descent flow, Levenberg–Marquardt, Adam and the
+     levels' default —: the start-at-truth floor first, then levels 1–3 with mean / median error, % of trials with
+     every joint ≤ 2°, the gap to the floor, decoder evaluations per trial and wall time;
   3. wall time and results of the full levels benchmark (levels 1–3 and 3 with multi-start, N trials × runs) for
      analytic oracles on planar2 and nao_arm, and for any extra model given with --model (e.g. a pixel decoder
      "models:/bodyschema-nao_arm-image-pixel@champion" or a saved model directory);
@@ -31,7 +32,6 @@ from bodyschema.evaluation.targets import eval_rng, initial_beliefs, make_target
 
 PLAIN = PerceptionConfig(integrator="euler", dt=0.1, k_z=1.0, max_steps=5000, tol=0.0, max_step=None, record=True)
 SIGMA = {"ee_xyz": 1e-3, "ee_pixel": 1.0, "joints": math.radians(2.0)}   # m, px, rad: noise = 1/√precision
-FLOOR_RAD = 1e-6           # errors below this count as reached: both at the float32 observation's exact solution
 COLUMNS = ("joint_err_deg", "joint_err_median_deg", "ee_err_mm", "success", "steps", "evaluations_per_trial",
            "diverged", "wall_s")
 
@@ -71,33 +71,70 @@ def batched_vs_loop(models, n, precisions=None, noise=None):
           f"(float32 networks round differently at batch 1 and N); mean steps {batched.steps.float().mean():.1f}")
 
 
-def evaluations_to_plain_error(models, n, noise=None):
-    targets, mu0 = problem(models, n, noise=noise)
-    modalities = [m.modality for m in models]
-    obs = targets.tensors(modalities)
-    truth = torch.from_numpy(targets.q)
-    t = time.perf_counter()
-    plain = Perception(models, PLAIN, {m: 1.0 for m in modalities}).infer(obs, mu0)
-    t_plain = time.perf_counter() - t
-    t = time.perf_counter()
-    ours_config = replace(LevelsConfig().perception, record=True)          # the benchmark's default update
-    ours = Perception(models, ours_config, {m: 1.0 for m in modalities}).infer(obs, mu0)
-    t_ours = time.perf_counter() - t
-    target = (plain.mu - truth).abs().mean(-1)                             # (N,) rad, plain protocol's final error
-    floor = torch.full_like(target, FLOOR_RAD)                             # float32 observations: ~1e-8 rad floor
-    print(f"[2] {label(models)}, {n} trials (level 2), unit precisions for both (same F): "
-          f"plain diverged {plain.n_diverged}; plain protocol final mean joint error "
-          f"{np.rad2deg(target.mean().item()):.4g}°, ours {np.rad2deg((ours.mu - truth).abs().mean().item()):.4g}°")
-    for name, res, wall in (("plain (Euler Δt 0.1)", plain, t_plain), ("ours (local-linear GN, descent)", ours, t_ours)):
-        err = (res.trajectory["mu"][:, :, 0] - truth).abs().mean(-1)       # (T, N) rad; NaN once stopped
-        err = torch.where(torch.isnan(err), torch.inf, err)
-        reached = err <= torch.maximum(target * 1.001, floor)             # within 0.1 % (or the floor)
-        hit = reached.any(0)
-        first = torch.where(hit, reached.float().argmax(0) + 1, res.steps)  # evaluations = steps; the plain
-        got = first[hit | (res is plain)].double()                         # protocol reaches its error at its end
-        print(f"    {name:32s}: evaluations to reach it median {got.median():.0f}, max {got.max():.0f} "
-              f"({hit.float().mean() * 100:.0f}% of trials reach it before the last step); total evaluations/trial "
-              f"{res.evaluations / n:.0f}; wall {wall:.2f} s")
+def pixel_aif_plain(level: int) -> PerceptionConfig:
+    """Pixel-AIF's own update (Sancaktar et al. 2020): Euler Δt 0.1 on F with its visual precision 1/Σ_v,
+    Σ_v = 2·10⁴ at levels 1–2 and 2·10³ at level 3 (÷10 precision once the image MSE ≤ 0.01: `plain_infer`)."""
+    sigma_v = 2e3 if level == 3 else 2e4
+    return replace(PLAIN, precisions=(("image", 1.0 / sigma_v),), record=False, divergence_ratio=None)
+
+
+def plain_infer(models, obs, mu0, level, steps, chunk=100):
+    """The plain protocol in chunks of `chunk` Euler steps (the state is μ alone, so chunking is exact); at level 3
+    a trial's precision drops ×10 once its image MSE ≤ 0.01, as in Pixel-AIF."""
+    image = next(m for m in models if m.modality == "image")
+    mu, evaluations = mu0.clone(), 0
+    pi = torch.full((len(mu0),), dict(pixel_aif_plain(level).precisions)["image"], dtype=torch.float64)
+    for _ in range(0, steps, chunk):
+        if level == 3:
+            with torch.no_grad():
+                mse = (image.predict(mu.float()).double() - obs["image"]).pow(2).mean(dim=(1, 2))
+            pi = torch.where(mse <= 0.01, dict(pixel_aif_plain(2).precisions)["image"], pi)
+        cfg = replace(pixel_aif_plain(level), max_steps=chunk, precisions=())
+        res = Perception(models, cfg, {"image": pi[:, None, None].expand(-1, *image.output_shape)}).infer(obs, mu)
+        mu, evaluations = res.mu, evaluations + res.evaluations
+    res.mu, res.evaluations = mu, evaluations
+    return res
+
+
+def updates():
+    """The updates compared in [2]: Pixel-AIF's plain protocol, the Gauss–Newton descent flow, LM, Adam, default."""
+    default = LevelsConfig().perception
+    return {"plain Pixel-AIF (Euler Δt 0.1, Π=1/Σ_v)": None,
+            "Gauss–Newton descent (flow)": PerceptionConfig(step_control="descent"),
+            "Levenberg–Marquardt": PerceptionConfig(method="lm"),
+            "Adam (first-order adaptive)": PerceptionConfig(method="adam"),
+            f"default ({default.method})": replace(default, record=False)}
+
+
+def compare_updates(models, n, levels=(1, 2, 3), plain_n=100, plain_steps=5000):
+    """[2] Every update on the same problems: the start-at-truth floor first, then each level and the gap to it."""
+    print(f"[2] {label(models)}: updates side by side, {n} trials per level (plain protocol: {plain_n} trials, "
+          f"{plain_steps} steps), mean |joint error| over joints and trials")
+    header = f"    {'update':42s} {'level':>5s} {'mean°':>7s} {'median°':>8s} {'all≤2°':>7s} {'gap°':>7s} " \
+             f"{'evals/trial':>11s} {'wall s':>7s}"
+    print(header)
+    problems = {}                                                          # rendered once per (trials, level)
+    for name, cfg in updates().items():
+        floors = {}
+        for level in (0, *levels):                                         # 0: start at the truth
+            key = (plain_n if cfg is None else n, max(level, 1))
+            if key not in problems:
+                problems[key] = problem(models, key[0], level=key[1])
+            targets, mu0 = problems[key]
+            obs = targets.tensors([m.modality for m in models])
+            truth = torch.from_numpy(targets.q)
+            start = truth if level == 0 else mu0
+            t = time.perf_counter()
+            res = plain_infer(models, obs, start, max(level, 1), plain_steps) if cfg is None else \
+                Perception(models, cfg).infer(obs, start)
+            wall = time.perf_counter() - t
+            err = np.rad2deg((res.mu - truth).abs().numpy())                # (N, Dz) deg
+            mean = err.mean()
+            floors.setdefault(level, mean)
+            gap = mean - floors[0]
+            print(f"    {name:42s} {'floor' if level == 0 else str(level):>5s} {mean:7.3f} "
+                  f"{np.median(err.mean(1)):8.3f} {100 * (err <= 2).all(1).mean():6.1f}% "
+                  f"{'' if level == 0 else f'{gap:+7.3f}':>7s} {res.evaluations / len(err):11.1f} {wall:7.1f}")
 
 
 def full_levels(models_spec, n, runs, out, label, precisions=(), noise=()):
@@ -170,10 +207,10 @@ def main():
         if extra:
             batched_vs_loop(extra, n)
     if 2 not in args.skip:
-        for models, _, noise in oracles:      # nao with px at unit precision: Euler Δt 0.1 is unstable there
-            evaluations_to_plain_error(models, n, noise)
-        if extra:                             # 5000 plain steps per trial: a subset of the trials
-            evaluations_to_plain_error(extra, min(n, args.plain_trials))
+        if any(m.modality == "image" for m in extra):   # 5000 plain steps per trial: a subset of the trials
+            compare_updates(extra, n, plain_n=min(n, args.plain_trials), plain_steps=PLAIN.max_steps)
+        else:
+            print("[2] skipped: give an image decoder with --model (e.g. models:/bodyschema-nao_arm-image-pixel@champion)")
     if 3 not in args.skip:
         full_levels(["analytic:planar2:ee_xyz"], n, runs, args.out, "planar2 ee_xyz")
         full_levels(["analytic:nao_arm:ee_xyz"], n, runs, args.out, "nao_arm ee_xyz")

@@ -68,6 +68,9 @@ class LevelsConfig:
     screen_steps: int = 5              # multi-start: updates before pruning (a descent trial converges in ~15)
     keep: int = 2                      # multi-start: starts per trial refined to convergence
     success_deg: float = 1.0           # a trial succeeds when its mean |joint error| is below this
+    encoder: str | None = None         # an image encoder (kind "encoder", same spec forms as --model): level 3 is
+                                       # also run from its estimate, alone and as one multi-start seed
+    device: str = "cpu"                # where networks run: "cpu", "cuda" or "cuda:N" (the belief stays on the CPU)
     image_size: tuple[int, int] | None = None   # robot camera (H, W); default: the image model's, else the robot's
     mlflow: bool = True
     tracking_uri: str | None = None    # None: $MLFLOW_TRACKING_URI, else sqlite:///mlflow.db
@@ -95,7 +98,10 @@ class LevelsSummary:
 
 # ---- models and robot -----------------------------------------------------------------------------------
 def resolve_model(spec: str, tracking_uri: str | None = None):
-    """"analytic:<robot>:<modality>" | "models:/…" (registry at `tracking_uri`) | a model directory → SensoryModel."""
+    """"analytic:<robot>:<modality>" | "models:/…" (registry at `tracking_uri`) | a model directory → SensoryModel.
+
+    A model directory loads only when its digest is recorded in the tracking database (`registry.load_local`);
+    "trusted:<dir>" loads one unchecked, by the user's explicit choice (tensors only: no code runs either way)."""
     if spec.startswith("analytic:"):
         parts = spec.split(":")
         if len(parts) != 3:
@@ -105,11 +111,14 @@ def resolve_model(spec: str, tracking_uri: str | None = None):
     if spec.startswith("models:/"):
         from bodyschema.training.registry import load
         return load(spec, tracking=tracking_uri)
-    if Path(spec).is_dir():
+    if spec.startswith("trusted:") and Path(spec[len("trusted:"):]).is_dir():
         from bodyschema.models import load_model
-        return load_model(spec)
-    raise ValueError(must_be("model spec", "'analytic:<robot>:<modality>', 'models:/<name>@<alias>' or a model "
-                             "directory", spec))
+        return load_model(spec[len("trusted:"):])
+    if Path(spec).is_dir():
+        from bodyschema.training.registry import load_local
+        return load_local(spec, tracking=tracking_uri)
+    raise ValueError(must_be("model spec", "'analytic:<robot>:<modality>', 'models:/<name>@<alias>', a model "
+                             "directory logged by `bodyschema train` or 'trusted:<model directory>'", spec))
 
 
 def load_robot(models: Sequence, image_size: tuple[int, int] | None = None):
@@ -125,7 +134,45 @@ def load_robot(models: Sequence, image_size: tuple[int, int] | None = None):
         image_size = tuple(pixel.image_size)
     robot = Robot.load(models[0].body.robot, image_size=image_size, rgb=rgb)
     check_models_match(models, robot)
+    robot.sampling_ranges = trained_workspace(models, robot)
     return robot
+
+
+def trained_workspace(models: Sequence, robot) -> np.ndarray:
+    """The joint box every model was trained on (their latent scaling ranges, intersected, inside the joint
+    limits): evaluation poses come from there, not from poses a model never saw. # (Dq, 2) rad"""
+    low = np.max([m.body.q_low for m in models], axis=0)
+    high = np.min([m.body.q_high for m in models], axis=0)
+    low, high = np.maximum(low, robot.joint_limits[:, 0]), np.minimum(high, robot.joint_limits[:, 1])
+    if (high <= low).any():
+        raise ValueError(must_be("the models' joint ranges", "overlapping", [list(m.body.q_low) for m in models],
+                                 "Evaluate together only models trained on overlapping workspaces."))
+    return np.stack([low, high], axis=1)
+
+
+def resolve_encoder(spec: str | None, robot, tracking_uri: str | None = None):
+    """The image encoder of `spec` (None: none), checked against the benchmark robot and its camera image."""
+    if spec is None:
+        return None
+    encoder = resolve_model(spec, tracking_uri)
+    if getattr(encoder, "kind", None) != "encoder":
+        raise ValueError(must_be("encoder", "a model of kind 'encoder' (bodyschema train --model encoder)",
+                                 getattr(encoder, "kind", type(encoder).__name__)))
+    check_models_match([encoder], robot)
+    want = (*robot.image_size, *((3,) if robot.channels == 3 else ()))
+    if tuple(encoder.image_shape) != want:
+        raise ValueError(must_be("encoder image shape", f"the benchmark camera's {want}", encoder.image_shape,
+                                 "Train the encoder on images of the same camera and size as the decoder."))
+    return encoder
+
+
+def on_device(models: Sequence, device: str) -> None:
+    """Move every network to `device` (checked: the house error when CUDA is asked for but absent)."""
+    from bodyschema.models.device import check_device
+    target = check_device(device)
+    for m in models:
+        if hasattr(m, "to"):
+            m.to(target)
 
 
 def check_models_match(models: Sequence, robot) -> None:
@@ -139,15 +186,25 @@ def check_models_match(models: Sequence, robot) -> None:
 
 # ---- one level ----------------------------------------------------------------------------------------
 def evaluate_level(perception: Perception, robot, targets, level: int, rng: np.random.Generator,
-                   success_deg: float = 1.0, multistart: int = 0, screen_steps: int = 20, keep: int = 2):
-    """Infer every target from its level-`level` belief; returns (metrics row, per-trial arrays, result)."""
+                   success_deg: float = 1.0, multistart: int = 0, screen_steps: int = 20, keep: int = 2,
+                   encoder=None):
+    """Infer every target from its level-`level` belief; returns (metrics row, per-trial arrays, result).
+
+    encoder: an image encoder whose estimate from the target images is the initial belief (the level's own start
+    then becomes the second multi-start seed)."""
     models = perception.models
     obs = targets.tensors([m.modality for m in models if m.modality not in _broken(perception)])
     mu0 = initial_beliefs(level, targets.q, robot.sampling_ranges, rng)   # (N, Dq) rad
     start = time.perf_counter()
+    seeds = [mu0]
+    if encoder is not None:
+        low, high = robot.sampling_ranges.T
+        seeds.insert(0, np.clip(encoder.encode(targets.observations["image"]).double().numpy(), low, high))
+        mu0 = seeds[0]
     if multistart:
-        extra = uniform(rng, robot.sampling_ranges, len(mu0) * (multistart - 1))
-        starts = np.concatenate([mu0[:, None], extra.reshape(len(mu0), multistart - 1, -1)], axis=1)
+        extra = uniform(rng, robot.sampling_ranges, len(mu0) * max(multistart - len(seeds), 0))
+        starts = np.concatenate([s[:, None] for s in seeds] + [extra.reshape(len(mu0), -1, mu0.shape[1])],
+                                axis=1)[:, :multistart]                    # (N, S, Dq) rad
         ms = infer_multistart(perception, obs, torch.from_numpy(starts), screen_steps, keep)
         result, evaluations = ms.result, ms.evaluations
     else:
@@ -159,7 +216,8 @@ def evaluate_level(perception: Perception, robot, targets, level: int, rng: np.r
     mean_err = err.mean(axis=1)
     lim = robot.joint_limits
     ee_mm = 1e3 * np.linalg.norm(robot.fk(np.clip(mu, lim[:, 0], lim[:, 1])) - robot.fk(targets.q), axis=1)
-    row = {"level": f"{level}+ms" if multistart else str(level), "trials": len(mu),
+    row = {"level": str(level) + ("+enc" if encoder is not None else "") + ("+ms" if multistart else ""),
+           "trials": len(mu),
            "joint_err_deg": float(mean_err.mean()), "joint_err_median_deg": float(np.median(mean_err)),
            **{f"joint_err_deg/{name}": float(e) for name, e in zip(robot.joint_names, err.mean(axis=0))},
            "ee_err_mm": float(ee_mm.mean()), "success": float((mean_err < success_deg).mean()),
@@ -183,19 +241,22 @@ def run_levels(config: LevelsConfig = LevelsConfig(), models: Sequence | None = 
     from tqdm import tqdm
     models = resolve_models(config.models, DEFAULT_MODELS, config.tracking_uri, models)
     robot = load_robot(models, config.image_size)
+    encoder = resolve_encoder(config.encoder, robot, config.tracking_uri)
+    on_device(models + ([encoder] if encoder else []), config.device)
     perception = Perception(models, config.perception)
-    has_image = any(m.modality == "image" for m in models)
+    has_image = any(m.modality == "image" for m in models) or encoder is not None
     rows, per_trial, curves = [], {}, {}
-    jobs = [(run, level, ms) for run in range(config.runs) for level in config.levels
+    jobs = [(run, level, ms, enc) for run in range(config.runs) for level in config.levels
+            for enc in ((False, True) if level == 3 and encoder else (False,))
             for ms in ((0, config.multistart) if level == 3 and config.multistart else (0,))]
     targets = None
-    for run, level, ms in tqdm(jobs, desc="levels", disable=len(jobs) < 2):
+    for run, level, ms, enc in tqdm(jobs, desc="levels", disable=len(jobs) < 2):
         if targets is None or targets[0] != run:
             targets = (run, make_targets(robot, config.trials, eval_rng(config.seed, run, "targets"), has_image,
                                          dict(config.noise), eval_rng(config.seed, run, "noise")))
         rng = eval_rng(config.seed, run, "beliefs", level)                 # same μ0 with and without multi-start
         row, trial, result = evaluate_level(perception, robot, targets[1], level, rng, config.success_deg, ms,
-                                            config.screen_steps, config.keep)
+                                            config.screen_steps, config.keep, encoder if enc else None)
         rows.append({"run": run, **row})
         per_trial.setdefault(row["level"], []).append(trial["mean_err_deg"])
         if result.trajectory is not None and not ms and row["level"] not in curves:   # ms: refinement only

@@ -136,3 +136,43 @@ def test_noise_and_broken_sensor_sweeps(tmp_path, planar2_xyz):
     assert broken[0]["joint_err_deg"] < 0.1 and broken[1]["joint_err_deg"] < 0.1, "one sensor left suffices"
     assert plot_sweep(rows, "sigma", tmp_path / "noise.png").stat().st_size > 0
     assert plot_sweep(broken, "broken", tmp_path / "broken.png").stat().st_size > 0
+
+
+# ---- level 3 from an amortized encoder --------------------------------------------------------------------
+def _encoder(robot_name: str, image_size, tmp_path):
+    """A one-epoch image encoder of `robot_name` saved to tmp_path: enough to test the plumbing, not accuracy."""
+    from bodyschema.datagen.robot import Robot
+    from bodyschema.models.encoder import ImageEncoder
+    from bodyschema.models.scaling import BodySpec
+    robot = Robot.load(robot_name, image_size=image_size)
+    q = np.random.default_rng(0).uniform(*robot.sampling_ranges.T, size=(32, robot.dq))
+    body = BodySpec(robot.name, robot.joint_names, *map(tuple, robot.sampling_ranges.T))
+    encoder = ImageEncoder(body, image_shape=image_size, channels=(4, 8), fc_hidden=8, epochs=1)
+    encoder.fit(q, robot.render(q), progress=False)
+    encoder.save(tmp_path / robot_name)
+    return f"trusted:{tmp_path / robot_name}"      # a local directory, loaded unchecked on purpose
+
+
+def test_level3_runs_from_the_encoder_alone_and_as_a_multistart_seed(planar2_xyz, planar2, tmp_path):
+    spec = _encoder("planar2", planar2.image_size, tmp_path)
+    config = LevelsConfig(levels=(3,), trials=12, runs=1, multistart=3, screen_steps=2, encoder=spec,
+                          mlflow=False, plots=False, out=tmp_path / "out")
+    rows = run_levels(config, models=[planar2_xyz]).table
+    assert [r["level"] for r in rows] == ["3", "3+ms", "3+enc", "3+enc+ms"]
+
+
+def test_encoder_of_another_robot_is_refused_before_any_work(planar2_xyz, tmp_path):
+    spec = _encoder("nao_arm", (56, 80), tmp_path)
+    config = LevelsConfig(levels=(3,), trials=4, runs=1, encoder=spec, mlflow=False, plots=False, out=tmp_path / "o")
+    with pytest.raises(ValueError, match="model body must be robot 'planar2'"):
+        run_levels(config, models=[planar2_xyz])
+    assert not (tmp_path / "o").exists()
+
+
+def test_cuda_without_cuda_is_the_house_error(planar2_xyz, tmp_path):
+    import torch
+    if torch.cuda.is_available():
+        pytest.skip("this machine has CUDA")
+    config = LevelsConfig(levels=(1,), trials=4, runs=1, device="cuda", mlflow=False, plots=False, out=tmp_path)
+    with pytest.raises(ValueError, match="device must be"):
+        run_levels(config, models=[planar2_xyz])
