@@ -8,11 +8,29 @@
     bodyschema evaluate reaching --robot nao_arm | evaluate adaptation jupiter | evaluate self-recognition
     bodyschema report
     bodyschema demo
+    bodyschema --debug ...    (or BODYSCHEMA_DEBUG=1): show the traceback behind an error message
+
+One error boundary (`main`): an expected failure (bad input, a bad file, MLflow, rendering, a non-finite
+computation; the list is `bodyschema.errors.expected_types`) prints one house line on stderr and exits 2; a bug
+prints its traceback and exits 1; Ctrl-C exits 130.
 """
 
 from __future__ import annotations
 
+import os
+
+# Headless rendering by default. mujoco reads MUJOCO_GL once, when first imported, and the imports below reach
+# it (evaluation.jupiter imports mujoco), so this must come first; a value the user set wins.
+_GL = os.environ.setdefault("MUJOCO_GL", "egl")
+if _GL in ("egl", "osmesa"):
+    os.environ.setdefault("PYOPENGL_PLATFORM", _GL)
+# (every import below comes after it on purpose)
+
+import dataclasses
+import inspect
+import math
 import sys
+import traceback
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Union
@@ -29,6 +47,7 @@ from bodyschema.evaluation.reaching import ReachingConfig, run_reaching
 from bodyschema.evaluation.report import ReportConfig, write_report
 from bodyschema.evaluation.robustness import RobustnessConfig, run_robustness
 from bodyschema.evaluation.self_recognition import SelfRecognitionConfig, run_self_recognition
+from bodyschema.errors import expected_types, explain, must_be
 from bodyschema.training.config import TrainConfig
 
 
@@ -55,7 +74,11 @@ class RegistryPromote:
     tracking_uri: str | None = None
 
 
+COMMAND_WORDS: set[str] = set()   # every subcommand name, to name the command in an error line
+
+
 def _command(name: str, kind, description: str):
+    COMMAND_WORDS.add(name)
     return Annotated[kind, tyro.conf.subcommand(name, description=description)]
 
 
@@ -94,6 +117,9 @@ COMMANDS = Union[(  # noqa: UP007
 
 def run(config) -> int:
     """Run the stage a parsed config stands for; returns the process exit code."""
+    if isinstance(config, TrainConfig):
+        check_hyper(config)
+    check_tracking_first(config)
     if isinstance(config, DatagenConfig):
         from bodyschema.datagen.generate import generate
         from bodyschema.datagen.validate import summarize_store
@@ -102,6 +128,9 @@ def run(config) -> int:
     elif isinstance(config, ValidateArgs):
         from bodyschema.datagen.validate import validate_store
 
+        if not config.path.exists():     # bad input (exit 2), not an invalid store (exit 1)
+            raise FileNotFoundError(must_be("path", "an existing .zarr store", str(config.path),
+                                            "Create one with `bodyschema datagen --out PATH`."))
         problems = validate_store(config.path)
         for problem in problems:
             print(f"- {problem}", file=sys.stderr)
@@ -132,15 +161,119 @@ def run(config) -> int:
     return 0
 
 
+# ---- checks before any work ----------------------------------------------------------------------------
+def check_hyper(config: TrainConfig) -> None:
+    """Each --hyper value has the type of the model parameter it sets (a finite number where a number goes):
+    otherwise a string such as "abc" or "nan" reaches the model and fails deep inside as a TypeError."""
+    from bodyschema.training.config import model_class
+
+    params = inspect.signature(model_class(config.model)).parameters
+    problems = []
+    for name, value in config.hyper_values().items():
+        param = params.get(name)
+        expected = _value_kind(param) if param is not None else None
+        if expected is not None and not _is_kind(value, expected):
+            problems.append(must_be(f"--hyper {name}", _KIND_TEXT[expected], config.hyper[name],
+                                    f"{model_class(config.model).__name__}'s default is {param.default!r}."))
+    if problems:
+        raise ValueError("\n".join(problems))
+
+
+_KIND_TEXT = {bool: "true or false", int: "an integer", float: "a finite number", tuple: "a list such as [64, 64]",
+              str: "a word"}
+
+
+def _value_kind(param: inspect.Parameter) -> type | None:
+    """The kind of value a model parameter takes: from its default, else from its annotation (`int | None`)."""
+    default = param.default
+    for kind in (bool, int, float, tuple, str):                  # bool before int: True is an int
+        if default is not inspect.Parameter.empty and default is not None and isinstance(default, kind):
+            return kind
+    text = str(param.annotation).removeprefix("typing.").split("|")[0].split("[")[0].strip()
+    return {"bool": bool, "int": int, "float": float, "tuple": tuple, "str": str}.get(text)
+
+
+def _is_kind(value, kind: type) -> bool:
+    if value is None:
+        return True                                               # JSON null: the model's own default
+    if kind is float:
+        return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    if kind is int:
+        return isinstance(value, int) and not isinstance(value, bool)
+    return isinstance(value, kind)
+
+
+def tracking_of(config) -> tuple[bool, str | None]:
+    """(does this command talk to MLflow, its explicit tracking URI or None for the default)."""
+    tree = list(_dataclass_tree(config))
+    uses = isinstance(config, (TrainConfig, RegistryList, RegistryPromote, DemoConfig)) or any(
+        getattr(c, "mlflow", False) is True or any(str(s).startswith("models:/") for s in getattr(c, "models", ()))
+        for c in tree)
+    explicit = next((c.tracking_uri for c in tree if getattr(c, "tracking_uri", None)), None)
+    return uses, explicit
+
+
+def _dataclass_tree(config):
+    yield config
+    for f in dataclasses.fields(config):
+        value = getattr(config, f.name)
+        if dataclasses.is_dataclass(value) and not isinstance(value, type):
+            yield from _dataclass_tree(value)
+
+
+def check_tracking_first(config) -> None:
+    """A command that talks to MLflow says where, and fails within seconds when that is unreachable (instead of
+    hanging in MLflow's retries for minutes)."""
+    uses, explicit = tracking_of(config)
+    if not uses:
+        return
+    from bodyschema.training.registry import check_tracking, tracking_uri
+
+    uri = tracking_uri(explicit)
+    print(f"tracking: {uri}", file=sys.stderr)
+    check_tracking(uri, timeout_s=5)
+
+
+# ---- the error boundary ----------------------------------------------------------------------------------
 def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    debug = "--debug" in argv or os.environ.get("BODYSCHEMA_DEBUG", "") not in ("", "0")
+    argv = [a for a in argv if a != "--debug"]
+    command = "bodyschema " + " ".join(_command_words(argv))
     try:
-        config = tyro.cli(COMMANDS, prog="bodyschema", args=argv,
-                          description="A robot learns its body by motor babbling and perceives it by active inference.")
+        config = tyro.cli(COMMANDS, prog="bodyschema", args=argv,  # a parsing error: tyro's message box, exit 2
+                          description="A robot learns its body by motor babbling and perceives it by active "
+                                      "inference. --debug (or BODYSCHEMA_DEBUG=1) shows the traceback behind an error.")
         return run(config)
-    except (ValueError, OSError) as error:
-        # User-facing errors are already in the house form; no traceback for them.
-        print(f"error: {error}", file=sys.stderr)
+    except KeyboardInterrupt:
+        print(f"\n{command}: interrupted. Run the same command again to resume.", file=sys.stderr)
+        return 130
+    except expected_types() as error:
+        line = explain(error)
+        if line is None:                                             # e.g. a TypeError from our own code: a bug
+            return _bug(command, error)
+        if debug:
+            traceback.print_exc()
+        print(f"{command}: error: {line}", file=sys.stderr)
         return 2
+    except Exception as error:
+        return _bug(command, error)
+
+
+def _bug(command: str, error: BaseException) -> int:
+    traceback.print_exception(error)
+    print(f"{command}: internal error ({type(error).__name__}): a bug, not your input. Please report it with the "
+          "traceback above.", file=sys.stderr)
+    return 1
+
+
+def _command_words(argv: list[str]) -> list[str]:
+    words = []
+    for arg in argv:
+        if arg not in COMMAND_WORDS:
+            break
+        words.append(arg)
+    return words
 
 
 if __name__ == "__main__":

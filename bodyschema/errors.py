@@ -1,4 +1,20 @@
-"""The house error message, shared by every stage: "<what> must be <expected>. Got <actual>. <hint>"."""
+"""The house error message, shared by every stage: "<what> must be <expected>. Got <actual>. <hint>".
+
+`must_be` formats it where an error is raised. `explain` is the other half, used once at the CLI boundary: it
+turns any *expected* failure (bad input, a bad or truncated file, an unreachable or refusing service, a broken
+rendering set-up, a computation gone non-finite) into that line, and returns None for a bug, which keeps its
+traceback. This module stays a leaf: optional libraries (mlflow, mujoco, zarr, torch) are looked up in
+`sys.modules`, never imported; an exception class whose library was never loaded cannot have been raised.
+"""
+
+from __future__ import annotations
+
+import errno
+import pickle
+import re
+import sys
+import traceback
+from pathlib import Path
 
 
 def must_be(what: str, expected: str, got: object, hint: str = "") -> str:
@@ -9,3 +25,106 @@ def must_be(what: str, expected: str, got: object, hint: str = "") -> str:
 
 class NotFittedError(ValueError, AttributeError):
     """A model was used before `fit` (as scikit-learn's NotFittedError)."""
+
+
+# ---- the expected failures, in one place ------------------------------------------------------------------
+# Always expected: their message is (or is made) the house line.
+ALWAYS = (ValueError, OSError, FloatingPointError, MemoryError, pickle.UnpicklingError)
+# Expected when they carry the house message, or were raised while reading a file the user gave (READERS).
+IF_USERS_FAULT = (TypeError, KeyError, IndexError, RuntimeError, EOFError, AttributeError)
+# Library failures: (module, class) -> (what, expected, hint). Looked up only if the module is loaded.
+LIBRARY = {
+    ("mlflow.exceptions", "MlflowException"): (
+        "the MLflow tracking server or registry", "reachable and answering",
+        "Check --tracking-uri (or $MLFLOW_TRACKING_URI; default sqlite:///<cwd>/mlflow.db) and "
+        "`bodyschema registry list`."),
+    ("mujoco", "FatalError"): (
+        "MuJoCo rendering", "available",
+        "Set MUJOCO_GL=egl (apt-get install libegl1 libegl-mesa0) or MUJOCO_GL=osmesa (libosmesa6); see README."),
+}
+# Code that reads user files: a KeyError etc. raised under these means a truncated or edited file, not a bug.
+READER_MODULES = ("zarr", "numcodecs", "torch.serialization", "torch._weights_only_unpickler", "json", "pickle")
+READER_FUNCTIONS = ("load_model", "_from_saved", "from_dict", "open_store", "load_dataset", "read_rows",
+                    "_read_chunked", "load")
+FILE_HINT = "It is truncated, corrupt or was edited; re-create it with the command that wrote it, or pass another."
+
+
+def expected_types() -> tuple[type[BaseException], ...]:
+    """Every exception class a user can cause (the CLI's `except` clause); IF_USERS_FAULT ones are sorted by `explain`."""
+    return (*ALWAYS, *IF_USERS_FAULT, *(cls for cls, _ in _loaded_library_errors()))
+
+
+def explain(error: BaseException) -> str | None:
+    """The house line(s) for an expected failure; None for a bug (the caller shows its traceback)."""
+    text = _text(error)
+    for cls, (what, expected, hint) in _loaded_library_errors():
+        if isinstance(error, cls):
+            return text if " must be " in text else must_be(what, expected, _first_line(text), hint)
+    if isinstance(error, pickle.UnpicklingError):
+        return must_be("a saved model's state.pt", "tensors only (read with torch.load(weights_only=True))",
+                       _unpickler_reason(text), "The file was refused unread; it is not trusted. " + FILE_HINT)
+    if " must be " in text and isinstance(error, (*ALWAYS, *IF_USERS_FAULT)):
+        return text
+    if isinstance(error, OSError):
+        return _explain_os_error(error)
+    if isinstance(error, FloatingPointError):
+        return must_be("the computation", "finite", _first_line(text),
+                       "Lower the learning rate (--hyper lr), check the data (`bodyschema validate`), or rerun with "
+                       "--debug to see where.")
+    if isinstance(error, MemoryError):
+        return must_be("the memory this run needs", "available", "MemoryError",
+                       "Ask for less: fewer samples (--n, --max-train), smaller images or fewer trials.")
+    source = _reader(error) if isinstance(error, (ValueError, *IF_USERS_FAULT)) else None
+    if source is not None:              # e.g. a KeyError or a JSONDecodeError from an edited meta.json / zarr.json
+        return must_be(source, "complete and well-formed", f"{type(error).__name__}: {_first_line(text)}", FILE_HINT)
+    if isinstance(error, ValueError):
+        return text                     # raised on purpose by our checks or a library's; the message says what
+    return None                         # a TypeError etc. from our own code: a bug
+
+
+def _loaded_library_errors():
+    for (module, name), row in LIBRARY.items():
+        cls = getattr(sys.modules.get(module), name, None)
+        if isinstance(cls, type):
+            yield cls, row
+
+
+def _text(error: BaseException) -> str:
+    text = str(error.args[0]) if isinstance(error, KeyError) and error.args else str(error)
+    return text.strip() or type(error).__name__
+
+
+def _first_line(text: str) -> str:
+    return next((line.strip() for line in text.splitlines() if line.strip()), text)
+
+
+def _unpickler_reason(text: str) -> str:
+    # torch's message advises weights_only=False (i.e. running the payload); keep only the reason it refused.
+    match = re.search(r"WeightsUnpickler error:\s*(.+?)(?:\n\n|$)", text, re.S)
+    return " ".join(match.group(1).split()) if match else _first_line(text)
+
+
+def _explain_os_error(error: OSError) -> str:
+    if error.filename is None and isinstance(error, (ConnectionError, TimeoutError)):
+        return must_be("the connection", "answered", _first_line(_text(error)),
+                       "Check the server address (--tracking-uri, $RAY_ADDRESS) and that it is running.")
+    expected = {errno.ENOENT: "an existing file or directory", errno.EACCES: "readable and writable by you",
+                errno.EPERM: "readable and writable by you", errno.ENOSPC: "on a disk with free space",
+                errno.EISDIR: "a file, not a directory", errno.ENOTDIR: "a directory"}.get(error.errno, "usable")
+    got = error.strerror or _first_line(_text(error))
+    what = str(Path(error.filename)) if error.filename is not None else "a file or device"
+    return must_be(what, expected, got,
+                   "Check the path given on the command line and its permissions.")
+
+
+def _reader(error: BaseException) -> str | None:
+    """What file was being read when `error` was raised (a path when a reader frame holds one), else None."""
+    found = None
+    for frame, _ in traceback.walk_tb(error.__traceback__):
+        module = frame.f_globals.get("__name__", "")
+        library = module.split(".")[0] in READER_MODULES or module in READER_MODULES
+        ours = module.startswith("bodyschema.") and frame.f_code.co_name in READER_FUNCTIONS
+        if library or ours:
+            path = frame.f_locals.get("path") if ours else None
+            found = f"the file or store {str(path)!r}" if path is not None else (found or "a file being read")
+    return found

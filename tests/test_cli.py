@@ -38,8 +38,11 @@ def test_validate_exit_code_reflects_the_store(tmp_path, capsys):
     store = generate(DatagenConfig(robot="planar2", n=64, images=False, shard_size=32, out=tmp_path / "ok.zarr"),
                      progress=False)
     assert main(["validate", str(store)]) == 0
-    assert main(["validate", str(tmp_path / "missing.zarr")]) != 0
+    (tmp_path / "empty.zarr").mkdir()
+    assert main(["validate", str(tmp_path / "empty.zarr")]) == 1            # a store with problems: the answer
     assert "problem" in capsys.readouterr().out
+    assert main(["validate", str(tmp_path / "missing.zarr")]) == 2          # no store at all: bad input
+    assert "path must be an existing .zarr store" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("words", [["evaluate", "levels"], ["evaluate", "reaching"], ["evaluate", "self-recognition"],
