@@ -106,7 +106,7 @@ def measure(camera: str, q: np.ndarray, n_check: int) -> dict:
         return {"coverage": covered.mean(), "coverage_head": covered[:n_check].mean(),
                 "coverage_check": segmented_coverage(robot, q[:n_check]).mean(),
                 "in_view": ee_in_view(robot, q).mean(), "sensitivity": sensitivity(robot, q, images),
-                "fovy": float(robot.model.cam_fovy[robot.model.camera(camera).id]), "joints": robot.joint_names}
+                "fovy": float(robot.model.camera(camera).fovy[0]), "joints": robot.joint_names}
 
 
 def write_sheet(out_png: Path, seed: int) -> Path:
@@ -130,7 +130,8 @@ def main() -> None:
     print(f"nao_arm, {args.n} uniform poses of workspace {WORKSPACE!r} {np.round(ranges, 3).tolist()} rad, "
           f"56 x 80 grayscale")
     print(f"{'':42s}{'old: eye':>14s}{'new: CameraBottom':>20s}{'new/old':>10s}")
-    print(f"{'vertical field of view (deg)':42s}{old['fovy']:14.2f}{new['fovy']:20.2f}{new['fovy'] / old['fovy']:10.2f}")
+    fovy = ("vertical field of view (deg)", old["fovy"], new["fovy"])
+    print(f"{fovy[0]:42s}{fovy[1]:14.2f}{fovy[2]:20.2f}{fovy[2] / fovy[1]:10.2f}")
     rows = [("arm coverage (fraction of px)", old["coverage"], new["coverage"]),
             (f"  first {min(args.n, N_CHECK)} poses", old["coverage_head"], new["coverage_head"]),
             ("  same, exact (segmentation)", old["coverage_check"], new["coverage_check"]),

@@ -40,9 +40,9 @@ class DatagenConfig:
     seed: int = 0  # shard i draws from SeedSequence([seed, i]); same seed -> byte-identical arrays
     out: Path | None = None  # the .zarr store to write; None: data/<robot>_<sampler>_<n>.zarr
     overwrite: bool = False  # replace an existing store made with another config (refused otherwise)
-    workspace: Literal["full", "camera"] | None = None  # the robot's named joint box to sample; None: "camera"
-    # (the poses its camera sees) when images are rendered, "full" (the whole kinematic box) with --no-images
-    ranges: tuple[tuple[float, float], ...] | None = None  # (lo, hi) rad per joint; None: the workspace's; wins
+    workspace: Literal["full", "camera"] | None = None  # robot joint box to sample; None: camera if images else full
+    # ("camera": the poses the camera sees, so the arm is in view; "full": the whole kinematic box)
+    ranges: tuple[tuple[float, float], ...] | None = None  # (lo, hi) rad per joint, overrides workspace; None: its box
     gravity: float | None = None  # m/s^2 magnitude, pointing down; None: 9.81 (0 or 3.7 for adaptation studies)
     shard_size: int | None = None  # samples per shard = Zarr chunk rows; None: 512 with images, 16384 without
     # (~1-3 MB chunks: small enough for progress and resume, large enough that Zarr calls cost nothing)

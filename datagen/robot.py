@@ -182,6 +182,14 @@ class Robot:
         """(N, 3) m world → (N, 2) px (u = column, v = row)."""
         return project(self._K, self.extrinsics(), self._check_points(xyz))
 
+    def in_view(self, q) -> np.ndarray:
+        """(N, Dq) rad → (N,) bool: the ee lies in front of the camera and projects inside the image."""
+        xyz = self._fk_and_jacobian(self.check_q(q))[0]                  # (N, 3) m
+        depth = xyz @ self._rot[2] + self._trans[2]                      # (N,) m along the optical axis
+        px = project(self._K, self.extrinsics(), xyz)                    # (N, 2) px
+        h, w = self.image_size
+        return (depth > 0) & (px >= 0).all(axis=1) & (px[:, 0] <= w - 1) & (px[:, 1] <= h - 1)
+
     def project_jacobian(self, xyz) -> np.ndarray:
         """(N, 3) m → (N, 2, 3) d px / d m of `project`."""
         xyz = self._check_points(xyz)

@@ -165,8 +165,17 @@ def _reach(robot) -> tuple[np.ndarray, float]:
     return base, float(np.linalg.norm(robot.fk(q) - base, axis=1).max()) * 1.01
 
 
+def in_view_targets(rng: np.random.Generator, robot, n: int) -> np.ndarray:
+    """n uniform poses of the sampling ranges whose ee the camera sees (a goal pixel must be in the image;
+    nao_arm's camera workspace keeps it in view for ~90 % of its poses); the first n draws when all are seen.
+    Too few seen: the first n, and check_goal names a pose the camera cannot see. # (n, Dq) rad"""
+    q = uniform(rng, robot.sampling_ranges, 20 * n)                         # (20n, Dq)
+    seen = q[robot.in_view(q)]
+    return seen[:n] if len(seen) >= n else q[:n]
+
+
 def make_episodes(config: ReachingConfig, robot, modality: str, output_shape) -> Episodes:
-    q_target = uniform(reaching_rng(config.seed, "targets"), robot.sampling_ranges, config.targets)
+    q_target = in_view_targets(reaching_rng(config.seed, "targets"), robot, config.targets)
     q_start = uniform(reaching_rng(config.seed, "starts"), robot.sampling_ranges, config.targets)
     goal = make_goal(robot, modality, q_target)
     check_goal(robot, modality, goal, output_shape)

@@ -65,15 +65,23 @@ def test_the_ee_of_the_full_workspace_stays_in_front_of_the_camera(name):
     assert camera_depth(r, q).min() > 0.0
 
 
+def test_in_view_is_the_ee_in_front_of_the_camera_and_inside_the_image(nao):
+    q = np.random.default_rng(2).uniform(*nao.workspaces["full"].T, size=(600, nao.dq))   # big batch: vectorized
+    px, depth = nao.project(nao.fk(q)), camera_depth(nao, q)
+    h, w = nao.image_size
+    expected = (depth > 0) & (px >= 0).all(axis=1) & (px[:, 0] <= w - 1) & (px[:, 1] <= h - 1)
+    np.testing.assert_array_equal(nao.in_view(q), expected)
+    np.testing.assert_array_equal(nao.in_view(q[:5]), expected[:5])                      # small batch: MuJoCo
+    assert 0 < expected.mean() < 1
+
+
 def test_nao_camera_workspace_keeps_most_of_the_hand_in_view_and_full_does_not(nao):
     full = Robot.load("nao_arm", workspace="full")
-    h, w = nao.image_size
 
-    def inside(r: Robot) -> float:
-        px = r.project(r.fk(np.random.default_rng(1).uniform(*r.sampling_ranges.T, size=(2000, r.dq))))
-        return float(((px >= 0).all(axis=1) & (px[:, 0] <= w - 1) & (px[:, 1] <= h - 1)).mean())
+    def seen(r: Robot) -> float:
+        return float(r.in_view(np.random.default_rng(1).uniform(*r.sampling_ranges.T, size=(2000, r.dq))).mean())
 
-    assert inside(nao) >= 0.85 > inside(full)                                  # the cut is what keeps it in view
+    assert seen(nao) >= 0.85 > seen(full)                                      # the cut is what keeps it in view
 
 
 def test_datagen_picks_camera_with_images_full_without_and_explicit_ranges_win(tmp_path):
