@@ -25,7 +25,8 @@ from tqdm.auto import tqdm  # noqa: E402
 from bodyschema.datagen.backends import run_loky, run_ray  # noqa: E402
 from bodyschema.datagen.config import DatagenConfig  # noqa: E402
 from bodyschema.datagen.guards import check_resources, n_shards, probe_render  # noqa: E402
-from bodyschema.datagen.integrity import clear_shard, failing_shards, shard_digest  # noqa: E402
+from bodyschema.datagen.integrity import (clear_shard, data_arrays, failing_shards,  # noqa: E402
+                                          shard_digest)
 from bodyschema.datagen.reach import arm_reach  # noqa: E402
 from bodyschema.datagen.samplers import Babbler, sample_kinematic  # noqa: E402
 from bodyschema.datagen.store import (SCHEMA_VERSION, StoreWriteError, create_store, drop_shard_marks,  # noqa: E402
@@ -184,6 +185,10 @@ def _prepare(path: Path, config: DatagenConfig, feats: dict, attrs: dict) -> Non
             if old["schema_version"] != SCHEMA_VERSION:  # schema 1 recorded no shard checksums: cannot be checked
                 raise FileExistsError(must_be("out", f"a store of schema {SCHEMA_VERSION} to resume",
                                               f"schema {old['schema_version']} at {path}",
+                                              "Pass --overwrite to regenerate it (same config, same data)."))
+            lost = sorted(set(feats) - set(data_arrays(open_store(path))))
+            if lost:  # a whole array gone: no shard can be repaired into it
+                raise FileExistsError(must_be("out", "a store holding every array of its schema", f"{lost} missing",
                                               "Pass --overwrite to regenerate it (same config, same data)."))
             if old.get("created"):
                 return  # resume

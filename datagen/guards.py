@@ -60,9 +60,8 @@ def check_resources(config: DatagenConfig, feats: dict, chunk_len: int, path: Pa
     """Refuse a job whose shard list, data or shards in flight exceed their limit, naming the limit and the fix."""
     shards, per_sample = n_shards(config, chunk_len), sample_bytes(feats)
     if shards > MAX_SHARDS:
-        raise ValueError(must_be("n / shard rows", f"at most {MAX_SHARDS} shards",
-                                 f"{shards} shards (n={config.n}, {chunk_len} rows per shard)",
-                                 "Raise --shard-size or lower --n."))
+        raise ValueError(must_be("n", f"<= {MAX_SHARDS * chunk_len} samples with {chunk_len}-row shards "
+                                 f"(at most {MAX_SHARDS} shards)", config.n, "Raise --shard-size or lower --n."))
     need = config.n * per_sample  # raw bytes: the compressed store is smaller, never larger
     where = _existing_parent(path)
     free = shutil.disk_usage(where).free

@@ -138,8 +138,18 @@ def drop_shard_marks(root: zarr.Group, shards) -> None:
 
 
 def shard_digests(root: zarr.Group) -> np.ndarray:
-    """(n_shards,) uint64: each shard's recorded checksum, 0 for a shard not done."""
-    return np.asarray(root[DONE][:]).astype(np.uint64)
+    """(n_shards,) uint64: each shard's recorded checksum, 0 for a shard not done (or whose marker is damaged)."""
+    markers = root[DONE]
+    try:
+        return np.asarray(markers[:]).astype(np.uint64)
+    except Exception:  # noqa: BLE001 - a damaged marker chunk: that shard reruns and its marker is rewritten
+        out = np.zeros(markers.shape, np.uint64)
+        for i in range(markers.shape[0]):
+            try:
+                out[i] = markers[i]
+            except Exception:  # noqa: BLE001
+                pass
+        return out
 
 
 def shards_done(root: zarr.Group) -> np.ndarray:

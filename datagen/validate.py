@@ -166,7 +166,7 @@ def _done_digests(root: zarr.Group, problems: list[str]) -> np.ndarray | None:
     try:
         digests = np.asarray(root[DONE][:])
     except Exception as e:  # noqa: BLE001
-        problems.append(f"{DONE} is unreadable: {type(e).__name__}: {e}.")
+        problems.append(must_be(DONE, "readable", f"{type(e).__name__}: {e}", "A marker chunk is damaged: " + REPAIR_HINT))
         return None
     if not digests.all():
         problems.append(must_be("every shard", "done", f"shards {np.flatnonzero(digests == 0).tolist()[:20]} not done",

@@ -55,8 +55,13 @@ def change(path):
     root["q"][20] = root["q"][20] * np.float32(0.5)  # a plausible pose, but not the one written
 
 
+def marker(path):
+    (path / "shard_done" / "c" / "1").write_bytes(b"\x01\x02\x03")  # a torn 8-byte checksum
+
+
 DAMAGES = {delete: (1, "image chunks must be on disk"), truncate: (2, "q rows 32:40 must be readable"),
-           flip: (0, "jacobian rows 0:16 must be readable"), change: (1, "checksum in its shard_done marker")}
+           flip: (0, "jacobian rows 0:16 must be readable"), change: (1, "checksum in its shard_done marker"),
+           marker: (1, "shard_done must be readable")}
 
 
 @pytest.mark.parametrize("damage", DAMAGES, ids=lambda f: f.__name__)
@@ -68,11 +73,21 @@ def test_a_damaged_shard_is_reported_then_rewritten_to_the_clean_bytes(clean, tm
     assert len(problems) == 1 and words in problems[0] and "rewrites the damaged shards" in problems[0], problems
     before = {k: (path / k).stat().st_mtime_ns for k in files(path)}
     generate(DatagenConfig(**JOB, out=path), progress=False)  # the same command again
-    assert f"rewriting 1 damaged shard(s) of {path}: {shard} (" in capsys.readouterr().err
+    if damage is not marker:  # a damaged marker reads as "not done": the shard simply reruns
+        assert f"rewriting 1 damaged shard(s) of {path}: {shard} (" in capsys.readouterr().err
     assert validate_store(path) == []
     assert files(path) == files(clean)  # byte-identical chunks, markers and array metadata
     rewritten = {k for k in before if (path / k).stat().st_mtime_ns != before[k]}
     assert rewritten and all(f"/c/{shard}" in k for k in rewritten), rewritten  # only the damaged shard's chunks
+
+
+def test_a_store_that_lost_a_whole_array_is_refused_not_half_repaired(clean, tmp_path):
+    path = shutil.copytree(clean, tmp_path / "s.zarr")
+    shutil.rmtree(path / "jacobian")
+    with pytest.raises(FileExistsError, match=r"out must be a store holding every array.*'jacobian'.*--overwrite"):
+        generate(DatagenConfig(**JOB, out=path), progress=False)
+    generate(DatagenConfig(**JOB, out=path, overwrite=True), progress=False)
+    assert validate_store(path) == [] and files(path) == files(clean)
 
 
 def test_a_trillion_samples_is_refused_before_any_list_or_write(tmp_path, monkeypatch):
