@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import importlib
 import json
+import pickle
 from pathlib import Path
 from typing import ClassVar, Protocol, runtime_checkable
 
@@ -178,7 +179,17 @@ def load_model(path: str | Path) -> BaseSensoryModel:
     if meta["kind"] not in MODEL_KINDS:
         raise ValueError(must_be("model kind", f"one of {sorted(set(MODEL_KINDS) | set(SHIPPED_KINDS))}",
                                  meta["kind"]))
-    state = torch.load(path / "state.pt", weights_only=True)
+    try:
+        state = torch.load(path / "state.pt", weights_only=True)
+    except pickle.UnpicklingError:
+        # torch's own message advises weights_only=False, i.e. running the file's code: never do that here.
+        raise ValueError(must_be(f"{path / 'state.pt'}", "tensors only (as written by model.save)",
+                                 "a pickle that needs code to load", "Refusing to run it: re-save the model with "
+                                 "`bodyschema train` or model.save().")) from None
+    except (RuntimeError, EOFError) as error:      # truncated or not a torch file at all
+        raise ValueError(must_be(f"{path / 'state.pt'}", "a complete torch file written by model.save",
+                                 str(error).splitlines()[0] if str(error) else type(error).__name__,
+                                 "The file is damaged or partial: copy or train the model again.")) from None
     return MODEL_KINDS[meta["kind"]]._from_saved(BodySpec.from_dict(meta["body"]), meta["modality"],
                                                  tuple(meta["output_shape"]), meta["config"], state)
 

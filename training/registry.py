@@ -6,15 +6,25 @@ the `champion` alias moves only when a new version's validation metric (`val_rms
 the current champion's, or when a user `promote`s a version by hand.
 
 Consumers call `load("models:/<name>@champion")` (or `models:/<name>/<version>`) and get the SensoryModel
-itself. Trust boundary: the artifacts are downloaded, their sha256 is compared with the digest recorded in
-the registry at logging time, and only then are the tensors read (`torch.load(weights_only=True)`).
+itself. Trust boundary: the artifacts are downloaded, their sha256 is compared with the digest recorded on the
+registered version (in the tracking database, never a file beside the weights), and only then are the tensors
+read (`torch.load(weights_only=True)`); the MLmodel file is read as data, no code of the artifacts runs.
+
+Concurrency: with the default sqlite store, creating its tables, registering a version (with its tags, in one
+transaction) and moving `champion` (a compare-and-set) happen under an flock on `<db>.lock`, so two `train`
+processes finishing together neither lose a run nor leave the worse model as champion. With a tracking server
+the same lock is a file in the temp directory: it serializes the processes of one machine only.
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
 import re
 import tempfile
+import urllib.error
+import urllib.parse
+import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,12 +34,21 @@ from mlflow.exceptions import MlflowException
 
 from bodyschema.errors import must_be
 from bodyschema.models.scaling import BodySpec
-from bodyschema.training.mlflow_model import ARTIFACT_KEY, DIGEST_TAG, verify_directory
+from bodyschema.training.digest import DIGEST_TAG, verify_directory
+from bodyschema.training.locks import exclusive
 
 CHAMPION = "champion"
 METRIC = "val_rmse"          # decides the champion; lower is better
 PREFIX = "bodyschema-"
 _URI = re.compile(r"^models:/(?P<name>[^/@]+)(?:@(?P<alias>[^/]+)|/(?P<version>\d+))$")
+# Schemes MLflow can track to ("mysql+pymysql" counts as "mysql"); anything else is a typo, refused up front.
+SCHEMES = ("", "file", "sqlite", "postgresql", "mysql", "mssql", "http", "https", "databricks", "databricks-uc", "uc")
+OLD_ARTIFACT_KEY = "sensory_model"     # models logged "from code" before the loader module kept their directory here
+_initialized: set[str] = set()         # sqlite URIs whose tables this process created or checked under the lock
+
+
+class TrackingUnreachable(ConnectionError):
+    """The tracking server did not answer within the timeout (an OSError, so the CLI reports it as one)."""
 
 
 def tracking_uri(explicit: str | None = None) -> str:
@@ -38,11 +57,64 @@ def tracking_uri(explicit: str | None = None) -> str:
 
 
 def use_tracking(explicit: str | None = None) -> MlflowClient:
-    """Point MLflow (tracking and registry) at the resolved URI; returns a client for it."""
+    """Point MLflow (tracking and registry) at the resolved URI, checked first; returns a client for it.
+
+    A sqlite store is created (or migrated) once, under its file lock: two processes starting on a fresh
+    directory would otherwise both run the schema migration and one would die in it."""
     uri = tracking_uri(explicit)
+    check_tracking(uri)
     mlflow.set_tracking_uri(uri)
     mlflow.set_registry_uri(uri)
-    return MlflowClient(uri, uri)
+    client = MlflowClient(uri, uri)
+    if sqlite_path(uri) is not None and uri not in _initialized:
+        with exclusive(registry_lock(uri)):
+            client.search_experiments(max_results=1)              # creates or migrates the tracking tables
+            client.search_registered_models(max_results=1)        # the registry store checks them too
+        _initialized.add(uri)
+    return client
+
+
+def check_tracking(uri: str, timeout_s: float = 5.0) -> None:
+    """Refuse a tracking URI MLflow cannot use: an unknown scheme (ValueError), or a http(s) server that does not
+    answer within `timeout_s` seconds (TrackingUnreachable, a ConnectionError). Any HTTP answer counts as up."""
+    if not isinstance(uri, str) or not uri:
+        raise ValueError(must_be("tracking URI", "a non-empty string", uri))
+    scheme = urllib.parse.urlparse(uri).scheme.split("+")[0].lower()
+    if len(scheme) == 1:
+        scheme = ""                          # a Windows drive letter (C:\\...): a local path
+    if scheme not in SCHEMES:
+        raise ValueError(must_be("tracking URI", "sqlite:///<file>.db, http(s)://<host>:<port>, file:<dir> or a "
+                                 "database URL", uri, "Fix --tracking-uri or $MLFLOW_TRACKING_URI (unset it for the "
+                                 "default sqlite:///<cwd>/mlflow.db)."))
+    if scheme not in ("http", "https"):
+        return
+    try:
+        with urllib.request.urlopen(f"{uri.rstrip('/')}/health", timeout=timeout_s):
+            pass
+    except urllib.error.HTTPError:
+        return                               # it answered (an error page is still an answer)
+    except (urllib.error.URLError, OSError) as error:
+        reason = getattr(error, "reason", error)
+        raise TrackingUnreachable(must_be("tracking server", f"answering within {timeout_s:g} s", f"{uri}: {reason}",
+                                          "Start it (`mlflow server --host 127.0.0.1 --port <port>`), or unset "
+                                          "MLFLOW_TRACKING_URI to use the local sqlite store.")) from None
+
+
+def sqlite_path(uri: str) -> Path | None:
+    """The database file of a `sqlite:///<path>` URI (relative to the cwd, as SQLAlchemy reads it), else None."""
+    if not uri.startswith("sqlite:///"):
+        return None
+    path = uri[len("sqlite:///"):].split("?")[0]
+    return Path(path) if path and path != ":memory:" else None
+
+
+def registry_lock(uri: str | None = None) -> Path:
+    """The lock file of a tracking store: `<db>.lock` beside a sqlite file, else one per URI in the temp dir."""
+    uri = uri or mlflow.get_registry_uri()
+    path = sqlite_path(uri)
+    if path is not None:
+        return path.with_name(path.name + ".lock")
+    return Path(tempfile.gettempdir()) / f"bodyschema-registry-{hashlib.sha256(uri.encode()).hexdigest()[:16]}.lock"
 
 
 def ensure_experiment(name: str) -> str:
@@ -59,18 +131,61 @@ def registered_name(robot: str, modality: str, kind: str) -> str:
     return f"{PREFIX}{robot}-{modality}-{kind}"
 
 
+def register_version(client: MlflowClient, name: str, model_uri: str, tags: dict[str, str],
+                     metric: float) -> tuple[str, bool]:
+    """Register logged model `model_uri` as a version of `name`, its tags set in the same transaction, then move
+    `champion` if `metric` is better — all under the registry lock. → (version, now champion?)
+
+    Idempotent, so a command started again after a kill (or after it finished) converges: a version of `name`
+    that already holds these very weights (same DIGEST_TAG) is reused, never duplicated; a version of the same
+    run without a digest (left by a kill between creating and tagging, before tags moved into the creation)
+    could never load and is deleted."""
+    digest = tags[DIGEST_TAG]
+    with exclusive(registry_lock()):
+        run_id = client.get_logged_model(model_uri.removeprefix("models:/")).source_run_id
+        if _registered_model_exists(client, name):
+            for stale in client.search_model_versions(f"name = '{name}' and run_id = '{run_id}'"):
+                if DIGEST_TAG not in stale.tags:
+                    client.delete_model_version(name, stale.version)
+            same = client.search_model_versions(f"name = '{name}' and tags.`{DIGEST_TAG}` = '{digest}'")
+        else:
+            same = []
+        if same:
+            version = str(min(int(v.version) for v in same))
+        else:
+            version = str(mlflow.register_model(model_uri, name, tags=tags, await_registration_for=60).version)
+        return version, _champion_if_better(client, name, version, metric)
+
+
 def update_champion(client: MlflowClient, name: str, version: str, metric: float) -> bool:
-    """Move `champion` to `version` when its metric beats the current champion's (or there is none)."""
+    """Move `champion` to `version` when its metric beats the current champion's (or there is none): a
+    compare-and-set under the registry lock, so of two runs finishing together the better one ends champion."""
+    with exclusive(registry_lock()):
+        return _champion_if_better(client, name, version, metric)
+
+
+def _champion_if_better(client: MlflowClient, name: str, version: str, metric: float) -> bool:
+    # Caller holds the registry lock: the read and the write below are one step for every bodyschema process.
     try:
         current = client.get_model_version_by_alias(name, CHAMPION)
     except MlflowException:
         current = None
     if current is not None:
+        if str(current.version) == str(version):
+            return True
         best = float(current.tags.get(METRIC, "inf"))
         if not metric < best:
             return False
     client.set_registered_model_alias(name, CHAMPION, version)
     return True
+
+
+def _registered_model_exists(client: MlflowClient, name: str) -> bool:
+    try:
+        client.get_registered_model(name)
+        return True
+    except MlflowException:
+        return False
 
 
 def promote(name: str, version: str | int, *, tracking: str | None = None) -> None:
@@ -81,7 +196,8 @@ def promote(name: str, version: str | int, *, tracking: str | None = None) -> No
     except MlflowException as error:
         raise ValueError(must_be("NAME VERSION", "a registered model version (see `bodyschema registry list`)",
                                  f"{name} {version}")) from error
-    client.set_registered_model_alias(name, CHAMPION, str(version))
+    with exclusive(registry_lock()):
+        client.set_registered_model_alias(name, CHAMPION, str(version))
 
 
 @dataclass(frozen=True)
@@ -148,15 +264,47 @@ def load(uri: str, *, expect_body: BodySpec | None = None, expect_modality: str 
 
 
 def _artifact_dir(local: Path) -> Path:
-    """Where the logged model keeps the SensoryModel directory (named in its MLmodel file), inside `local`."""
+    """Where the logged model keeps the SensoryModel directory, inside `local`: the pyfunc `data` of the loader
+    module (or, for models logged from code before it, the artifact `sensory_model`). The MLmodel file is only
+    read here, as YAML data; the digest check that follows is what makes the directory trusted."""
     from mlflow.models import Model
 
     try:
-        relative = Model.load(str(local / "MLmodel")).flavors["python_function"]["artifacts"][ARTIFACT_KEY]["path"]
+        flavor = Model.load(str(local / "MLmodel")).flavors["python_function"]
+        relative = flavor["data"] if flavor.get("data") else flavor["artifacts"][OLD_ARTIFACT_KEY]["path"]
     except (OSError, KeyError, TypeError) as error:
-        raise ValueError(must_be("registered model", f"a bodyschema pyfunc with artifact {ARTIFACT_KEY!r}",
+        raise ValueError(must_be("registered model", "a bodyschema pyfunc (logged by `bodyschema train`)",
                                  str(local), "Only models logged by `bodyschema train` can be loaded.")) from error
-    path = (local / relative).resolve()
+    path = (local / str(relative)).resolve()
     if not path.is_relative_to(local.resolve()):
-        raise ValueError(must_be(f"artifact path of {ARTIFACT_KEY!r}", "inside the model directory", relative))
+        raise ValueError(must_be("pyfunc data path", "inside the model directory", relative))
     return path
+
+
+def load_local(path: str | Path, *, tracking: str | None = None):
+    """A model directory written by `model.save`, loaded only when its digest is recorded in the tracking database
+    (it was logged by `bodyschema train` there); otherwise refused, naming the explicit opt-in `trusted:<dir>`.
+
+    The files are copied to a private temp directory first and the copy is digested and loaded, so they cannot
+    change between the check and the read."""
+    import shutil
+
+    from bodyschema.models import load_model
+    from bodyschema.training.digest import digest_is_recorded, directory_sha256
+
+    path = Path(path)
+    if not ((path / "meta.json").is_file() and (path / "state.pt").is_file()):
+        return load_model(path)             # the house error naming what a model directory holds
+    uri = tracking_uri(tracking)
+    with tempfile.TemporaryDirectory(prefix="bodyschema-local-") as tmp:
+        copy = Path(shutil.copytree(path, Path(tmp) / "model", symlinks=False))
+        digest = directory_sha256(copy)
+        db = sqlite_path(uri)
+        recorded = None if db is not None and not db.is_file() else digest_is_recorded(use_tracking(tracking), digest)
+        if recorded is None:
+            raise ValueError(must_be(f"model directory {str(path)!r}", f"a model logged by `bodyschema train` in {uri} "
+                                     "(its sha256 recorded there)", f"sha256 {digest[:16]}… recorded nowhere",
+                                     "Load it from the registry (models:/<name>@champion), point --tracking-uri at "
+                                     f"the store it was trained with, or pass trusted:{path} to load it unchecked "
+                                     "(tensors only, so no code runs, but its numbers are unverified)."))
+        return load_model(copy)

@@ -30,12 +30,13 @@ from mlflow.data.meta_dataset import MetaDataset
 from mlflow.exceptions import MlflowException
 
 from bodyschema.errors import must_be
-from bodyschema.training import plots
+from bodyschema.training import guards, plots, runs
 from bodyschema.training.config import NON_IDENTITY_FIELDS, TrainConfig, build_model
 from bodyschema.training.data import Dataset, Split, as_float, load_dataset
-from bodyschema.training.mlflow_model import DIGEST_TAG, log_sensory_model
-from bodyschema.training.registry import (METRIC, ensure_experiment, registered_name, update_champion,
-                                          use_tracking)
+from bodyschema.training.digest import DIGEST_TAG
+from bodyschema.training.pyfunc_loader import log_sensory_model
+from bodyschema.training.registry import CHAMPION, METRIC, ensure_experiment, register_version, registered_name, \
+    use_tracking
 
 UNITS = {"ee_xyz": "m", "ee_pixel": "px", "image": "intensity", "touch": "N", "jacobian": "m/rad"}
 PREDICT_BATCH = 256       # validation prediction batch: bounded memory for image decoders
@@ -60,6 +61,7 @@ class TrainResult:
     plots: dict[str, Path] = field(default_factory=dict)
     model_dirs: dict[str, Path] = field(default_factory=dict)   # modality -> saved model (meta.json + state.pt)
     run_dir: Path | None = None      # checkpoint, history, plots of this config
+    reused: bool = False             # True: this config had finished and registered already; nothing was redone
 
     # Single-modality shortcuts (None when nothing, or several models, were registered).
     @property
@@ -81,6 +83,8 @@ class TrainResult:
     def __str__(self) -> str:
         """What `bodyschema train` prints: the run, each registered version, the held-out scores, the plots."""
         lines = [f"MLflow run {self.run_id} (run directory {self.run_dir})"]
+        if self.reused:
+            lines[0] += ": finished before with this config; reusing its registered versions"
         for r in self.registered:
             lines.append(f"registered models:/{r.name}/{r.version}" + ("  → now @champion" if r.champion else
                                                                         "  (champion unchanged: not better)"))
@@ -92,6 +96,7 @@ class TrainResult:
 
 def train(config: TrainConfig) -> TrainResult:
     """Train, evaluate, log and (unless `config.register` is False) register one model. See the module doc."""
+    guards.check_config(config.model, config.modalities)          # a GP on images: refused before any work
     client = use_tracking(config.tracking_uri)
     data = load_dataset(config.data, config.modalities, val_fraction=config.val_fraction, seed=config.seed,
                         max_train=config.max_train, progress=config.progress)
@@ -101,17 +106,31 @@ def train(config: TrainConfig) -> TrainResult:
     if config.device != "cpu" and not on_device:
         raise ValueError(must_be("device", f"'cpu' for model kind {config.model!r}", config.device,
                                  "Only the network kinds (pixel, encoder) train on CUDA."))
+    for shape in shapes.values():                                 # GP memory (n², outputs) vs available RAM
+        guards.check_memory(config.model, model, len(data.train), shape)
     multi = hasattr(model, "members")              # MultimodalModel: one SensoryModel per modality
     members = dict(model.members) if multi else {config.modality: model}
     run_dir = config.run_dir(data.sha256)
+    with runs.claim(run_dir):      # one process per config: the same command started twice is refused, naming the pid
+        return _train_owned(config, client, data, model, members, multi, run_dir, on_device)
+
+
+def _train_owned(config: TrainConfig, client, data: Dataset, model, members: dict, multi: bool, run_dir: Path,
+                 on_device: bool) -> TrainResult:
+    """`train` once this process owns `run_dir`: reuse a finished run, or continue / start one and fit."""
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "config.json").write_text(json.dumps(config.identity(data.sha256), indent=2, default=str))
     experiment_id = ensure_experiment(config.experiment)
-    resume_id = _resumable_run(client, run_dir)
+    identity = config.config_hash(data.sha256)
+    done = runs.finished_run(client, run_dir, identity, experiment_id, tuple(members), config.register)
+    if done is not None:                            # re-run of a finished command: no second version
+        return _reused(client, *done, run_dir, multi)
+    runs.reap_dead_runs(client, experiment_id)      # RUNNING runs whose process died (kill -9) become KILLED
+    resume_id = runs.resumable_run(client, run_dir)
     history = _History(run_dir / "history.jsonl")
 
     start = dict(run_id=resume_id) if resume_id else dict(experiment_id=experiment_id, run_name=run_dir.name)
-    with mlflow.start_run(**start) as run:          # an exception inside ends the run FAILED
+    with mlflow.start_run(**start, tags=runs.owner_tags(identity)) as run:   # an exception inside ends it FAILED
         (run_dir / "mlflow_run_id").write_text(run.info.run_id)
         _log_inputs(config, data, run_dir.name)
 
@@ -205,17 +224,30 @@ def _log_and_register(client, member, model_dir: Path, config: TrainConfig, data
     """Log one member as a pyfunc; register it (unless config.register is False) and maybe make it champion."""
     m = member.modality
     name = registered_name(data.body.robot, m, config.model) if config.register else None
-    info, digest = log_sensory_model(model_dir, member, registered_name=name, name=f"model-{m}" if multi else "model")
+    info, digest = log_sensory_model(model_dir, member, name=f"model-{m}" if multi else "model")
     mlflow.set_tag(DIGEST_TAG + (f".{m}" if multi else ""), digest)
     if name is None:
         return None
-    version = str(info.registered_model_version)
     tags = {DIGEST_TAG: digest, METRIC: repr(val_rmse), "robot": data.body.robot, "modality": m,
             "kind": config.model, "joint_names": ",".join(data.body.joint_names),
             "dataset_sha256": data.sha256, "mjcf_sha256": str(data.attrs.get("mjcf_sha256", ""))}
-    for key, value in tags.items():
-        client.set_model_version_tag(name, version, key, value)
-    return Registered(m, name, version, update_champion(client, name, version, val_rmse), digest)
+    version, champion = register_version(client, name, info.model_uri, tags, val_rmse)   # one guarded step
+    return Registered(m, name, version, champion, digest)
+
+
+def _reused(client, run, versions: dict, run_dir: Path, multi: bool) -> TrainResult:
+    """The result of a finished run of the same config, from the tracking database (nothing is redone)."""
+    registered = []
+    for m, v in versions.items():
+        try:
+            champion = str(client.get_model_version_by_alias(v.name, CHAMPION).version) == str(v.version)
+        except MlflowException:
+            champion = False
+        registered.append(Registered(m, v.name, str(v.version), champion, v.tags[DIGEST_TAG]))
+    metrics = {**_History(run_dir / "history.jsonl").last(), **run.data.metrics}
+    model_dirs = {m: run_dir / (f"model-{m}" if multi else "model") for m in versions}
+    made = {p.stem: p for p in sorted((run_dir / "plots").glob("*.png"))}
+    return TrainResult(run.info.run_id, tuple(registered), metrics, made, model_dirs, run_dir, reused=True)
 
 
 def predict_batched(model, q: np.ndarray, batch: int = PREDICT_BATCH, dtype=torch.float32) -> np.ndarray:
@@ -264,20 +296,6 @@ def _log_inputs(config: TrainConfig, data: Dataset, run_name: str) -> None:
     dataset = MetaDataset(source, name=Path(data.path).name, digest=data.sha256[:32])
     mlflow.log_input(dataset, context="training", tags={"robot": tags["robot"], "mjcf_sha256": tags["mjcf_sha256"],
                                                          "modality": config.modality})
-
-
-def _resumable_run(client, run_dir: Path) -> str | None:
-    """The MLflow run of an interrupted attempt at this config (KILLED by Ctrl-C, or still RUNNING after a hard
-    kill), else None. A FAILED run (an exception) is not continued: a new run starts, from the checkpoint."""
-    marker = run_dir / "mlflow_run_id"
-    if not marker.is_file():
-        return None
-    try:
-        run = client.get_run(marker.read_text().strip())
-    except MlflowException:
-        return None                 # another tracking store, or the run was deleted
-    resumable = run.info.status in ("RUNNING", "KILLED") and run.info.lifecycle_stage == "active"
-    return run.info.run_id if resumable else None
 
 
 class _History:

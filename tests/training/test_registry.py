@@ -10,7 +10,7 @@ import torch
 from mlflow import MlflowClient
 
 from bodyschema.models import BodySpec
-from bodyschema.training.mlflow_model import DIGEST_TAG
+from bodyschema.training.digest import DIGEST_TAG
 from bodyschema.training.registry import _artifact_dir, list_models, load, promote, tracking_uri
 from bodyschema.training.train import train
 from tests.training.tiny_model import tiny_config
@@ -96,7 +96,7 @@ def test_load_refuses_a_version_without_a_recorded_digest(registered):
     digest = client.get_model_version(NAME, "1").tags[DIGEST_TAG]
     client.delete_model_version_tag(NAME, "1", DIGEST_TAG)
     try:
-        with pytest.raises(ValueError, match="has no recorded bodyschema.model_sha256"):
+        with pytest.raises(ValueError, match="must be recorded with a bodyschema.model_sha256 in the tracking database"):
             load(f"models:/{NAME}/1", tracking=registered)
     finally:
         client.set_model_version_tag(NAME, "1", DIGEST_TAG, digest)

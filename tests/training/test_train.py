@@ -9,7 +9,7 @@ import torch
 from mlflow import MlflowClient
 
 from bodyschema.training.data import load_dataset
-from bodyschema.training.mlflow_model import DIGEST_TAG, directory_sha256
+from bodyschema.training.digest import DIGEST_TAG, directory_sha256
 from bodyschema.training.registry import load
 from bodyschema.training.train import _subset, train
 from tests.training.tiny_model import Boom, tiny_config

@@ -3,11 +3,13 @@
 Random Fourier features of the scaled joints with a linear read-out, fitted by full-batch gradient descent,
 one step per "epoch". The class attributes `fail_at` / `fail_with` (set by a test, not part of the config, so
 the run identity is unchanged) raise at that epoch — a crash, or a kill (KeyboardInterrupt) — after the epoch's
-checkpoint is written, so a second run with the same config resumes.
+checkpoint is written, so a second run with the same config resumes. `sleep_s` slows each epoch down, so a test
+can kill a training process (or start a second one) while it is fitting.
 """
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +30,7 @@ class TinyModel(BaseSensoryModel):
     kind = "tiny"
     fail_at: int = -1           # epoch at which fit raises (-1: never)
     fail_with: str = "error"    # "error" → Boom, "interrupt" → KeyboardInterrupt
+    sleep_s: float = 0.0        # seconds slept after each epoch's checkpoint
 
     def __init__(self, body, modality, output_shape, *, epochs: int = 30, lr: float = 0.5):
         super().__init__(body, modality, output_shape)
@@ -59,6 +62,7 @@ class TinyModel(BaseSensoryModel):
             self.epochs_run_.append(epoch)
             if on_epoch is not None:
                 on_epoch(epoch, {"train_loss": loss, "val_rmse": loss ** 0.5})
+            time.sleep(self.sleep_s)
             if epoch == self.fail_at:
                 raise KeyboardInterrupt if self.fail_with == "interrupt" else Boom(f"injected failure at {epoch}")
         self.weight_ = weight

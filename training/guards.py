@@ -1,0 +1,93 @@
+"""Resource guards of `train`, checked before any work starts: a fit that cannot fit in memory is refused.
+
+An exact GP keeps n×n matrices: `gpr` one per output dimension (its kernel is per output), `sklearn-gpr` one
+shared by all outputs. Peak memory, measured on this code (bench: ru_maxrss of a fit, n up to 4000, O up to 6),
+is the larger of the two phases:
+- hyper-parameters on m = min(hyper_points, n) samples: gpr ≈ 11 · m² · O, sklearn ≈ 13 · m² float64 values
+  (autograd keeps the kernel, its Cholesky and their gradients; sklearn's gradient is (m, m, Dz + 2));
+- conditioning on n = min(max_points, training samples): gpr ≈ 2.7 · n² · O, sklearn ≈ 3.2 · n² values.
+A GP over images (O = H·W, 4480 for 56×80) needs terabytes at a few thousand samples; it is refused outright.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from bodyschema.errors import must_be
+
+GP_KINDS = ("gpr", "sklearn-gpr")
+# Measured copies of an n×n (or m×m) float64 matrix at the peak, rounded up (see the module doc).
+FIT_COPIES = {"gpr": 12.0, "sklearn-gpr": 14.0}
+CONDITION_COPIES = {"gpr": 3.0, "sklearn-gpr": 3.5}
+PER_OUTPUT = {"gpr": True, "sklearn-gpr": False}      # gpr keeps one kernel per output dimension
+LIMIT_FRACTION = 0.8      # of the available memory: leave room for the dataset, Python and the other processes
+
+
+def check_config(model: str, modalities: tuple[str, ...]) -> None:
+    """Refuse a GP on images before anything is loaded (a GP per pixel cannot fit in any memory)."""
+    if model in GP_KINDS and "image" in modalities:
+        raise ValueError(must_be("model", "'pixel' for modality 'image'", f"{model!r} on 'image'",
+                                 "An exact GP keeps an n×n matrix per output, and an image has thousands of "
+                                 "outputs (56×80 = 4480): train the pixel decoder, --model pixel."))
+
+
+def gp_peak_bytes(kind: str, n: int, m: int, outputs: int) -> float:
+    """Estimated peak memory (bytes) of a GP fit on n conditioning and m hyper-parameter samples."""
+    per = outputs if PER_OUTPUT[kind] else 1
+    return 8.0 * per * max(FIT_COPIES[kind] * m * m, CONDITION_COPIES[kind] * n * n)
+
+
+def check_memory(kind: str, model, n_train: int, output_shape: tuple[int, ...],
+                 available: float | None = None) -> None:
+    """Refuse a GP fit whose estimated peak exceeds LIMIT_FRACTION of the available memory (`available` bytes;
+    None: read from the system). Other kinds are not estimated (mini-batch fits: memory bounded by the batch)."""
+    if kind not in GP_KINDS:
+        return
+    outputs = math.prod(output_shape)
+    n = min(n_train, int(getattr(model, "max_points", n_train)))
+    m = min(n, int(getattr(model, "hyper_points", n)))
+    need = gp_peak_bytes(kind, n, m, outputs)
+    available = available_memory() if available is None else available
+    limit = LIMIT_FRACTION * available
+    if need <= limit:
+        return
+    per = 8.0 * (outputs if PER_OUTPUT[kind] else 1)
+    fits = int(math.sqrt(limit / (per * max(FIT_COPIES[kind], CONDITION_COPIES[kind]))))
+    hint = (f"Train on fewer samples: --max-train {fits} (or --hyper max_points {fits} hyper_points "
+            f"{min(fits, m)})." if fits >= 2 else
+            "Even 2 samples do not fit: free memory, or use a kind that fits in mini-batches (--model mdn).")
+    raise ValueError(must_be(f"{kind} fit memory", f"at most {limit / 1e9:.3g} GB ({LIMIT_FRACTION:.0%} of the "
+                             f"{available / 1e9:.3g} GB available)",
+                             f"an estimated {need / 1e9:.3g} GB for n={n} samples × {outputs} outputs "
+                             f"(hyper-parameters on m={m})", hint))
+
+
+def available_memory() -> float:
+    """Bytes this process may still allocate: MemAvailable, capped by the cgroup (container) limit if any."""
+    values = [_meminfo_available()]
+    cgroup = _cgroup_room()
+    if cgroup is not None:
+        values.append(cgroup)
+    known = [v for v in values if v is not None]
+    return float(min(known)) if known else math.inf
+
+
+def _meminfo_available() -> int | None:
+    try:
+        for line in Path("/proc/meminfo").read_text().splitlines():
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return None
+
+
+def _cgroup_room() -> int | None:
+    """cgroup v2 memory.max − memory.current of this process's cgroup; None when unlimited or unknown."""
+    try:
+        limit = Path("/sys/fs/cgroup/memory.max").read_text().strip()
+        current = int(Path("/sys/fs/cgroup/memory.current").read_text().strip())
+    except (OSError, ValueError):
+        return None
+    return None if limit == "max" else max(int(limit) - current, 0)
