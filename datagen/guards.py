@@ -84,6 +84,7 @@ def probe_render(robot) -> None:
         raise RenderingUnavailable(must_be(
             f"rendering (MUJOCO_GL={os.environ.get('MUJOCO_GL')!r})",
             "a working OpenGL backend: egl (headless GPU or Mesa), osmesa (software) or glfw (a display)",
-            f"{type(e).__name__}: {e}", "Set MUJOCO_GL=egl or osmesa, or pass --no-images; nothing was written.")) from e
+            f"{type(e).__name__}: {e}",
+            "Set MUJOCO_GL=egl or osmesa, or pass --no-images; nothing was written.")) from e
     finally:
         robot.close()

@@ -74,8 +74,11 @@ def failing_shards(path: Path, root: zarr.Group) -> dict[int, str]:
     """{shard: why} for every done shard whose chunks are missing, unreadable or differ from its checksum."""
     if not has_checksums(root):
         return {}
-    names, step, n = data_arrays(root), int(root.attrs["chunk_len"]), int(root.attrs["n"])
-    digests = shard_digests(root)
+    names, digests = data_arrays(root), shard_digests(root)
+    if not names:
+        return {}
+    first = root[names[0]]
+    step, n = int(root.attrs.get("chunk_len") or first.chunks[0]), first.shape[0]
     faults = {i: f"{name} chunk missing" for name, rows in missing_chunks(path, root, names).items()
               for i in rows if digests[i]}
     for i in np.flatnonzero(digests):

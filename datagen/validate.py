@@ -156,7 +156,8 @@ def _report_values(tally: _Tally, attrs: dict, problems: list[str]) -> None:
                                     f"{where}, up to {worst:.4g} m/rad", REGENERATE_HINT))
         elif kind == "pixel":
             problems.append(must_be("ee_pixel", f"ee_xyz projected through attrs intrinsics/extrinsics "
-                                    f"(+-{PIXEL_TOL} px)", f"{count} rows off by up to {worst:.3g} px, first at row {row}"))
+                                    f"(+-{PIXEL_TOL} px)",
+                                    f"{count} rows off by up to {worst:.3g} px, first at row {row}"))
 
 
 def _done_digests(root: zarr.Group, problems: list[str]) -> np.ndarray | None:
@@ -166,7 +167,8 @@ def _done_digests(root: zarr.Group, problems: list[str]) -> np.ndarray | None:
     try:
         digests = np.asarray(root[DONE][:])
     except Exception as e:  # noqa: BLE001
-        problems.append(must_be(DONE, "readable", f"{type(e).__name__}: {e}", "A marker chunk is damaged: " + REPAIR_HINT))
+        problems.append(must_be(DONE, "readable", f"{type(e).__name__}: {e}",
+                                "A marker chunk is damaged: " + REPAIR_HINT))
         return None
     if not digests.all():
         problems.append(must_be("every shard", "done", f"shards {np.flatnonzero(digests == 0).tolist()[:20]} not done",
@@ -254,7 +256,8 @@ def summarize_store(path: str | Path, check: bool = True) -> str:
             xyz = np.asarray(root["ee_xyz"][:])
             xyz = xyz[np.isfinite(xyz).all(axis=1)]
             lo, hi = xyz.min(axis=0), xyz.max(axis=0)
-            lines.append("  ee_xyz box (m): " + ", ".join(f"{c} [{l:+.3f}, {h:+.3f}]" for c, l, h in zip("xyz", lo, hi)))
+            box = ", ".join(f"{c} [{l:+.3f}, {h:+.3f}]" for c, l, h in zip("xyz", lo, hi))
+            lines.append(f"  ee_xyz box (m): {box}")
         except Exception as e:  # noqa: BLE001 - a damaged or empty array is listed by validate_store below
             lines.append(f"  ee_xyz box (m): unavailable ({type(e).__name__})")
     size = sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
