@@ -65,12 +65,13 @@ def use_tracking(explicit: str | None = None) -> MlflowClient:
     check_tracking(uri)
     mlflow.set_tracking_uri(uri)
     mlflow.set_registry_uri(uri)
-    client = MlflowClient(uri, uri)
-    if sqlite_path(uri) is not None and uri not in _initialized:
-        with exclusive(registry_lock(uri)):
-            client.search_experiments(max_results=1)              # creates or migrates the tracking tables
-            client.search_registered_models(max_results=1)        # the registry store checks them too
-        _initialized.add(uri)
+    if sqlite_path(uri) is None or uri in _initialized:
+        return MlflowClient(uri, uri)
+    with exclusive(registry_lock(uri)):
+        client = MlflowClient(uri, uri)                       # creating the client creates or migrates the tables
+        client.search_experiments(max_results=1)              # (and these make sure of it, for both stores)
+        client.search_registered_models(max_results=1)
+    _initialized.add(uri)
     return client
 
 
