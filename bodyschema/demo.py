@@ -34,7 +34,8 @@ class DemoConfig:
 def run_demo(config: DemoConfig) -> None:
     stores = _datagen(config)
     champions = _train(config, stores["nao_arm"])
-    _evaluate(config, champions["gpr"])
+    _evaluate(config, champions["gpr"], "gpr")
+    _evaluate(config, champions["pixel"], "pixel")
     _act(config, champions["gpr"])
     from bodyschema.evaluation.report import ReportConfig, write_report
     from bodyschema.training.registry import list_models
@@ -91,12 +92,12 @@ def _train(config: DemoConfig, nao_store: Path) -> dict[str, str]:
     return uris
 
 
-def _evaluate(config: DemoConfig, gpr_uri: str) -> None:
+def _evaluate(config: DemoConfig, uri: str, kind: str) -> None:
     from bodyschema.evaluation.levels import LevelsConfig, run_levels
 
-    print(f"\n== AIF perception, levels 1–3, with {gpr_uri} loaded from the registry")
-    levels = LevelsConfig(models=(gpr_uri,), trials=config.trials, runs=config.runs, seed=config.seed,
-                          out=config.out / "results" / "levels", tracking_uri=config.tracking_uri)
+    print(f"\n== AIF perception, levels 1–3, with {uri} loaded from the registry")
+    levels = LevelsConfig(models=(uri,), trials=config.trials, runs=config.runs, seed=config.seed,
+                          out=config.out / "results" / f"levels_{kind}", tracking_uri=config.tracking_uri)
     summary = run_levels(levels)
     print(summary.paths["summary_md"].read_text())
     print("plots:", ", ".join(str(p) for k, p in summary.paths.items() if str(p).endswith(".png")))
