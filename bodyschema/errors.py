@@ -35,7 +35,7 @@ IF_USERS_FAULT = (TypeError, KeyError, IndexError, RuntimeError, EOFError, Attri
 # Library failures: (module, class) -> (what, expected, hint). Looked up only if the module is loaded.
 LIBRARY = {
     ("mlflow.exceptions", "MlflowException"): (
-        "the MLflow tracking server or registry", "reachable and answering",
+        "the MLflow request", "accepted by the tracking store and registry",
         "Check --tracking-uri (or $MLFLOW_TRACKING_URI; default sqlite:///<cwd>/mlflow.db) and "
         "`bodyschema registry list`."),
     ("mujoco", "FatalError"): (
@@ -62,7 +62,7 @@ def explain(error: BaseException) -> str | None:
             return text if " must be " in text else must_be(what, expected, _first_line(text), hint)
     if isinstance(error, pickle.UnpicklingError):
         return must_be("a saved model's state.pt", "tensors only (read with torch.load(weights_only=True))",
-                       _unpickler_reason(text), "The file was refused unread; it is not trusted. " + FILE_HINT)
+                       _unpickler_reason(text), "It was refused without running it. " + FILE_HINT)
     if " must be " in text and isinstance(error, (*ALWAYS, *IF_USERS_FAULT)):
         return text
     if isinstance(error, OSError):

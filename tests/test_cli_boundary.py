@@ -82,7 +82,7 @@ def test_library_failures_read_as_house_lines():
     assert explain(mujoco.FatalError("gladLoadGL error")).startswith("MuJoCo rendering must be available")
     assert "MUJOCO_GL=egl" in explain(mujoco.FatalError("gladLoadGL error"))
     assert explain(MlflowException("RESOURCE_DOES_NOT_EXIST: x")).startswith(
-        "the MLflow tracking server or registry must be reachable")
+        "the MLflow request must be accepted by the tracking store")
 
 
 # ---- main: exit codes, --debug, Ctrl-C ------------------------------------------------------------------
