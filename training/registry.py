@@ -68,11 +68,26 @@ def use_tracking(explicit: str | None = None) -> MlflowClient:
     if sqlite_path(uri) is None or uri in _initialized:
         return MlflowClient(uri, uri)
     with exclusive(registry_lock(uri)):
+        if not sqlite_path(uri).exists():
+            _create_sqlite(sqlite_path(uri))
         client = MlflowClient(uri, uri)                       # creating the client creates or migrates the tables
         client.search_experiments(max_results=1)              # (and these make sure of it, for both stores)
         client.search_registered_models(max_results=1)
     _initialized.add(uri)
     return client
+
+
+def _create_sqlite(db: Path) -> None:
+    """Create a fresh store beside `db` and rename it into place: a kill while MLflow creates its ~40 tables then
+    leaves no half-built database (the next process would die on "table ... already exists")."""
+    db.parent.mkdir(parents=True, exist_ok=True)
+    partial = db.with_name(db.name + ".creating")
+    for leftover in ("", "-journal", "-wal", "-shm"):     # of a creation killed before (a stale journal would be
+        partial.with_name(partial.name + leftover).unlink(missing_ok=True)   # rolled back into the new file)
+    fresh = MlflowClient(f"sqlite:///{partial}", f"sqlite:///{partial}")
+    fresh.search_experiments(max_results=1)
+    fresh.search_registered_models(max_results=1)
+    os.replace(partial, db)
 
 
 def check_tracking(uri: str, timeout_s: float = 5.0) -> None:

@@ -76,6 +76,40 @@ def test_two_processes_creating_the_tracking_database_both_succeed(tmp_path):
     assert len({out.strip() for out, _ in outs}) == 1, "both see the same experiment"
 
 
+def _tables(db: Path) -> int:
+    """How many tables a sqlite file holds right now (0 while it is missing or locked)."""
+    import sqlite3
+
+    if not db.exists():
+        return 0
+    try:
+        with sqlite3.connect(f"file:{db}?mode=ro", uri=True, timeout=0.01) as con:
+            return con.execute("SELECT count(*) FROM sqlite_master WHERE type = 'table'").fetchone()[0]
+    except sqlite3.Error:
+        return 0
+
+
+def test_a_creation_killed_half_way_leaves_nothing_the_next_process_trips_on(tmp_path):
+    """(a, kill) Before: kill -9 while MLflow created its tables left a half-built mlflow.db; every later command
+    died on "table ... already exists". Now the store is built as mlflow.db.creating and renamed when complete."""
+    from bodyschema.training.registry import use_tracking
+
+    db = tmp_path / "mlflow.db"
+    code = "import sys; from bodyschema.training.registry import use_tracking; use_tracking(sys.argv[1])"
+    proc = subprocess.Popen([sys.executable, "-c", code, f"sqlite:///{db}"], cwd=tmp_path, env=_env(),
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + START_S
+    while _tables(db) + _tables(db.with_name("mlflow.db.creating")) < 3:      # kill half-way through the tables
+        assert proc.poll() is None and time.monotonic() < deadline, "the creating process ended early"
+        time.sleep(0.01)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert not db.exists(), "no half-built mlflow.db (MLflow would re-run a migration on it and fail)"
+    client = use_tracking(f"sqlite:///{db}")
+    assert client.search_experiments() and client.search_registered_models() == []
+    assert not list(tmp_path.glob("*.creating*"))
+
+
 def test_the_same_command_started_twice_is_refused_naming_the_first_pid(workdir, kin_store, tiny_kind):
     """(b) Before: the second attached to the first's RUNNING run and crashed on its checkpoint."""
     first = _spawn(workdir, _config(kin_store, 60), sleep_s=0.5)
