@@ -8,10 +8,11 @@ finite-difference checks and gradient descent), channels_last for oneDNN, and th
 centre crop of the last stage (any H, W; C = 1 or more). The precision is one fixed number per pixel: a
 hyper-parameter, or 1/σ² with σ² the mean squared residual on the validation set (train set without one).
 
-Two named capacities (`size`): "lean" (FC 64, channels 32/16/8) and "pixel_aif", the size of Pixel-AIF's NAO
-decoder (FC 4→512→1120 = 16×7×10 at 56×80, transposed convolutions 16→64→16→C, each but the last followed by a
-3×3 convolution of the same width, which Pixel-AIF adds against checkerboard artifacts). Unlike Pixel-AIF it
-keeps ELU for ReLU and has no dropout: the AIF update differentiates g, and a seed must give one model.
+Two named capacities (`size`): "lean" (FC 64, channels 32/16/8) and "pixel_aif", the size of Pixel-AIF's
+NAO decoder (FC 4→512→1120 = 16×7×10 at 56×80, transposed convolutions 16→64→16→C, each but the last
+followed by a 3×3 convolution of the same width, which Pixel-AIF adds against checkerboard artifacts).
+Unlike Pixel-AIF it keeps ELU for ReLU and has no dropout: the AIF update differentiates g, and a seed must
+give one model.
 """
 
 from __future__ import annotations
