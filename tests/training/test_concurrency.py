@@ -115,7 +115,8 @@ def test_the_same_command_started_twice_is_refused_naming_the_first_pid(workdir,
     first = _spawn(workdir, _config(kin_store, 60), sleep_s=0.5)
     try:
         run_dir = _wait_for_checkpoint(workdir, first)
-        with pytest.raises(Locked, match=rf"run directory .*{run_dir.name} must be free .* Got 'locked by pid {first.pid}'"):
+        refused = rf"run directory .*{run_dir.name} must be free .* Got 'locked by pid {first.pid}'"
+        with pytest.raises(Locked, match=refused):
             train(tiny_config(kin_store, hyper={"epochs": "60"}))
         assert first.poll() is None, "the first one goes on undisturbed"
     finally:
@@ -225,7 +226,8 @@ def test_check_tracking_refuses_unknown_schemes_and_servers_that_do_not_answer(t
             check_tracking(uri)
     with pytest.raises(ValueError, match="tracking URI must be"):
         use_tracking("notascheme://x")
-    for uri in (f"sqlite:///{tmp_path}/x.db", f"file://{tmp_path}/mlruns", str(tmp_path), "postgresql+psycopg2://u@h/d"):
+    for uri in (f"sqlite:///{tmp_path}/x.db", f"file://{tmp_path}/mlruns", str(tmp_path),
+                "postgresql+psycopg2://u@h/d"):
         check_tracking(uri)                                            # known schemes; nothing is contacted
 
     with socket.socket() as closed:

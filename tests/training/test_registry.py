@@ -96,7 +96,7 @@ def test_load_refuses_a_version_without_a_recorded_digest(registered):
     digest = client.get_model_version(NAME, "1").tags[DIGEST_TAG]
     client.delete_model_version_tag(NAME, "1", DIGEST_TAG)
     try:
-        with pytest.raises(ValueError, match="must be recorded with a bodyschema.model_sha256 in the tracking database"):
+        with pytest.raises(ValueError, match="must be recorded with a bodyschema.model_sha256 in the tracking"):
             load(f"models:/{NAME}/1", tracking=registered)
     finally:
         client.set_model_version_tag(NAME, "1", DIGEST_TAG, digest)
