@@ -27,7 +27,7 @@ LIMIT_FRACTION = 0.8      # of the available memory: leave room for the dataset,
 def check_config(model: str, modalities: tuple[str, ...]) -> None:
     """Refuse a GP on images before anything is loaded (a GP per pixel cannot fit in any memory)."""
     if model in GP_KINDS and "image" in modalities:
-        raise ValueError(must_be("model", "'pixel' for modality 'image'", f"{model!r} on 'image'",
+        raise ValueError(must_be("model", "'pixel' for modality 'image'", f"{model} on image",
                                  "An exact GP keeps an n×n matrix per output, and an image has thousands of "
                                  "outputs (56×80 = 4480): train the pixel decoder, --model pixel."))
 
