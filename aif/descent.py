@@ -131,7 +131,8 @@ def levenberg_marquardt(objective: Objective, mu0: torch.Tensor, low, high, *, m
         lam[active[~ok]] = lam[active[~ok]] * nu[active[~ok]]
         nu[active[~ok]] = nu[active[~ok]] * 2
         moved = step.abs().amax(-1)
-        done = (moved < tol) | (gain <= F_NOISE * free[active].abs()) | (lam[active] > LM_LAMBDA_MAX)
+        energy = sum(e[active] for e in errors.values())                       # E = Σ ½εᵀΠε: F without ln|Π|
+        done = (moved < tol) | (gain <= F_NOISE * energy) | (lam[active] > LM_LAMBDA_MAX)
         converged[active[done]] = True
         active = active[~done]
     return DescentResult(mu, free, steps, converged, diverged, evaluations, rec.rows)

@@ -27,7 +27,7 @@ import torch
 
 from bodyschema.aif.perception import Perception, PerceptionConfig
 from bodyschema.evaluation.level_report import markdown
-from bodyschema.evaluation.levels import LevelsConfig, load_robot, resolve_model, run_levels
+from bodyschema.evaluation.levels import LevelsConfig, levels_update, load_robot, resolve_model, run_levels
 from bodyschema.evaluation.targets import eval_rng, initial_beliefs, make_targets
 
 PLAIN = PerceptionConfig(integrator="euler", dt=0.1, k_z=1.0, max_steps=5000, tol=0.0, max_step=None, record=True)
@@ -57,7 +57,7 @@ def label(models) -> str:
 
 def batched_vs_loop(models, n, precisions=None, noise=None):
     targets, mu0 = problem(models, n, noise=noise)
-    perception = Perception(models, replace(LevelsConfig().perception, record=False), precisions)  # the benchmark update
+    perception = Perception(models, replace(levels_update(LevelsConfig(), models), record=False), precisions)
     obs = targets.tensors([m.modality for m in models])
     t = time.perf_counter()
     batched = perception.infer(obs, mu0)
@@ -96,9 +96,9 @@ def plain_infer(models, obs, mu0, level, steps, chunk=100):
     return res
 
 
-def updates():
+def updates(models):
     """The updates compared in [2]: Pixel-AIF's plain protocol, the Gauss–Newton descent flow, LM, Adam, default."""
-    default = LevelsConfig().perception
+    default = levels_update(LevelsConfig(), models)
     return {"plain Pixel-AIF (Euler Δt 0.1, Π=1/Σ_v)": None,
             "Gauss–Newton descent (flow)": PerceptionConfig(step_control="descent"),
             "Levenberg–Marquardt": PerceptionConfig(method="lm"),
@@ -114,7 +114,7 @@ def compare_updates(models, n, levels=(1, 2, 3), plain_n=100, plain_steps=5000):
              f"{'evals/trial':>11s} {'wall s':>7s}"
     print(header)
     problems = {}                                                          # rendered once per (trials, level)
-    for name, cfg in updates().items():
+    for name, cfg in updates(models).items():
         floors = {}
         for level in (0, *levels):                                         # 0: start at the truth
             key = (plain_n if cfg is None else n, max(level, 1))
@@ -220,7 +220,7 @@ def main():
             full_levels(args.model, n, runs, args.out, "+".join(args.model))
     if args.train_pixel:
         pixel = train_pixel("planar2", args.train_pixel, (32, 32), args.pixel_epochs)
-        pixel.save(args.out / "pixel_decoder")                       # reuse: --model <out>/pixel_decoder
+        pixel.save(args.out / "pixel_decoder")               # reuse: --model trusted:<out>/pixel_decoder
         pixel_levels(pixel, n, runs, args.out, "planar2 pixel decoder (image)")
 
 if __name__ == "__main__":

@@ -24,7 +24,7 @@ import torch
 import tyro
 
 from bodyschema.aif.multistart import infer_multistart
-from bodyschema.aif.perception import Perception, PerceptionConfig
+from bodyschema.aif.perception import METHODS, Perception, PerceptionConfig
 from bodyschema.errors import must_be
 from bodyschema.evaluation import level_report
 from bodyschema.evaluation.mlflow_log import log_benchmark, table_metrics
@@ -64,6 +64,9 @@ class LevelsConfig:
     out: Path = Path("results/levels")
     noise: tuple[tuple[str, float], ...] = ()   # observation noise σ per modality (m, px, rad, intensity)
     perception: PerceptionConfig = PerceptionConfig(record=True, step_control="descent")  # monotone: see perception.py
+    update: str = "auto"               # perception.method for this run; "auto": "adam" with an image model (its F has
+                                       # shallow local minima that Gauss–Newton jumps land in; bench/aif.py [2]),
+                                       # else "flow" (Gauss–Newton descent: exact in ~5–20 steps on kinematics)
     multistart: int = 8                # starts per trial for the level-3 remedy (0: off)
     screen_steps: int = 5              # multi-start: updates before pruning (a descent trial converges in ~15)
     keep: int = 2                      # multi-start: starts per trial refined to convergence
@@ -83,6 +86,8 @@ class LevelsConfig:
         for name in ("trials", "runs"):
             if getattr(self, name) < 1:
                 raise ValueError(must_be(name, "at least 1", getattr(self, name)))
+        if self.update not in ("auto", *METHODS):
+            raise ValueError(must_be("update", f"'auto' or one of {METHODS}", self.update))
         if self.multistart < 0 or self.multistart == 1:
             raise ValueError(must_be("multistart", "0 (off) or at least 2 starts", self.multistart))
 
@@ -148,6 +153,14 @@ def trained_workspace(models: Sequence, robot) -> np.ndarray:
         raise ValueError(must_be("the models' joint ranges", "overlapping", [list(m.body.q_low) for m in models],
                                  "Evaluate together only models trained on overlapping workspaces."))
     return np.stack([low, high], axis=1)
+
+
+def levels_update(config: LevelsConfig, models: Sequence) -> PerceptionConfig:
+    """config.perception with the update method of this run (config.update, "auto" resolved per model kind)."""
+    method = config.update
+    if method == "auto":
+        method = "adam" if any(m.modality == "image" for m in models) else "flow"
+    return replace(config.perception, method=method)
 
 
 def resolve_encoder(spec: str | None, robot, tracking_uri: str | None = None):
@@ -243,7 +256,7 @@ def run_levels(config: LevelsConfig = LevelsConfig(), models: Sequence | None = 
     robot = load_robot(models, config.image_size)
     encoder = resolve_encoder(config.encoder, robot, config.tracking_uri)
     on_device(models + ([encoder] if encoder else []), config.device)
-    perception = Perception(models, config.perception)
+    perception = Perception(models, levels_update(config, models))
     has_image = any(m.modality == "image" for m in models) or encoder is not None
     rows, per_trial, curves = [], {}, {}
     jobs = [(run, level, ms, enc) for run in range(config.runs) for level in config.levels
