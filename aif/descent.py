@@ -12,7 +12,11 @@ updates here follow the flow more closely and keep descending F monotonically (t
           prediction (ratio ρ) and grows on every rejected step: the trust region starts small and grows on agreement.
   "adam"  first-order flow with per-joint adaptive steps and momentum (Kingma & Ba 2015) on −∂F/∂μ, bounded by
           max_step; on a plateau (no new best F for `patience` steps) the step halves and restarts from the best
-          belief. It needs only F's gradient (one VJP for an image), no Jacobian.
+          belief (a new best counts as progress only beyond F's float noise, so a float32 decoder's jitter does not
+          keep it going). It needs only F's gradient (one VJP for an image), no Jacobian.
+  "adam+lm" Adam until its step has halved to `handover` rad (it oscillates in one basin), then LM from its best
+          belief: Adam crosses the rough terrain, LM then converges in a few steps where Adam would crawl along an
+          ill-conditioned valley (measured on a 56×80 decoder: F still falling after 250 Adam steps from the truth).
 
 Every trial stops on its own: lm when an accepted step moves less than tol, or its predicted gain is below F's float
 noise (a float32 decoder evaluates F to ~1e-7 relative), or λ saturates; adam when its step size falls below tol.
@@ -26,7 +30,7 @@ from dataclasses import dataclass
 
 import torch
 
-DESCENT_METHODS = ("lm", "adam")
+DESCENT_METHODS = ("lm", "adam", "adam+lm")
 F_NOISE = 1e-7                  # relative rise/gain of F not resolvable for float32 models
 LM_LAMBDA_MAX = 1e10            # λ beyond this: no descent left within float noise (stalled = converged)
 ADAM_BETAS = (0.9, 0.999)
@@ -180,12 +184,14 @@ def adam(objective: Objective, mu0: torch.Tensor, low, high, *, max_steps: int, 
         mu[active] = torch.where(finite[:, None], new, best_mu[active])
         free[active] = torch.where(finite, trial.free, best_free[active])
         grad[active] = torch.where(finite[:, None], trial.grad, grad[active])
+        energy = sum(trial.errors.values())                                  # E: the scale of F's float noise
         better = finite & (trial.free < best_free[active])
+        gained = better & (trial.free < best_free[active] - F_NOISE * energy)   # progress beyond float noise
         acc = active[better]
         best_mu[acc], best_free[acc], best_grad[acc] = new[better], trial.free[better], trial.grad[better]
         for k, v in trial.errors.items():
             best_errors[k][acc] = v[better]
-        since[active] = torch.where(better, 0, since[active] + 1)
+        since[active] = torch.where(gained, 0, since[active] + 1)
         plateau = active[(since[active] >= patience) | ~finite]
         if plateau.numel():                                                      # halve the step, restart at best
             rate[plateau] *= 0.5
@@ -196,3 +202,18 @@ def adam(objective: Objective, mu0: torch.Tensor, low, high, *, max_steps: int, 
         converged[active[done]] = True
         active = active[~done]
     return DescentResult(best_mu, best_free, steps, converged, diverged, evaluations, rec.rows)
+
+
+def adam_then_lm(objective: Objective, mu0: torch.Tensor, low, high, *, max_steps: int, tol: float, lr: float,
+                 patience: int, handover: float, max_step: float | None, record: bool) -> DescentResult:
+    """Adam until its step is below `handover` rad, then Levenberg–Marquardt (λ₀ = 0.1) from its best belief."""
+    first = adam(objective, mu0, low, high, max_steps=max_steps, tol=handover, lr=lr, patience=patience,
+                 max_step=max_step, record=record)
+    second = levenberg_marquardt(objective, first.mu, low, high, max_steps=max_steps, tol=tol, damping=0.1,
+                                 max_step=max_step, record=record)
+    trajectory = None
+    if record:                                                             # one time axis: Adam's rows, then LM's
+        trajectory = {name: first.trajectory.get(name, []) + second.trajectory.get(name, [])
+                      for name in {*first.trajectory, *second.trajectory}}
+    return DescentResult(second.mu, second.free, first.steps + second.steps, second.converged,
+                         first.diverged | second.diverged, first.evaluations + second.evaluations, trajectory)

@@ -60,10 +60,12 @@ class PerceptionConfig:
     record: bool = False           # keep the trajectory of μ̃, F and the prediction errors
     step_control: str = "none"     # "descent": a step that raises F is undone and that trial's Δt shrinks (order 0)
     method: str = "flow"           # "flow": generalized filtering (integrator above); order 0 only: "lm"
-                                   # (Levenberg–Marquardt) or "adam" (adaptive first-order flow): descent.py
+                                   # (Levenberg–Marquardt), "adam" (adaptive first-order flow) or "adam+lm"
+                                   # (Adam, then LM once in a basin): descent.py
     damping: float = 1.0           # lm: initial λ relative to diag H; large = short gradient-like first steps
     lr: float = 0.02               # adam: initial step per joint, rad
     patience: int = 5              # adam: steps without a new best F before the step halves
+    handover: float = 1e-2         # adam+lm: Adam's step (rad) below which LM takes over (one halving of lr)
 
     def __post_init__(self):
         for name in ("dt", "k_z", "prior_precision", "attractor_gain", "tol", "divergence_step"):
@@ -92,7 +94,7 @@ class PerceptionConfig:
         if self.method != "flow" and self.order > 0:
             raise ValueError(must_be("method", "'flow' when order > 0", self.method,
                                      "lm and adam minimise F at order 0 (static perception)."))
-        for name in ("damping", "lr"):
+        for name in ("damping", "lr", "handover"):
             if not getattr(self, name) > 0:
                 raise ValueError(must_be(name, "positive", getattr(self, name)))
         if self.patience < 1:
@@ -304,8 +306,11 @@ class Perception:
         common = dict(max_steps=cfg.max_steps, tol=cfg.tol, max_step=cfg.max_step, record=cfg.record)
         if cfg.method == "lm":
             r = descent.levenberg_marquardt(objective, mu0, self.low, self.high, damping=cfg.damping, **common)
-        else:
+        elif cfg.method == "adam":
             r = descent.adam(objective, mu0, self.low, self.high, lr=cfg.lr, patience=cfg.patience, **common)
+        else:
+            r = descent.adam_then_lm(objective, mu0, self.low, self.high, lr=cfg.lr, patience=cfg.patience,
+                                     handover=cfg.handover, **common)
         traj = None if r.trajectory is None else \
             {name: torch.stack(rows) if rows else torch.empty(0, len(mu0)) for name, rows in r.trajectory.items()}
         diverged_step = torch.where(r.diverged, 0, -1)

@@ -103,6 +103,7 @@ def updates(models):
             "Gauss–Newton descent (flow)": PerceptionConfig(step_control="descent"),
             "Levenberg–Marquardt": PerceptionConfig(method="lm"),
             "Adam (first-order adaptive)": PerceptionConfig(method="adam"),
+            "Adam, then LM in the basin": PerceptionConfig(method="adam+lm"),
             f"default ({default.method})": replace(default, record=False)}
 
 

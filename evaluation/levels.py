@@ -64,8 +64,8 @@ class LevelsConfig:
     out: Path = Path("results/levels")
     noise: tuple[tuple[str, float], ...] = ()   # observation noise σ per modality (m, px, rad, intensity)
     perception: PerceptionConfig = PerceptionConfig(record=True, step_control="descent")  # monotone: see perception.py
-    update: str = "auto"               # perception.method for this run; "auto": "adam" with an image model (its F has
-                                       # shallow local minima that Gauss–Newton jumps land in; bench/aif.py [2]),
+    update: str = "auto"               # perception.method for this run; "auto": "adam+lm" with an image model (its F
+                                       # has shallow local minima that Gauss–Newton jumps land in; bench/aif.py [2]),
                                        # else "flow" (Gauss–Newton descent: exact in ~5–20 steps on kinematics)
     multistart: int = 8                # starts per trial for the level-3 remedy (0: off)
     screen_steps: int = 5              # multi-start: updates before pruning (a descent trial converges in ~15)
@@ -159,7 +159,7 @@ def levels_update(config: LevelsConfig, models: Sequence) -> PerceptionConfig:
     """config.perception with the update method of this run (config.update, "auto" resolved per model kind)."""
     method = config.update
     if method == "auto":
-        method = "adam" if any(m.modality == "image" for m in models) else "flow"
+        method = "adam+lm" if any(m.modality == "image" for m in models) else "flow"
     return replace(config.perception, method=method)
 
 

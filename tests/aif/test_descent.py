@@ -13,8 +13,8 @@ from tests.aif.toys import ToyBlobImage, perturb, planar_poses
 from tests.toy_models import ToyPlanarArm
 
 DEG = math.pi / 180
-METHODS = [PerceptionConfig(method="lm"), PerceptionConfig(method="adam")]
-IDS = ["lm", "adam"]
+METHODS = [PerceptionConfig(method="lm"), PerceptionConfig(method="adam"), PerceptionConfig(method="adam+lm")]
+IDS = ["lm", "adam", "adam+lm"]
 
 
 @pytest.fixture
@@ -73,7 +73,7 @@ def test_lm_builds_the_image_jacobian_for_its_curvature_and_adam_only_vjps():
     image = ToyBlobImage()
     q = planar_poses(30, seed=24)
     obs, mu0 = {"image": image.predict(q)}, perturb(q, seed=25, max_rad=0.1)
-    for config, used, unused in ((METHODS[0], "jacobian", "vjp"), (METHODS[1], "vjp", "jacobian")):
+    for config, used, unused in ((METHODS[0], "jacobian", "vjp"), (METHODS[1], "vjp", "jacobian")):   # LM, Adam
         image.calls = {"vjp": 0, "jacobian": 0}
         result = Perception([image], config).infer(obs, mu0)
         assert (result.mu - q).abs().max() / DEG < 0.1, config.method
