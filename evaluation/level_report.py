@@ -9,7 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-MAIN_COLUMNS = ("joint_err_deg", "ee_err_mm", "success", "steps", "converged", "diverged", "wall_s")
+MAIN_COLUMNS = ("joint_err_deg", "joint_err_median_deg", "ee_err_mm", "success", "all_joints_2deg",
+                "evaluations_per_trial", "converged", "diverged", "wall_s")
 
 
 def aggregate(rows: Sequence[Mapping]) -> list[dict]:

@@ -234,6 +234,7 @@ def evaluate_level(perception: Perception, robot, targets, level: int, rng: np.r
            "joint_err_deg": float(mean_err.mean()), "joint_err_median_deg": float(np.median(mean_err)),
            **{f"joint_err_deg/{name}": float(e) for name, e in zip(robot.joint_names, err.mean(axis=0))},
            "ee_err_mm": float(ee_mm.mean()), "success": float((mean_err < success_deg).mean()),
+           "all_joints_2deg": float((err <= 2.0).all(axis=1).mean()),   # Pixel-AIF's criterion: every joint ≤ 2°
            "steps": float(result.steps.double().mean()), "converged": float(result.converged.double().mean()),
            "diverged": int(result.n_diverged), "evaluations_per_trial": evaluations / len(mu), "wall_s": wall}
     image = next((m for m in models if m.modality == "image"), None)
