@@ -59,22 +59,27 @@ class DescentResult:
     trajectory: dict[str, list[torch.Tensor]] | None
 
 
+def record_step(trajectory: dict, b: int, active, u, free, errors) -> None:
+    """Append one step's rows to a trajectory: beliefs u (b_a, K, Dz), F and prediction errors of the active trials,
+    NaN for the trials that stopped. Shared with the generalized-filtering loop (perception.py)."""
+    mu = torch.full((b, *u.shape[1:]), float("nan"), dtype=u.dtype)
+    mu[active] = u
+    trajectory["mu"].append(mu)
+    for name, values in (("F", free), *((f"error:{m}", e) for m, e in errors.items())):
+        row = torch.full((b,), float("nan"), dtype=free.dtype)
+        row[active] = values
+        trajectory.setdefault(name, []).append(row)
+
+
 class _Recorder:
-    """Per-step rows of the trajectory: the accepted belief, F and the prediction errors; NaN once a trial stopped."""
+    """Per-step rows of the trajectory (record_step), or nothing when recording is off."""
 
     def __init__(self, b: int, on: bool):
         self.b, self.rows = b, ({"mu": [], "F": []} if on else None)
 
     def add(self, active, mu, free, errors):
-        if self.rows is None:
-            return
-        full = torch.full((self.b, 1, mu.shape[1]), float("nan"), dtype=mu.dtype)
-        full[active, 0] = mu
-        self.rows["mu"].append(full)
-        for name, values in (("F", free), *((f"error:{m}", e) for m, e in errors.items())):
-            row = torch.full((self.b,), float("nan"), dtype=free.dtype)
-            row[active] = values
-            self.rows.setdefault(name, []).append(row)
+        if self.rows is not None:
+            record_step(self.rows, self.b, active, mu[:, None], free, errors)
 
 
 def _clamp(mu, low, high):

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import torch
 
 from bodyschema.aif import descent
+from bodyschema.aif.descent import record_step
 from bodyschema.aif.free_energy import check_models, check_observations, model_input, sensory_terms
 from bodyschema.aif.generalized import implicit_step, local_linear_step, shift, shift_matrix
 from bodyschema.aif.priors import PRIORS, attractor_flow, prior_terms
@@ -273,7 +274,7 @@ class Perception:
                     gain = gain - 0.5 * torch.einsum("bi,bij,bj->b", step, hess, step)
                 moved = torch.where(gain <= DESCENT_SLACK * f_a.abs(), torch.zeros_like(moved), moved)
             if trajectory is not None:
-                self._record(trajectory, b, active, ua, f_a, errors)
+                record_step(trajectory, b, active, ua, f_a, errors)
             free[active] = torch.where(torch.isfinite(f_a), f_a, free[active])
             cand[active[~bad]] = new[~bad]
             if not descent:
@@ -403,13 +404,3 @@ class Perception:
         if prior is not None:
             weighted["prior"] = 0.5 * cfg.prior_precision * prior.error.pow(2).sum(dim=(1, 2))
         return free, grad, hess, weighted
-
-    @staticmethod
-    def _record(trajectory, b, active, ua, f_a, errors):
-        mu = torch.full((b, *ua.shape[1:]), float("nan"), dtype=ua.dtype)
-        mu[active] = ua
-        trajectory["mu"].append(mu)
-        for name, values in (("F", f_a), *((f"error:{m}", e) for m, e in errors.items())):
-            row = torch.full((b,), float("nan"), dtype=ua.dtype)
-            row[active] = values
-            trajectory.setdefault(name, []).append(row)
