@@ -203,13 +203,27 @@ class Robot:
         return np.stack([du, dv], axis=1)
 
     # ---- kinematics ----------------------------------------------------------------------------------
-    def fk(self, q) -> np.ndarray:
-        """(N, Dq) rad → (N, 3) m, the `ee` site position in the world."""
-        return self._fk(self.check_q(q))
+    def fk(self, q, check: bool = True) -> np.ndarray:
+        """(N, Dq) rad → (N, 3) m, the `ee` site position in the world (mj_kinematics per pose).
 
-    def jacobian(self, q) -> np.ndarray:
-        """(N, Dq) rad → (N, 3, Dq) m/rad, d ee / d q from mj_jacSite."""
-        return self._jacobian(self.check_q(q))
+        check=False skips `check_q` (shape, finiteness, joint limits): for simulated states, which may pass the
+        limits by a little, in hot loops."""
+        return self._fk(self.check_q(q) if check else np.asarray(q, dtype=np.float64))
+
+    def jacobian(self, q, check: bool = True) -> np.ndarray:
+        """(N, Dq) rad → (N, 3, Dq) m/rad, d ee / d q from mj_jacSite; check as in `fk`."""
+        return self._jacobian(self.check_q(q) if check else np.asarray(q, dtype=np.float64))
+
+    def fk_and_jacobian(self, q, check: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """(N, Dq) rad → ee (N, 3) m and d ee / d q (N, 3, Dq) m/rad, the fastest way: vectorized over the hinge
+        chain for large batches (≥ VECTORIZE_FROM poses), MuJoCo per pose otherwise; check as in `fk`."""
+        return self._fk_and_jacobian(self.check_q(q) if check else np.asarray(q, dtype=np.float64))
+
+    @property
+    def actuation(self) -> str:
+        """What the actuators take: "position" (servos: ctrl is a joint target, rad) or "torque" (motors: ctrl is
+        a joint torque, N·m); `Robot.load(actuators=...)` chose it."""
+        return "position" if self._position_actuated else "torque"
 
     def _fk(self, q: np.ndarray) -> np.ndarray:
         m, d, qpos, ee, kinematics = self.model, self._kin, self._qpos, self._ee, mujoco.mj_kinematics
@@ -241,9 +255,10 @@ class Robot:
         return xyz, jac
 
     # ---- sensing -------------------------------------------------------------------------------------
-    def render(self, q) -> np.ndarray:
-        """(N, Dq) rad → (N, H, W) uint8 grayscale or (N, H, W, 3) uint8 RGB from the fixed camera."""
-        return self._render(self.check_q(q))
+    def render(self, q, check: bool = True) -> np.ndarray:
+        """(N, Dq) rad → (N, H, W) uint8 grayscale or (N, H, W, 3) uint8 RGB from the fixed camera; check as in
+        `fk`."""
+        return self._render(self.check_q(q) if check else np.asarray(q, dtype=np.float64))
 
     def _render(self, q: np.ndarray) -> np.ndarray:
         renderer, camera, rgb_buf = self._ensure_renderer()

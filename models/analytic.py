@@ -55,7 +55,7 @@ class AnalyticModel(BaseSensoryModel):
         if self.modality == "joints":
             return z.clone()
         q = _numpy(z)                                                     # (B, Dz) rad, float64
-        xyz = self.robot._fk(q)                                           # (B, 3) m
+        xyz = self.robot.fk(q, check=False)                               # (B, 3) m
         x = self.robot.project(xyz) if self.modality == "ee_pixel" else xyz   # (B, 2) px | (B, 3) m
         return torch.from_numpy(x).to(device=z.device, dtype=z.dtype)
 
@@ -63,7 +63,7 @@ class AnalyticModel(BaseSensoryModel):
         if self.modality == "joints":
             eye = torch.eye(self.latent_dim, dtype=z.dtype, device=z.device)
             return eye.expand(z.shape[0], -1, -1).clone()                 # (B, Dz, Dz)
-        xyz, jac = self.robot._fk_and_jacobian(_numpy(z))                 # (B, 3) m, (B, 3, Dz) m/rad
+        xyz, jac = self.robot.fk_and_jacobian(_numpy(z), check=False)     # (B, 3) m, (B, 3, Dz) m/rad
         if self.modality == "ee_pixel":
             jac = self.robot.project_jacobian(xyz) @ jac                  # (B, 2, 3) px/m @ (B, 3, Dz) → (B, 2, Dz)
         return torch.from_numpy(jac).to(device=z.device, dtype=z.dtype)

@@ -123,7 +123,7 @@ def test_vectorized_chain_equals_the_mujoco_calls(name):
     r = robot(name)
     q = random_q(r, 2 * VECTORIZE_FROM, seed=9)
     obs = r.observe(q, image=False)                                            # batch ≥ VECTORIZE_FROM: numpy chain
-    xyz, jac = r._fk_and_jacobian(q)
+    xyz, jac = r.fk_and_jacobian(q)
     np.testing.assert_allclose(xyz, r.fk(q), atol=1e-12)                      # fk: mj_kinematics per pose
     np.testing.assert_allclose(jac, r.jacobian(q), atol=1e-12)                # jacobian: mj_jacSite per pose
     np.testing.assert_allclose(obs["ee_xyz"], xyz.astype(np.float32))
