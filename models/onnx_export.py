@@ -1,0 +1,152 @@
+"""ONNX export of a fitted model: joint angles in rad in, the sensory prediction out, the scaling inside the graph.
+
+The exported graph is a small pure-torch module (`PredictGraph`) that calls the model's own computation, not the
+public wrapper: the wrapper's edge checks (`isfinite`, shape and dtype errors, device moves) are what
+`torch.export` cannot trace, while the hooks behind them are plain tensor code. So the graph holds
+    rad → [-1, 1] (the body's `to_unit`) → network (or the GP's k(u, X) α) → output de-standardization
+with no second copy of any of it, and `verify_onnx` checks it against the wrapper's `predict` with onnxruntime.
+
+Kinds: "mdn" (either mode), "pixel", "mm_member" (MLP or pixel decoder) and "gpr" (its posterior mean: the
+RBF kernel against the cached training inputs and α, a few matmuls and one exp) map q (B, Dz) rad → x (B, *out);
+"encoder" maps images (B, H, W[, C]) in [0, 1] → q (B, Dz) rad. Not exportable: "analytic" (MuJoCo's forward
+kinematics, no tensor graph) and "sklearn_gpr" (scikit-learn computes its mean in numpy).
+
+dtype: float64 graphs for vector models (error vs `predict` ~1e-12); float32 for models with convolutions,
+because onnxruntime's CPU provider has no float64 Conv / ConvTranspose kernels. Their weights are float32
+anyway; the float32 graph rounds differently from torch by ~1e-7 relative, far below 1e-5 on (0, 1) intensities.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+from bodyschema.errors import must_be
+
+OPSET = 18                              # onnxruntime ≥ 1.14 runs it; torch's exporter targets ≥ 18
+NETWORK_KINDS = ("mdn", "pixel", "mm_member")
+EXPORTABLE = (*NETWORK_KINDS, "encoder", "gpr")
+CONV_KINDS = ("pixel", "encoder")       # float32 graphs (see the module doc)
+
+
+class PredictGraph(nn.Module):
+    """q (B, Dz) rad → x (B, *output_shape), by the model's hooks (networks: `_outputs` on its weights)."""
+
+    def __init__(self, model, dtype: torch.dtype):
+        super().__init__()
+        self.model = [model]                            # a list: keeps the wrapper out of the module tree
+        self.net = model._net(dtype) if model.kind in NETWORK_KINDS else None   # registered: weights → initializers
+
+    def forward(self, q):
+        model = self.model[0]
+        if self.net is None:                            # gpr: closed form in float64 (its own `_predict`)
+            return model._predict(q).to(q.dtype)
+        return model._outputs(self.net, model.body.to_unit(q))
+
+
+class EncodeGraph(nn.Module):
+    """images (B, H, W[, C]) in [0, 1] → q (B, Dz) rad: the encoder's network, then the body's `from_unit`."""
+
+    def __init__(self, encoder):
+        super().__init__()
+        self.body = encoder.body
+        self.net = encoder.net_
+
+    def forward(self, x):
+        return self.body.from_unit(self.net(x))
+
+
+def graph_dtype(model) -> torch.dtype:
+    return torch.float32 if _is_conv(model) else torch.float64
+
+
+def _is_conv(model) -> bool:
+    return model.kind in CONV_KINDS or getattr(model, "decoder", None) == "pixel"
+
+
+def check_exportable(model) -> None:
+    kind = getattr(model, "kind", type(model).__name__)
+    if kind not in EXPORTABLE:
+        why = {"analytic": "MuJoCo's forward kinematics has no tensor graph: export the robot's MJCF instead",
+               "sklearn_gpr": "scikit-learn computes its mean in numpy: train kind 'gpr' for an exportable GP"}
+        raise ValueError(must_be("model kind", f"one of {list(EXPORTABLE)} to export ONNX", kind,
+                                 why.get(kind, "")))
+    if not model.is_fitted:
+        raise ValueError(must_be("model", "fitted", "a model without learned state", "Call `fit` first."))
+
+
+def export_onnx(model, out: str | Path, *, opset: int = OPSET) -> Path:
+    """Write `out` (.onnx, one file): input "q" (B, Dz) rad ("image" for an encoder), output "x" ("q"), a dynamic
+    batch axis, and metadata (opset, kind, modality, body, shapes, units) in the file's `metadata_props`."""
+    import onnx
+
+    check_exportable(model)
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    graph, example, names = _graph(model)
+    # torch's exporter warns once per torchvision operator it cannot register (torchvision is not a dependency)
+    logging.getLogger("torch.onnx._internal.exporter._registration").setLevel(logging.ERROR)
+    with torch.no_grad():
+        program = torch.onnx.export(graph, (example,), dynamo=True, opset_version=opset, verbose=False,
+                                    input_names=[names[0]], output_names=[names[1]], optimize=True,
+                                    dynamic_shapes=({0: torch.export.Dim("batch", min=1)},), external_data=False)
+    proto = program.model_proto
+    onnx.helper.set_model_props(proto, metadata(model, opset))
+    onnx.checker.check_model(proto)
+    onnx.save_model(proto, str(out))
+    return out
+
+
+def _graph(model) -> tuple[nn.Module, torch.Tensor, tuple[str, str]]:
+    """(module, an example input of batch 2, (input name, output name))."""
+    dtype = graph_dtype(model)
+    if model.kind == "encoder":
+        return EncodeGraph(model).eval(), torch.rand(2, *model.image_shape, dtype=torch.float32), ("image", "q")
+    z = model.body.from_unit(torch.zeros(2, model.latent_dim, dtype=dtype))        # (2, Dz) mid-range, rad
+    return PredictGraph(model, dtype).eval(), z, ("q", "x")
+
+
+def metadata(model, opset: int) -> dict[str, str]:
+    """What a consumer needs beside the graph: units, shapes, joint order and where the numbers came from."""
+    encoder = model.kind == "encoder"
+    dtype = "float32" if encoder else str(graph_dtype(model)).removeprefix("torch.")
+    return {"bodyschema.opset": str(opset), "bodyschema.kind": model.kind, "bodyschema.modality": model.modality,
+            "bodyschema.body": json.dumps(model.body.to_dict()), "bodyschema.dtype": dtype,
+            "bodyschema.input": (f"image (B, {', '.join(map(str, model.image_shape))}) {dtype} in [0, 1]" if encoder
+                                 else f"q (B, {model.latent_dim}) {dtype} rad, joints {list(model.body.joint_names)}"),
+            "bodyschema.output": (f"q (B, {model.latent_dim}) rad" if encoder
+                                  else f"x (B, {', '.join(map(str, model.output_shape))}) {model.modality}")}
+
+
+def read_metadata(path: str | Path) -> dict[str, str]:
+    """The `metadata_props` of an exported file, plus its opset as "opset"."""
+    import onnx
+
+    proto = onnx.load(str(path), load_external_data=False)
+    props = {p.key: p.value for p in proto.metadata_props}
+    props["opset"] = str(next(o.version for o in proto.opset_import if o.domain in ("", "ai.onnx")))
+    return props
+
+
+def verify_onnx(model, path: str | Path, *, n: int = 64, seed: int = 0) -> float:
+    """Max |onnxruntime(path) − model| over n seeded inputs: joint angles spread over (and 10 % beyond) the scaled
+    range against `predict` in float64; images in [0, 1] against `encode` for an encoder."""
+    import onnxruntime as ort
+
+    session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    gen = torch.Generator().manual_seed(seed)
+    if model.kind == "encoder":
+        x = torch.rand(n, *model.image_shape, generator=gen)                        # (n, H, W[, C]) float32
+        want = model.encode(x).double()                                             # (n, Dz) rad
+    else:
+        u = torch.rand(n, model.latent_dim, generator=gen, dtype=torch.float64) * 2.2 - 1.1
+        x = model.body.from_unit(u)                                                  # (n, Dz) rad
+        want = model.predict(x)                                                      # (n, *out) float64 reference
+        x = x.to(graph_dtype(model))
+    (got,) = session.run(None, {session.get_inputs()[0].name: x.numpy()})
+    return float(np.abs(got.astype(np.float64) - want.numpy()).max())
