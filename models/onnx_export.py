@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +30,7 @@ from torch import nn
 from bodyschema.errors import must_be
 
 OPSET = 18                              # onnxruntime ≥ 1.14 runs it; torch's exporter targets ≥ 18
+TOLERANCE = 1e-5                        # max |onnxruntime − model| accepted (output units; rad for an encoder)
 NETWORK_KINDS = ("mdn", "pixel", "mm_member")
 EXPORTABLE = (*NETWORK_KINDS, "encoder", "gpr")
 CONV_KINDS = ("pixel", "encoder")       # float32 graphs (see the module doc)
@@ -98,7 +100,9 @@ def export_onnx(model, out: str | Path, *, opset: int = OPSET) -> Path:
     proto = program.model_proto
     onnx.helper.set_model_props(proto, metadata(model, opset))
     onnx.checker.check_model(proto)
-    onnx.save_model(proto, str(out))
+    tmp = out.with_name(f".{out.name}.partial")
+    onnx.save_model(proto, str(tmp))
+    os.replace(tmp, out)                                # a killed export leaves no half-written OUT
     return out
 
 
@@ -120,7 +124,8 @@ def metadata(model, opset: int) -> dict[str, str]:
             "bodyschema.input": (f"image (B, {', '.join(map(str, model.image_shape))}) {dtype} in [0, 1]" if encoder
                                  else f"q (B, {model.latent_dim}) {dtype} rad, joints {list(model.body.joint_names)}"),
             "bodyschema.output": (f"q (B, {model.latent_dim}) rad" if encoder
-                                  else f"x (B, {', '.join(map(str, model.output_shape))}) {model.modality}")}
+                                  else f"x (B, {', '.join(map(str, model.output_shape))}) {model.modality}"),
+            "bodyschema.source": json.dumps(getattr(model, "provenance", None) or {})}   # registry name, version, sha
 
 
 def read_metadata(path: str | Path) -> dict[str, str]:

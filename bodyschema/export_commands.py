@@ -1,0 +1,99 @@
+"""The `bodyschema export dataset|onnx` and `bodyschema show` commands: their configs and what each runs.
+
+    bodyschema show data/nao.zarr                                     summary + data/nao_contact_sheet.png
+    bodyschema export dataset --to hdf5 data/nao.zarr data/nao.h5
+    bodyschema export dataset --to lerobot data/nao.zarr data/nao_lerobot
+    bodyschema export onnx models:/bodyschema-nao_arm-ee_xyz-gpr@champion gpr.onnx
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import tyro
+
+
+@dataclass(frozen=True)
+class ShowArgs:
+    """Summarize a dataset store and draw a contact sheet of its images (PNG) with the stored ee_pixel on each."""
+
+    path: tyro.conf.Positional[Path]   # the .zarr store
+    out: Path | None = None            # the PNG; None: <store name>_contact_sheet.png beside the store
+    n: int = 16                        # images on the sheet, evenly spread over the store
+
+
+@dataclass(frozen=True)
+class ExportDatasetArgs:
+    """Write a dataset store as HDF5 (one file) or in LeRobot's v3.0 dataset layout (a directory)."""
+
+    to: Literal["hdf5", "lerobot"]     # the format
+    store: tyro.conf.Positional[Path]  # the .zarr store (it must validate)
+    out: tyro.conf.Positional[Path]    # .h5 file (hdf5) or a directory (lerobot)
+    overwrite: bool = False            # replace OUT if it exists
+
+
+@dataclass(frozen=True)
+class ExportOnnxArgs:
+    """Export a fitted model to ONNX: joint angles in rad in, its prediction out (scaling inside), checked with
+    onnxruntime against the model before it is reported."""
+
+    model: tyro.conf.Positional[str]   # models:/<name>@<alias>, a model directory logged by `bodyschema train`, or trusted:<dir>
+    out: tyro.conf.Positional[Path]    # the .onnx file
+    opset: int = 18                    # ONNX opset (recorded in the file's metadata)
+    tracking_uri: str | None = None    # None: $MLFLOW_TRACKING_URI, else sqlite:///<cwd>/mlflow.db
+    overwrite: bool = False            # replace OUT if it exists
+
+
+def run_show(args: ShowArgs) -> int:
+    from bodyschema.datagen.show import show_store
+
+    shown = show_store(args.path, args.out, args.n)
+    print(shown.summary)
+    print(f"contact sheet: {shown.sheet}" if shown.sheet else shown.note, file=sys.stdout if shown.sheet else sys.stderr)
+    return 0
+
+
+def run_export_dataset(args: ExportDatasetArgs) -> int:
+    from bodyschema.datagen.export import export_dataset
+
+    print(f"{args.to}: {export_dataset(args.store, args.out, args.to, overwrite=args.overwrite)}")
+    return 0
+
+
+def run_export_onnx(args: ExportOnnxArgs) -> int:
+    from bodyschema.errors import must_be
+    from bodyschema.models.onnx_export import TOLERANCE, export_onnx, read_metadata, verify_onnx
+
+    if args.out.exists() and not args.overwrite:
+        raise FileExistsError(must_be("OUT", "a path that does not exist yet", str(args.out),
+                                      "Pass --overwrite to replace it, or choose another path."))
+    model = _load(args.model, args.tracking_uri)
+    path = export_onnx(model, args.out, opset=args.opset)
+    error = verify_onnx(model, path)
+    meta = read_metadata(path)
+    print(f"onnx: {path} (opset {meta['opset']}, {meta['bodyschema.dtype']})\n"
+          f"  in:  {meta['bodyschema.input']}\n  out: {meta['bodyschema.output']}\n"
+          f"  onnxruntime vs the model: max |error| {error:.3g} over 64 inputs (tolerance {TOLERANCE:g})")
+    if not error <= TOLERANCE:
+        raise FloatingPointError(must_be("the exported graph", f"equal to the model within {TOLERANCE:g}",
+                                         f"max |error| {error:.3g}", f"{path} is kept for inspection; report it."))
+    return 0
+
+
+def _load(spec: str, tracking_uri: str | None):
+    """The model a spec names (the evaluation core's resolution: registry, logged directory or trusted:<dir>)."""
+    from bodyschema.evaluation.core.specs import resolve_model
+
+    if spec.startswith("models:/") or (not spec.startswith(("trusted:", "analytic:")) and Path(spec).is_dir()):
+        from bodyschema.training.registry import check_tracking, tracking_uri as resolve_uri
+
+        uri = resolve_uri(tracking_uri)      # the registry or the digests of logged directories live there
+        print(f"tracking: {uri}", file=sys.stderr)
+        check_tracking(uri, timeout_s=5)
+    return resolve_model(spec, tracking_uri)
+
+
+RUNNERS = {ShowArgs: run_show, ExportDatasetArgs: run_export_dataset, ExportOnnxArgs: run_export_onnx}

@@ -1,0 +1,43 @@
+"""`show_store`: what a dataset store holds, in words (`summarize_store`) and at a glance (a contact sheet PNG).
+
+The sheet goes beside the store (`<store name>_contact_sheet.png`) unless `out` says where; a store without images
+(generated with --no-images) gets the summary only, and the result says why there is no sheet.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from bodyschema.datagen.contact_sheet import write_contact_sheet
+from bodyschema.datagen.store import open_store
+from bodyschema.datagen.validate import summarize_store
+from bodyschema.errors import must_be
+
+
+@dataclass(frozen=True)
+class Shown:
+    summary: str                # summarize_store's text (validity included)
+    sheet: Path | None          # the contact sheet PNG, None when the store has no images
+    note: str = ""              # why there is no sheet
+
+    def __str__(self) -> str:
+        return "\n".join([self.summary, f"contact sheet: {self.sheet}" if self.sheet else self.note])
+
+
+def show_store(path: str | Path, out: str | Path | None = None, n: int = 16) -> Shown:
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(must_be("STORE", "an existing .zarr store", str(path),
+                                        "Create one with `bodyschema datagen --out PATH`."))
+    summary = summarize_store(path)
+    if "image" not in open_store(path).array_keys():
+        return Shown(summary, None, "no contact sheet: the store has no images (it was generated with "
+                                    "--no-images); summary only")
+    sheet = Path(out) if out is not None else default_sheet_path(path)
+    return Shown(summary, write_contact_sheet(path, sheet, n=n))
+
+
+def default_sheet_path(store: Path) -> Path:
+    """`data/nao.zarr` → `data/nao_contact_sheet.png`."""
+    return store.parent / f"{store.name.removesuffix('.zarr')}_contact_sheet.png"
