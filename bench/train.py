@@ -23,6 +23,7 @@ from pathlib import Path
 import torch
 
 from bodyschema.models._nn_fit import build
+from bodyschema.models.configs import PixelConfig
 from bodyschema.models.pixel import PixelDecoder, _mse, fast_layout
 from bodyschema.training.config import TrainConfig
 from bodyschema.training.data import as_float, load_dataset
@@ -90,7 +91,7 @@ def main() -> None:
     parser.add_argument("--data", default=None, help="an existing image store instead of a generated one")
     args = parser.parse_args()
     store = dataset(args)
-    hyper = {"epochs": str(args.epochs), "patience": str(args.epochs), "batch_size": str(BATCH), "lr": str(LR)}
+    hyper = PixelConfig(epochs=args.epochs, patience=args.epochs, batch_size=BATCH, lr=LR)
 
     data = load_dataset(store, "image", seed=SEED)            # the same split `train` makes
     model = PixelDecoder(data.body, "image", data.output_shape("image"))
@@ -108,7 +109,7 @@ def main() -> None:
         os.chdir(tmp)                                          # fresh sqlite store and artifacts, thrown away
         try:
             start = clocks()
-            result = train(TrainConfig(model="pixel", data=store.resolve(), modality="image", hyper=hyper,
+            result = train(TrainConfig(model=hyper, data=store.resolve(), modality="image",
                                        seed=SEED, progress=False, tracking_uri=f"sqlite:///{tmp}/mlflow.db"))
             total = tuple(b - a for a, b in zip(start, clocks()))
         finally:

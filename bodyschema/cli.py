@@ -2,7 +2,7 @@
 
     bodyschema datagen --robot nao_arm --n 2000 --sampler babble --workers 2 --out data/nao.zarr
     bodyschema validate data/nao.zarr
-    bodyschema train --model gpr --data data/nao.zarr --modality ee_xyz
+    bodyschema train gpr --data data/nao.zarr --modality ee_xyz --noise-floor 1e-6   (train KIND --help: its flags)
     bodyschema registry list | bodyschema registry promote NAME VERSION
     bodyschema evaluate levels --model models:/bodyschema-nao_arm-ee_xyz-gpr@champion --levels 1 2 3
     bodyschema evaluate reaching --robot nao_arm | evaluate adaptation jupiter | evaluate self-recognition
@@ -27,8 +27,6 @@ if _GL in ("egl", "osmesa"):
 # (every import below comes after it on purpose)
 
 import dataclasses
-import inspect
-import math
 import sys
 import traceback
 from dataclasses import dataclass
@@ -39,16 +37,11 @@ import tyro
 
 from bodyschema.datagen.config import DatagenConfig
 from bodyschema.demo import DemoConfig
-from bodyschema.evaluation.jupiter import JupiterConfig, run_jupiter
-from bodyschema.evaluation.levels import LevelsConfig, run_levels
-from bodyschema.evaluation.loop_robustness import LoopRobustnessConfig, run_loop_robustness
-from bodyschema.evaluation.marker_shift import MarkerShiftConfig, run_marker_shift
-from bodyschema.evaluation.reaching import ReachingConfig, run_reaching
+from bodyschema.evaluation import registry
 from bodyschema.evaluation.report import ReportConfig, write_report
-from bodyschema.evaluation.robustness import RobustnessConfig, run_robustness
-from bodyschema.evaluation.self_recognition import SelfRecognitionConfig, run_self_recognition
 from bodyschema.errors import expected_types, explain, must_be
-from bodyschema.training.config import TrainConfig
+from bodyschema.export_commands import RUNNERS as EXPORT_RUNNERS, ExportDatasetArgs, ExportOnnxArgs, ShowArgs
+from bodyschema.training.config import TrainConfig, train_commands
 
 
 @dataclass(frozen=True)
@@ -88,37 +81,77 @@ def _group(name: str, description: str, *members):
     return _command(name, Union[built], description)  # noqa: UP007 (tyro: Union)
 
 
-# Benchmarks and the report: Config → runner returning the paths it wrote (levels: a summary holding them).
-BENCHMARKS = {LevelsConfig: run_levels, RobustnessConfig: run_robustness, ReachingConfig: run_reaching,
-              LoopRobustnessConfig: run_loop_robustness, MarkerShiftConfig: run_marker_shift,
-              JupiterConfig: run_jupiter, SelfRecognitionConfig: run_self_recognition, ReportConfig: write_report}
+# Benchmarks (evaluation/registry.py) and the report: Config → runner returning the paths it wrote (levels: a
+# summary holding them).
+BENCHMARKS = {**{b.config: b.run for b in registry.BENCHMARKS}, ReportConfig: write_report}
+
+
+def _evaluate_members() -> list:
+    """The `evaluate` subcommands, in registry order; two-word benchmarks gathered into their group."""
+    members, groups = [], {}
+    for b in registry.BENCHMARKS:
+        if len(b.words) == 1:
+            members.append((b.words[0], b.config, b.help))
+        else:
+            if b.words[0] not in groups:
+                groups[b.words[0]] = []
+                members.append(b.words[0])                               # the group's place: its first member
+            groups[b.words[0]].append((b.words[1], b.config, b.help))
+    return [m if isinstance(m, tuple) else _group(m, registry.GROUPS[m], *groups[m]) for m in members]
+
+
+# Flags of `evaluate` that changed (issue 13): (command words, old flag) → the new flag, None when it is gone.
+# Checked before tyro parses, so the error names the new spelling instead of "unrecognized option".
+RENAMED_FLAGS = {
+    (("evaluate", "reaching"), "--targets"): "--trials",
+    (("evaluate", "loop-robustness"), "--reaching.targets"): "--trials",
+    (("evaluate", "adaptation", "marker-shift"), "--episodes"): "--trials",
+    (("evaluate", "adaptation", "jupiter"), "--episodes"): "--trials",
+    (("evaluate", "self-recognition"), "--episodes"): "--trials",
+    **{(("evaluate", "loop-robustness"), f"--reaching.{gone}"): None
+       for gone in ("noise", "broken", "frozen", "baseline", "no-baseline", "path-plots")},
+}
+FLATTENED = {("evaluate", "robustness"): "--levels.", ("evaluate", "loop-robustness"): "--reaching."}   # → "--"
+
+
+def check_renamed_flags(argv: list[str]) -> None:
+    """The house error for a flag of `evaluate` that was renamed or flattened, naming the new flag."""
+    words = tuple(_command_words(argv))
+    for arg in argv[len(words):]:
+        flag = arg.split("=")[0]
+        prefix = FLATTENED.get(words, "\0")
+        new = RENAMED_FLAGS.get((words, flag), "--" + flag[len(prefix):] if flag.startswith(prefix) else "")
+        if (words, flag) in RENAMED_FLAGS and new is None:
+            raise ValueError(must_be(f"flag {flag}", f"absent from `bodyschema {' '.join(words)}`", flag,
+                                     "Every case of the sweep sets it; drop the flag."))
+        if new:
+            raise ValueError(must_be(f"flag {flag}", f"spelled {new} (renamed: --trials counts independent "
+                                     "trials everywhere, and nested flags are flat)", flag,
+                                     f"Use `bodyschema {' '.join(words)} {new} ...`."))
 
 
 COMMANDS = Union[(  # noqa: UP007
     _command("datagen", DatagenConfig, "Generate a motor-babbling dataset (Zarr v3)."),
     _command("validate", ValidateArgs, "Check a dataset store; exit 0 when valid, else list every problem."),
-    _command("train", TrainConfig, "Fit one sensory model on a dataset, log it to MLflow and register it."),
+    _command("show", ShowArgs, "Summarize a dataset store and draw a contact sheet of its images (PNG)."),
+    _group("train", "Fit one sensory model on a dataset, log it to MLflow and register it. "
+                    "`bodyschema train KIND --help` lists KIND's hyper-parameters with their defaults.",
+           *train_commands()),
     _group("registry", "Inspect and manage the MLflow model registry.",
            ("list", RegistryList, "List registered model versions, metrics and aliases."),
            ("promote", RegistryPromote, "Move the `champion` alias to NAME's VERSION.")),
-    _group("evaluate", "Run an evaluation benchmark.",
-           ("levels", LevelsConfig, "Estimation levels 1–3: where is my body? (AIF perception)"),
-           ("robustness", RobustnessConfig, "Joint error vs observation noise and with a broken sensor."),
-           ("reaching", ReachingConfig, "Closed-loop AIF reaching to image / ee-pixel / ee-position goals vs PD."),
-           ("loop-robustness", LoopRobustnessConfig, "Reaching success vs observation noise and with a sensor broken."),
-           _group("adaptation", "Adaptation in the loop.",
-                  ("marker-shift", MarkerShiftConfig, "(a) The visual marker moves on the hand at run time."),
-                  ("jupiter", JupiterConfig, "(b) Gravity jumps to 24.79 m/s² mid-task: PD vs AIC on the panda.")),
-           ("self-recognition", SelfRecognitionConfig, "Is this me? ROC/AUC of the free energy: own body vs others.")),
-    _command("report", ReportConfig, "Gather every benchmark's tables and plots into results/report.md and .html."),
+    _group("export", "Export a dataset (HDF5, LeRobot) or a model (ONNX) for other tools.",
+           ("dataset", ExportDatasetArgs, "A dataset store as HDF5 or in LeRobot's v3.0 layout."),
+           ("onnx", ExportOnnxArgs, "A fitted model as ONNX: rad in, prediction out, checked with onnxruntime.")),
+    _group("evaluate", "Run an evaluation benchmark; each run writes results/<name>/<run-id>/ and links latest.",
+           *_evaluate_members()),
+    _command("report", ReportConfig, "Gather every benchmark's latest run into results/report.md and .html."),
     _command("demo", DemoConfig, "The end-to-end demo: babble, fit, register, perceive, reach, recognise, report."),
 )]
 
 
 def run(config) -> int:
     """Run the stage a parsed config stands for; returns the process exit code."""
-    if isinstance(config, TrainConfig):
-        check_hyper(config)
     check_tracking_first(config)
     if isinstance(config, DatagenConfig):
         from bodyschema.datagen.generate import generate
@@ -154,6 +187,8 @@ def run(config) -> int:
         written = BENCHMARKS[type(config)](config)
         paths = getattr(written, "paths", written)                         # levels: a summary holding its paths
         print("\n".join(f"{k}: {v}" for k, v in paths.items()))
+    elif type(config) in EXPORT_RUNNERS:
+        return EXPORT_RUNNERS[type(config)](config)
     elif isinstance(config, DemoConfig):
         from bodyschema.demo import run_demo
 
@@ -162,45 +197,48 @@ def run(config) -> int:
 
 
 # ---- checks before any work ----------------------------------------------------------------------------
-def check_hyper(config: TrainConfig) -> None:
-    """Each --hyper value has the type of the model parameter it sets (a finite number where a number goes):
-    otherwise a string such as "abc" or "nan" reaches the model and fails deep inside as a TypeError."""
-    from bodyschema.training.config import model_class
-
-    params = inspect.signature(model_class(config.model)).parameters
-    problems = []
-    for name, value in config.hyper_values().items():
-        param = params.get(name)
-        expected = _value_kind(param) if param is not None else None
-        if expected is not None and not _is_kind(value, expected):
-            problems.append(must_be(f"--hyper {name}", _KIND_TEXT[expected], config.hyper[name],
-                                    f"{model_class(config.model).__name__}'s default is {param.default!r}."))
-    if problems:
-        raise ValueError("\n".join(problems))
+OLD_TRAIN_FLAGS = ("--model", "--hyper")     # `train --model KIND --hyper k v` before the kind subcommands
 
 
-_KIND_TEXT = {bool: "true or false", int: "an integer", float: "a finite number", tuple: "a list such as [64, 64]",
-              str: "a word"}
+def check_train_flags(argv: list[str]) -> None:
+    """`train --model KIND` and `--hyper k v` are gone (the kind is a subcommand, each hyper-parameter a typed
+    flag of it): name the new form of the very command given, instead of tyro's "unrecognized option"."""
+    if argv[:1] != ["train"] or not any(a.split("=")[0] in OLD_TRAIN_FLAGS for a in argv):
+        return
+    kind = argv[1] if len(argv) > 1 and not argv[1].startswith("-") else None
+    words, old, rest, i = argv[1 if kind is None else 2:], [], [], 0
+    while i < len(words):
+        if words[i].startswith("--model="):
+            kind, old, i = words[i].split("=", 1)[1], [*old, words[i]], i + 1
+        elif words[i] == "--model" and i + 1 < len(words):
+            kind, old, i = words[i + 1], [*old, *words[i:i + 2]], i + 2
+        elif words[i] == "--hyper":
+            end = next((j for j in range(i + 1, len(words)) if words[j].startswith("--")), len(words))
+            old, pairs, i = [*old, *words[i:end]], words[i + 1:end], end
+            rest += [w for k, v in zip(pairs[::2], pairs[1::2]) for w in _typed_flag(kind, k, v)]
+        else:
+            rest, i = [*rest, words[i]], i + 1
+    flags = [f for f in OLD_TRAIN_FLAGS if any(w.split("=")[0] == f for w in old)]
+    expected = {"--model": "the kind as a subcommand: `bodyschema train KIND`",
+                "--hyper": "a typed flag of the kind's subcommand"}
+    kind = kind or "KIND"
+    raise ValueError(must_be(" and ".join(flags), " and ".join(expected[f] for f in flags), " ".join(old),
+                             f"Use `{' '.join(['bodyschema', 'train', kind, *rest])}` "
+                             f"(see `bodyschema train {kind} --help`)."))
 
 
-def _value_kind(param: inspect.Parameter) -> type | None:
-    """The kind of value a model parameter takes: from its default, else from its annotation (`int | None`)."""
-    default = param.default
-    for kind in (bool, int, float, tuple, str):                  # bool before int: True is an int
-        if default is not inspect.Parameter.empty and default is not None and isinstance(default, kind):
-            return kind
-    text = str(param.annotation).removeprefix("typing.").split("|")[0].split("[")[0].strip()
-    return {"bool": bool, "int": int, "float": float, "tuple": tuple, "str": str}.get(text)
+def _typed_flag(kind: str | None, name: str, value: str) -> list[str]:
+    """`--hyper name value` as the subcommand's flag: `--name value`, a list as its items, a bool as the flag."""
+    from bodyschema.models import kinds
 
-
-def _is_kind(value, kind: type) -> bool:
-    if value is None:
-        return True                                               # JSON null: the model's own default
-    if kind is float:
-        return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-    if kind is int:
-        return isinstance(value, int) and not isinstance(value, bool)
-    return isinstance(value, kind)
+    flag = "--" + name.replace("_", "-")
+    config = kinds.KINDS[kind].config if kind in kinds.KINDS else None
+    hint = {f.name: f.type for f in dataclasses.fields(config)}.get(name) if config else None
+    if hint in (bool, "bool") and value.lower() in ("true", "false"):
+        return [flag if value.lower() == "true" else "--no-" + flag[2:]]
+    if value.lower() in ("true", "false", "null"):
+        return [flag, {"true": "True", "false": "False", "null": "None"}[value.lower()]]
+    return [flag, *value.strip("[]").replace(",", " ").split()]
 
 
 def tracking_of(config) -> tuple[bool, str | None]:
@@ -241,6 +279,8 @@ def main(argv: list[str] | None = None) -> int:
     argv = [a for a in argv if a != "--debug"]
     command = "bodyschema " + " ".join(_command_words(argv))
     try:
+        check_train_flags(argv)
+        check_renamed_flags(argv)
         config = tyro.cli(COMMANDS, prog="bodyschema", args=argv,  # a parsing error: tyro's message box, exit 2
                           description="A robot learns its body by motor babbling and perceives it by active "
                                       "inference. --debug (or BODYSCHEMA_DEBUG=1) shows the traceback behind an error.")

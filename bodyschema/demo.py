@@ -73,13 +73,13 @@ def _datagen(config: DemoConfig) -> dict[str, Path]:
 
 
 def _train(config: DemoConfig, nao_store: Path) -> dict[str, str]:
+    from bodyschema.models.configs import GPRConfig, MDNConfig, PixelConfig
     from bodyschema.training.config import TrainConfig
     from bodyschema.training.train import train
 
-    jobs = {"gpr": TrainConfig(model="gpr", data=nao_store, modality="ee_xyz", max_train=1500),
-            "mdn": TrainConfig(model="mdn", data=nao_store, modality="ee_xyz", hyper={"epochs": "60"}),
-            "pixel": TrainConfig(model="pixel", data=nao_store, modality="image",
-                                 hyper={"epochs": str(config.pixel_epochs)})}
+    jobs = {"gpr": TrainConfig(model=GPRConfig(), data=nao_store, modality="ee_xyz", max_train=1500),
+            "mdn": TrainConfig(model=MDNConfig(epochs=60), data=nao_store, modality="ee_xyz"),
+            "pixel": TrainConfig(model=PixelConfig(epochs=config.pixel_epochs), data=nao_store, modality="image")}
     uris = {}
     for kind, job in jobs.items():
         print(f"\n== train {kind} on nao_arm {job.modality}")
@@ -110,11 +110,11 @@ def _act(config: DemoConfig, gpr_uri: str) -> None:
     results = config.out / "results"
     print(f"\n== closed-loop reaching on nao_arm: {config.reach_targets} ee_xyz goals, {gpr_uri} + joint encoder")
     reaching = ReachingConfig(robot="nao_arm", models=(gpr_uri, "analytic:nao_arm:joints"), goal="ee_xyz",
-                              targets=config.reach_targets, seed=config.seed, out=results / "reaching",
+                              trials=config.reach_targets, seed=config.seed, out=results / "reaching",
                               tracking_uri=config.tracking_uri)
     print(run_reaching(reaching)["summary_md"].read_text())
     print(f"\n== self-recognition: {config.episodes} babbling episodes, is the ee stream mine? ({gpr_uri})")
-    recognition = SelfRecognitionConfig(robot="nao_arm", models=(gpr_uri,), episodes=config.episodes,
+    recognition = SelfRecognitionConfig(robot="nao_arm", models=(gpr_uri,), trials=config.episodes,
                                         seed=config.seed, out=results / "self_recognition",
                                         tracking_uri=config.tracking_uri)
     print(run_self_recognition(recognition)["summary_md"].read_text())

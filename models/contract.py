@@ -8,7 +8,6 @@ runs when a saved model is read). Subclasses implement the underscore hooks only
 
 from __future__ import annotations
 
-import importlib
 import json
 import pickle
 from pathlib import Path
@@ -17,13 +16,11 @@ from typing import ClassVar, Protocol, runtime_checkable
 import torch
 
 from bodyschema.errors import NotFittedError, must_be
+from bodyschema.models import kinds
 from bodyschema.models.scaling import BodySpec
 
 FLOAT_DTYPES = (torch.float32, torch.float64)
 FORMAT_VERSION = 1
-MODEL_KINDS: dict[str, type["BaseSensoryModel"]] = {}
-SHIPPED_KINDS = {"analytic": "analytic", "gpr": "gpr", "sklearn_gpr": "sklearn_gpr", "mdn": "mdn",  # kind → module
-                 "pixel": "pixel", "mm_member": "multimodal", "encoder": "encoder"}
 
 
 @runtime_checkable
@@ -41,8 +38,9 @@ class SensoryModel(Protocol):
 
 
 def register_kind(cls):
-    """Class decorator: make a model kind loadable by `load_model` from its saved `meta.json`."""
-    MODEL_KINDS[cls.kind] = cls
+    """Class decorator: make a model kind loadable by `load_model` from its saved `meta.json`. A shipped kind is
+    declared in models/kinds.py (the one registry), which this checks; another kind is declared here."""
+    kinds.register_class(cls)
     return cls
 
 
@@ -175,10 +173,10 @@ def load_model(path: str | Path) -> BaseSensoryModel:
     meta = json.loads(meta_file.read_text())
     if meta.get("format_version") != FORMAT_VERSION:
         raise ValueError(must_be("format_version", str(FORMAT_VERSION), meta.get("format_version")))
-    _import_kind(meta["kind"])
-    if meta["kind"] not in MODEL_KINDS:
-        raise ValueError(must_be("model kind", f"one of {sorted(set(MODEL_KINDS) | set(SHIPPED_KINDS))}",
-                                 meta["kind"]))
+    try:
+        cls = kinds.saved_class(meta["kind"])      # imports only that kind's module; old spellings are aliases
+    except ValueError:
+        raise ValueError(must_be("model kind", f"one of {sorted(kinds.KINDS)}", meta["kind"])) from None
     try:
         state = torch.load(path / "state.pt", weights_only=True)
     except pickle.UnpicklingError:
@@ -190,12 +188,5 @@ def load_model(path: str | Path) -> BaseSensoryModel:
         raise ValueError(must_be(f"{path / 'state.pt'}", "a complete torch file written by model.save",
                                  str(error).splitlines()[0] if str(error) else type(error).__name__,
                                  "The file is damaged or partial: copy or train the model again.")) from None
-    return MODEL_KINDS[meta["kind"]]._from_saved(BodySpec.from_dict(meta["body"]), meta["modality"],
-                                                 tuple(meta["output_shape"]), meta["config"], state)
-
-
-def _import_kind(kind: str) -> None:
-    # Import only the module that registers `kind` (importing all would pull in gpytorch and sklearn).
-    module = SHIPPED_KINDS.get(kind)
-    if module is not None and kind not in MODEL_KINDS:
-        importlib.import_module(f"bodyschema.models.{module}")
+    return cls._from_saved(BodySpec.from_dict(meta["body"]), meta["modality"], tuple(meta["output_shape"]),
+                           meta["config"], state)

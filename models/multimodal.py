@@ -41,7 +41,7 @@ class MemberNet(nn.Module):
 
 @register_kind
 class MultimodalMember(NetModel, BaseSensoryModel):
-    kind = "mm_member"
+    kind = "multimodal"
 
     def __init__(self, body: BodySpec, modality: str, output_shape: tuple[int, ...], *,
                  decoder: str = "auto",                  # auto: "pixel" for (H, W[, C]) images, else "mlp"

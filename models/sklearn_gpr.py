@@ -46,7 +46,7 @@ def make_kernel(latent_dim: int, noise_floor: float, lengthscale=0.5, outputscal
 class SklearnGPRModel(BaseSensoryModel):
     """scikit-learn GP sensory model, kind "sklearn_gpr". `__init__` stores hyper-parameters only."""
 
-    kind = "sklearn_gpr"
+    kind = "sklearn-gpr"
     precision_varies = True      # 1 / predictive std² at z
 
     def __init__(self, body: BodySpec, modality: str, output_shape: tuple[int, ...], *,

@@ -1,54 +1,50 @@
-"""`TrainConfig`: one training run (model kind, dataset, hyper-parameters, tracking), and the model-kind table.
+"""`TrainConfig`: one training run (a model kind with its typed hyper-parameters, the dataset, tracking).
+
+`TrainConfig[M]` is generic over the kind's hyper-parameter config (models/configs.py): `bodyschema train <kind>`
+is one subcommand per kind (`train_commands`), whose flags are the shared fields below plus that kind's
+hyper-parameters (`--epochs`, `--noise-floor`, …), each with its default in `--help`. In Python:
+`TrainConfig(model=MDNConfig(epochs=60), data=store)`; the config's class names the kind.
 
 The fields that change the trained model (kind, modality, data, seed, split, hyper-parameters) form the
 run's identity (`identity()`); its hash keys the run directory, so a killed run started again with the same
-config resumes from its checkpoint. The fields that only change *where* results go or how they are shown
-(tracking URI, experiment, run root, progress, register, device) are left out of the hash.
+config resumes from its checkpoint. Every hyper-parameter is in it with its value (defaults included), so a
+default that changes in the code starts a new run rather than resuming a different model. The fields that only
+change *where* results go or how they are shown (tracking URI, experiment, run root, progress, register,
+device) are left out of the hash.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import hashlib
-import importlib
 import inspect
 import json
-import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Generic, TypeVar
+
+import tyro
 
 from bodyschema.errors import must_be
+from bodyschema.models import kinds
+from bodyschema.models.configs import ModelConfig
 
-# kind -> (module, class). Modules are imported lazily: a kind whose module is broken only fails when chosen.
-MODEL_KINDS: dict[str, tuple[str, str]] = {
-    "gpr": ("bodyschema.models.gpr", "GPRModel"),
-    "sklearn-gpr": ("bodyschema.models.sklearn_gpr", "SklearnGPRModel"),
-    "mdn": ("bodyschema.models.mdn", "MDNModel"),
-    "pixel": ("bodyschema.models.pixel", "PixelDecoder"),
-    "multimodal": ("bodyschema.models.multimodal", "MultimodalModel"),
-    "encoder": ("bodyschema.models.encoder", "ImageEncoder"),   # the inverse: image → joint angles
-}
-DEFAULT_MODALITY = {"pixel": "image", "multimodal": "ee_xyz,image", "encoder": "image"}   # else "ee_xyz"
 MODALITIES = ("ee_xyz", "ee_pixel", "image", "touch", "jacobian", "joints")
 NON_IDENTITY_FIELDS = ("tracking_uri", "experiment", "run_root", "progress", "register", "device")
-
-
-def kind_not_available(kind: object) -> str:
-    return f"Model kind {kind!r} is not available. Choose one of {sorted(MODEL_KINDS)}."
+M = TypeVar("M", bound=ModelConfig)
 
 
 @dataclass(frozen=True)
-class TrainConfig:
+class TrainConfig(Generic[M]):
     """Train one sensory model g(z) on one dataset, log it to MLflow and register it."""
 
-    model: str  # model kind: gpr | sklearn-gpr | mdn | pixel | multimodal | encoder (image → joint angles)
     data: Path  # the Zarr store written by `bodyschema datagen`
-    modality: str | None = None  # what g predicts; None: "image" (pixel), "ee_xyz,image" (multimodal), else "ee_xyz"
+    # the model kind's hyper-parameters (its constructor's keywords, with its defaults)
+    model: Annotated[M, tyro.conf.OmitArgPrefixes]
+    modality: str | None = None  # what g predicts; None: image (pixel, encoder), ee_xyz,image (multimodal), else ee_xyz
     seed: int = 0  # split and model init; same seed and data -> same model
     val_fraction: float = 0.2  # held-out share (whole episodes when the store has `episode`)
     max_train: int | None = None  # cap on training samples (GPs are O(N^3)); None: all of them
-    hyper: dict[str, str] = field(default_factory=dict)  # model hyper-parameters: --hyper epochs 50 hidden [64,64]
     experiment: str = "bodyschema"  # MLflow experiment; one for the whole project keeps runs comparable
     tracking_uri: str | None = None  # None: $MLFLOW_TRACKING_URI, else sqlite:///<cwd>/mlflow.db (no server)
     run_root: Path = Path("runs")  # checkpoints, saved model and plots, in <run_root>/<kind>-<modality>-<hash>
@@ -61,26 +57,21 @@ class TrainConfig:
             object.__setattr__(self, name, value)
 
         problems: list[str] = []
-        if self.model not in MODEL_KINDS:
-            problems.append(kind_not_available(self.model))
+        try:
+            kind = kinds.of_config(self.model)
+        except ValueError as error:
+            problems.append(str(error))
+            kind = None
         fix("data", Path(self.data))
         fix("run_root", Path(self.run_root))
         if self.modality is None:
-            fix("modality", DEFAULT_MODALITY.get(self.model, "ee_xyz"))
+            fix("modality", kind.modality if kind else "ee_xyz")
         elif not isinstance(self.modality, str) or not all(self.modality.split(",")):
             problems.append(must_be("modality", f"a dataset array name such as {MODALITIES}", self.modality))
-        elif "," in self.modality and self.model != "multimodal":
-            problems.append(must_be("modality", f"one array name for model kind {self.model!r}", self.modality,
-                                    "Several modalities (comma-separated) need --model multimodal."))
-        if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
-            problems.append(must_be("seed", "an integer >= 0", self.seed))
-        if not (isinstance(self.val_fraction, (int, float)) and 0 < self.val_fraction < 1):
-            problems.append(must_be("val_fraction", "a number in (0, 1)", self.val_fraction,
-                                    "The champion is chosen on held-out data, so some must be held out."))
-        if self.max_train is not None and (not isinstance(self.max_train, int) or self.max_train < 1):
-            problems.append(must_be("max_train", "a positive integer or None", self.max_train))
-        if not isinstance(self.hyper, dict) or not all(isinstance(k, str) for k in self.hyper):
-            problems.append(must_be("hyper", "a dict of name -> value", self.hyper))
+        elif "," in self.modality and kind is not None and kind.name != "multimodal":
+            problems.append(must_be("modality", f"one array name for model kind {kind.name!r}", self.modality,
+                                    "Several modalities (comma-separated) need `bodyschema train multimodal`."))
+        problems += self._split_problems()
         if not isinstance(self.experiment, str) or not self.experiment:
             problems.append(must_be("experiment", "a non-empty name", self.experiment))
         try:
@@ -92,23 +83,39 @@ class TrainConfig:
         if problems:
             raise ValueError("\n".join(problems))
 
+    def _split_problems(self) -> list[str]:
+        problems = []
+        if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
+            problems.append(must_be("seed", "an integer >= 0", self.seed))
+        if not (isinstance(self.val_fraction, (int, float)) and 0 < self.val_fraction < 1):
+            problems.append(must_be("val_fraction", "a number in (0, 1)", self.val_fraction,
+                                    "The champion is chosen on held-out data, so some must be held out."))
+        if self.max_train is not None and (not isinstance(self.max_train, int) or self.max_train < 1):
+            problems.append(must_be("max_train", "a positive integer or None", self.max_train))
+        return problems
+
+    @property
+    def kind(self) -> str:
+        """The model kind's name (models/kinds.py), e.g. "gpr"."""
+        return self.model.kind
+
     @property
     def modalities(self) -> tuple[str, ...]:
         return tuple(m.strip() for m in self.modality.split(","))
 
     def hyper_values(self) -> dict[str, Any]:
-        """`hyper` with values parsed: JSON literals ("50", "1e-3", "true", "[64, 64]") become numbers etc."""
-        return {k: _parse_value(v) for k, v in sorted(self.hyper.items())}
+        """Every hyper-parameter of the kind with its value (defaults included), as plain JSON values."""
+        return json.loads(json.dumps(self.model.to_kwargs(), sort_keys=True))
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON values (Path as str), as logged to MLflow params and the run directory."""
-        return json.loads(json.dumps(dataclasses.asdict(self), default=str))
+        values = {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.name != "model"}
+        return json.loads(json.dumps({**values, "model": self.kind, "hyper": self.hyper_values()}, default=str))
 
     def identity(self, dataset_sha256: str) -> dict[str, Any]:
-        """What determines the trained model: the identity fields and the data's content digest (not its path:
-        a moved or copied store with the same content is the same data)."""
+        """What determines the trained model: the kind, the identity fields, every hyper-parameter and the data's
+        content digest (not its path: a moved or copied store with the same content is the same data)."""
         values = {k: v for k, v in self.to_dict().items() if k not in (*NON_IDENTITY_FIELDS, "data")}
-        values["hyper"] = self.hyper_values()
         values["dataset_sha256"] = dataset_sha256
         return values
 
@@ -118,51 +125,23 @@ class TrainConfig:
         return hashlib.sha256(blob.encode()).hexdigest()
 
     def run_dir(self, dataset_sha256: str) -> Path:
-        return self.run_root / f"{self.model}-{'+'.join(self.modalities)}-{self.config_hash(dataset_sha256)[:12]}"
+        return self.run_root / f"{self.kind}-{'+'.join(self.modalities)}-{self.config_hash(dataset_sha256)[:12]}"
 
 
-def _parse_value(value: Any) -> Any:
-    if not isinstance(value, str):
-        return value
-    try:
-        parsed = json.loads(value)
-    except json.JSONDecodeError:
-        return value                     # a bare word such as "rbf" stays a string
-    if isinstance(parsed, float) and not math.isfinite(parsed):
-        return value
-    return tuple(parsed) if isinstance(parsed, list) else parsed
+def train_commands() -> list[tuple[str, type, str]]:
+    """(subcommand, config type, description) of every trainable kind: `bodyschema train <kind>`."""
+    return [(k.name, TrainConfig[k.config], k.summary) for k in kinds.trainable()]
 
 
-def model_class(kind: str) -> type:
-    """The model class of a kind; an unknown kind names the available ones."""
-    if kind not in MODEL_KINDS:
-        raise ValueError(kind_not_available(kind))
-    module_name, class_name = MODEL_KINDS[kind]
-    try:
-        module = importlib.import_module(module_name)
-    except ImportError as error:
-        raise ImportError(f"Model kind {kind!r} could not be imported from {module_name}: {error}") from error
-    if not hasattr(module, class_name):
-        raise ImportError(f"Model kind {kind!r}: {module_name} has no class {class_name}.")
-    return getattr(module, class_name)
-
-
-def build_model(kind: str, body, output_shapes: dict[str, tuple[int, ...]], hyper: dict[str, Any]):
-    """`Model(body, modality, output_shape, **hyper)`, or for multimodal `Model(body, output_shapes, **hyper)`.
-
-    A wrong hyper-parameter name is reported with the accepted ones.
-    """
-    cls = model_class(kind)
-    params = inspect.signature(cls).parameters
-    if not any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
-        accepted = [p for p in params
-                    if p not in ("self", "body", "modality", "output_shape", "output_shapes", "image_shape")]
-        unknown = sorted(set(hyper) - set(accepted))
-        if unknown:
-            raise ValueError(must_be("hyper", f"names accepted by {cls.__name__}: {accepted}", unknown))
-    if "output_shapes" in params:
+def build_model(config: TrainConfig, body, output_shapes: dict[str, tuple[int, ...]]):
+    """The untrained model of `config`: `Model(body, modality, output_shape, **hyper)`, or for a kind that trains
+    several modalities at once (multimodal) `Model(body, output_shapes, **hyper)`."""
+    cls = kinds.model_class(config.kind)
+    hyper = config.model.to_kwargs()
+    if "output_shapes" in inspect.signature(cls).parameters:
         return cls(body, {m: tuple(s) for m, s in output_shapes.items()}, **hyper)
     if len(output_shapes) != 1:
-        raise ValueError(must_be("modality", f"a single modality for model kind {kind!r}", sorted(output_shapes)))
+        raise ValueError(must_be("modality", f"a single modality for model kind {config.kind!r}",
+                                 sorted(output_shapes)))
     ((modality, shape),) = output_shapes.items()
     return cls(body, modality, tuple(shape), **hyper)

@@ -29,7 +29,7 @@ def check_config(model: str, modalities: tuple[str, ...]) -> None:
     if model in GP_KINDS and "image" in modalities:
         raise ValueError(must_be("model", "'pixel' for modality 'image'", f"{model} on image",
                                  "An exact GP keeps an n×n matrix per output, and an image has thousands of "
-                                 "outputs (56×80 = 4480): train the pixel decoder, --model pixel."))
+                                 "outputs (56×80 = 4480): train the pixel decoder, `bodyschema train pixel`."))
 
 
 def gp_peak_bytes(kind: str, n: int, m: int, outputs: int) -> float:
@@ -54,9 +54,9 @@ def check_memory(kind: str, model, n_train: int, output_shape: tuple[int, ...],
         return
     per = 8.0 * (outputs if PER_OUTPUT[kind] else 1)
     fits = int(math.sqrt(limit / (per * max(FIT_COPIES[kind], CONDITION_COPIES[kind]))))
-    hint = (f"Train on fewer samples: --max-train {fits} (or --hyper max_points {fits} hyper_points "
+    hint = (f"Train on fewer samples: --max-train {fits} (or --max-points {fits} --hyper-points "
             f"{min(fits, m)})." if fits >= 2 else
-            "Even 2 samples do not fit: free memory, or use a kind that fits in mini-batches (--model mdn).")
+            "Even 2 samples do not fit: free memory, or use a kind that fits in mini-batches (`bodyschema train mdn`).")
     raise ValueError(must_be(f"{kind} fit memory", f"at most {limit / 1e9:.3g} GB ({LIMIT_FRACTION:.0%} of the "
                              f"{available / 1e9:.3g} GB available)",
                              f"an estimated {need / 1e9:.3g} GB for n={n} samples × {outputs} outputs "

@@ -96,18 +96,18 @@ class TrainResult:
 
 def train(config: TrainConfig) -> TrainResult:
     """Train, evaluate, log and (unless `config.register` is False) register one model. See the module doc."""
-    guards.check_config(config.model, config.modalities)          # a GP on images: refused before any work
+    guards.check_config(config.kind, config.modalities)           # a GP on images: refused before any work
     client = use_tracking(config.tracking_uri)
     data = load_dataset(config.data, config.modalities, val_fraction=config.val_fraction, seed=config.seed,
                         max_train=config.max_train, progress=config.progress)
     shapes = {m: data.output_shape(m) for m in data.modalities}
-    model = build_model(config.model, data.body, shapes, config.hyper_values())
+    model = build_model(config, data.body, shapes)
     on_device = "device" in inspect.signature(model.fit).parameters     # the network kinds train on a GPU
     if config.device != "cpu" and not on_device:
-        raise ValueError(must_be("device", f"'cpu' for model kind {config.model!r}", config.device,
+        raise ValueError(must_be("device", f"'cpu' for model kind {config.kind!r}", config.device,
                                  "Only the network kinds (pixel, encoder) train on CUDA."))
     for shape in shapes.values():                                 # GP memory (n², outputs) vs available RAM
-        guards.check_memory(config.model, model, len(data.train), shape)
+        guards.check_memory(config.kind, model, len(data.train), shape)
     multi = hasattr(model, "members")              # MultimodalModel: one SensoryModel per modality
     members = dict(model.members) if multi else {config.modality: model}
     run_dir = config.run_dir(data.sha256)
@@ -223,13 +223,13 @@ def _log_and_register(client, member, model_dir: Path, config: TrainConfig, data
                       multi: bool) -> Registered | None:
     """Log one member as a pyfunc; register it (unless config.register is False) and maybe make it champion."""
     m = member.modality
-    name = registered_name(data.body.robot, m, config.model) if config.register else None
+    name = registered_name(data.body.robot, m, config.kind) if config.register else None
     info, digest = log_sensory_model(model_dir, member, name=f"model-{m}" if multi else "model")
     mlflow.set_tag(DIGEST_TAG + (f".{m}" if multi else ""), digest)
     if name is None:
         return None
     tags = {DIGEST_TAG: digest, METRIC: repr(val_rmse), "robot": data.body.robot, "modality": m,
-            "kind": config.model, "joint_names": ",".join(data.body.joint_names),
+            "kind": config.kind, "joint_names": ",".join(data.body.joint_names),
             "dataset_sha256": data.sha256, "mjcf_sha256": str(data.attrs.get("mjcf_sha256", ""))}
     version, champion = register_version(client, name, info.model_uri, tags, val_rmse)   # one guarded step
     return Registered(m, name, version, champion, digest)
@@ -281,7 +281,7 @@ def _log_inputs(config: TrainConfig, data: Dataset, run_name: str) -> None:
                   joint_names=",".join(data.body.joint_names))
     mlflow.log_params({k: str(v) for k, v in params.items()})
     tags = {"robot": data.body.robot, "mjcf_sha256": str(data.attrs.get("mjcf_sha256", "")),
-            "dataset_sha256": data.sha256, "modality": config.modality, "kind": config.model,
+            "dataset_sha256": data.sha256, "modality": config.modality, "kind": config.kind,
             "config_hash": run_name.rsplit("-", 1)[-1], "python": platform.python_version(),
             **{f"config.{k}": str(getattr(config, k)) for k in NON_IDENTITY_FIELDS}}
     for lib in LIBRARIES:

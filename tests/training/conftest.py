@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from bodyschema.training import config as config_module
+from bodyschema.models import kinds
 
 
 @pytest.fixture(scope="session")
@@ -54,8 +54,9 @@ def workdir(tmp_path, monkeypatch, empty_db) -> Path:
 @pytest.fixture
 def tiny_kind(monkeypatch):
     """Make the test model kind "tiny" trainable."""
-    monkeypatch.setitem(config_module.MODEL_KINDS, "tiny", ("tests.training.tiny_model", "TinyModel"))
-    from tests.training.tiny_model import TinyModel
+    from tests.training.tiny_model import TINY, TinyModel
+
+    monkeypatch.setitem(kinds.KINDS, "tiny", TINY)
 
     monkeypatch.setattr(TinyModel, "fail_at", -1)
     return TinyModel

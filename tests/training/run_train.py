@@ -1,5 +1,5 @@
 """`python -m tests.training.run_train '<json>'`: one `train` of the tiny kind in a fresh process, for the tests
-that need a second process or a kill. JSON keys: `config` (TrainConfig fields), `sleep_s` (per epoch),
+that need a second process or a kill. JSON keys: `config` (`tiny_config` keywords), `sleep_s` (per epoch),
 `kill_after_version` (SIGKILL this process right after a model version is created, before anything else)."""
 
 from __future__ import annotations
@@ -13,11 +13,11 @@ import sys
 def main(spec: dict) -> None:
     from mlflow import MlflowClient
 
-    from bodyschema.training import config as config_module
+    from bodyschema.models import kinds
     from bodyschema.training.train import train
-    from tests.training.tiny_model import TinyModel, tiny_config
+    from tests.training.tiny_model import TINY, TinyModel, tiny_config
 
-    config_module.MODEL_KINDS["tiny"] = ("tests.training.tiny_model", "TinyModel")
+    kinds.register(TINY)
     TinyModel.sleep_s = float(spec.get("sleep_s", 0.0))
     if spec.get("kill_after_version"):
         create = MlflowClient._create_model_version

@@ -59,7 +59,7 @@ def _client(workdir: Path) -> MlflowClient:
 
 
 def _config(kin_store: Path, epochs: int) -> dict:
-    return {"data": str(kin_store), "hyper": {"epochs": str(epochs)}}
+    return {"data": str(kin_store), "epochs": epochs}
 
 
 @pytest.mark.slow     # two fresh interpreters creating the tables: ~30 s on a busy 2-core machine
@@ -117,7 +117,7 @@ def test_the_same_command_started_twice_is_refused_naming_the_first_pid(workdir,
         run_dir = _wait_for_checkpoint(workdir, first)
         refused = rf"run directory .*{run_dir.name} must be free .* Got 'locked by pid {first.pid}'"
         with pytest.raises(Locked, match=refused):
-            train(tiny_config(kin_store, hyper={"epochs": "60"}))
+            train(tiny_config(kin_store, epochs=60))
         assert first.poll() is None, "the first one goes on undisturbed"
     finally:
         first.kill()
@@ -134,11 +134,11 @@ def test_a_killed_run_is_marked_killed_by_the_next_command_and_then_resumed(work
     client = _client(workdir)
     assert client.get_run(run_id).info.status == "RUNNING", "what kill -9 leaves behind"
 
-    train(tiny_config(kin_store, hyper={"epochs": "2"}))                # any other train in the experiment
+    train(tiny_config(kin_store, epochs=2))                # any other train in the experiment
     assert client.get_run(run_id).info.status == "KILLED"
     assert "found dead" in client.get_run(run_id).data.tags["bodyschema.ended"]
 
-    resumed = train(tiny_config(kin_store, hyper={"epochs": "30"}))     # the same config continues that run
+    resumed = train(tiny_config(kin_store, epochs=30))     # the same config continues that run
     assert resumed.run_id == run_id and client.get_run(run_id).info.status == "FINISHED"
     steps = [m.step for m in client.get_metric_history(run_id, "train_loss")]
     assert steps[-1] == 29 and len(steps) == len(set(steps)), "resumed from the checkpoint: no epoch twice"
@@ -158,7 +158,7 @@ def test_a_kill_right_after_creating_the_version_converges_to_one_loadable_champ
     if leftover == "untagged":
         client.delete_model_version_tag(NAME, created.version, DIGEST_TAG)
 
-    result = train(tiny_config(kin_store, hyper={"epochs": "3"}))
+    result = train(tiny_config(kin_store, epochs=3))
     versions = client.search_model_versions(f"name = '{NAME}'")
     assert all(DIGEST_TAG in v.tags for v in versions) and len(versions) == 1
     assert result.champion and result.run_id == created.run_id, "the killed run was completed, not duplicated"
@@ -168,8 +168,8 @@ def test_a_kill_right_after_creating_the_version_converges_to_one_loadable_champ
 
 def test_a_finished_command_run_again_reuses_its_version(workdir, kin_store, tiny_kind):
     """(d) Before: every re-run of a finished `train` registered one more, identical, version."""
-    first = train(tiny_config(kin_store, hyper={"epochs": "5"}))
-    again = train(tiny_config(kin_store, hyper={"epochs": "5"}))
+    first = train(tiny_config(kin_store, epochs=5))
+    again = train(tiny_config(kin_store, epochs=5))
     assert again.reused and not first.reused and "reusing its registered versions" in str(again)
     assert (again.run_id, again.model_version, again.champion) == (first.run_id, first.model_version, True)
     assert again.metrics["val_rmse"] == first.metrics["val_rmse"]
@@ -178,14 +178,14 @@ def test_a_finished_command_run_again_reuses_its_version(workdir, kin_store, tin
     assert len(client.search_runs([client.get_experiment_by_name("bodyschema").experiment_id])) == 1
 
     shutil.rmtree(workdir / "runs")          # its run directory gone: trained again, same weights, same version
-    third = train(tiny_config(kin_store, hyper={"epochs": "5"}))
+    third = train(tiny_config(kin_store, epochs=5))
     assert third.run_id != first.run_id and third.model_version == first.model_version
     assert len(client.search_model_versions(f"name = '{NAME}'")) == 1
 
 
 def test_two_runs_finishing_together_leave_the_better_one_champion(workdir, kin_store, tiny_kind, monkeypatch):
     """(f) Before: update_champion read the alias, then set it; the slower, worse run could overwrite the better."""
-    better, worse = (train(tiny_config(kin_store, hyper={"epochs": str(e)})) for e in (40, 2))
+    better, worse = (train(tiny_config(kin_store, epochs=e)) for e in (40, 2))
     assert better.metrics["val_rmse"] < worse.metrics["val_rmse"]
     client = _client(workdir)
     client.delete_registered_model_alias(NAME, "champion")

@@ -5,6 +5,7 @@ import re
 
 import pytest
 
+from bodyschema.models.configs import GPRConfig, SklearnGPRConfig
 from bodyschema.training import guards
 from bodyschema.training.config import TrainConfig, build_model
 from bodyschema.training.data import load_dataset
@@ -13,10 +14,11 @@ from bodyschema.training.train import train
 GB = 1e9
 
 
-@pytest.mark.parametrize("kind", guards.GP_KINDS)
-def test_a_gp_on_images_is_refused_before_anything_is_loaded(kind, workdir, tmp_path):
-    config = TrainConfig(model=kind, data=tmp_path / "never-read.zarr", modality="image", progress=False)
-    with pytest.raises(ValueError, match=r"model must be 'pixel' for modality 'image'. .*--model pixel"):
+@pytest.mark.parametrize("hyper", [GPRConfig(), SklearnGPRConfig()])
+def test_a_gp_on_images_is_refused_before_anything_is_loaded(hyper, workdir, tmp_path):
+    assert hyper.kind in guards.GP_KINDS
+    config = TrainConfig(model=hyper, data=tmp_path / "never-read.zarr", modality="image", progress=False)
+    with pytest.raises(ValueError, match=r"model must be 'pixel' for modality 'image'. .*`bodyschema train pixel`"):
         train(config)
     assert not (workdir / "runs").exists()
 
@@ -33,7 +35,7 @@ def test_the_estimate_grows_with_n_squared_and_with_outputs_for_gpr_only():
 
 def test_a_gp_too_big_for_the_memory_is_refused_with_a_max_train_that_fits(kin_store, workdir, monkeypatch):
     data = load_dataset(kin_store, "ee_xyz")
-    model = build_model("gpr", data.body, {"ee_xyz": (3,)}, {})
+    model = build_model(TrainConfig(model=GPRConfig(), data=kin_store), data.body, {"ee_xyz": (3,)})
     need = guards.gp_peak_bytes("gpr", len(data.train), min(len(data.train), 500), 3)
     available = need / 2                                                # half of what this fit needs
     with pytest.raises(ValueError, match=r"gpr fit memory must be at most .* GB \(80% of the .* GB available\)\. "
@@ -46,7 +48,7 @@ def test_a_gp_too_big_for_the_memory_is_refused_with_a_max_train_that_fits(kin_s
 
     monkeypatch.setattr(guards, "available_memory", lambda: available)  # end to end: refused before a run exists
     with pytest.raises(ValueError, match="gpr fit memory must be at most"):
-        train(TrainConfig(model="gpr", data=kin_store, modality="ee_xyz", progress=False))
+        train(TrainConfig(model=GPRConfig(), data=kin_store, modality="ee_xyz", progress=False))
     assert not (workdir / "runs").exists() and not (workdir / "mlartifacts").exists()
 
 

@@ -7,7 +7,7 @@ import shutil
 import pytest
 import torch
 
-from bodyschema.evaluation.levels import resolve_model
+from bodyschema.evaluation.core.specs import resolve_model
 from bodyschema.models import load_model
 from bodyschema.training.train import train
 from tests.training.tiny_model import tiny_config
@@ -23,7 +23,7 @@ class _Payload:
 
 def test_a_directory_logged_by_train_loads_and_a_changed_copy_is_refused(workdir, kin_store, tiny_kind):
     for register in (True, False):                          # registered, or only logged (its run records it)
-        result = train(tiny_config(kin_store, hyper={"epochs": str(3 + register)}, register=register))
+        result = train(tiny_config(kin_store, epochs=3 + register, register=register))
         z = torch.zeros(2, 2, dtype=torch.float64)
         torch.testing.assert_close(resolve_model(str(result.model_dir)).predict(z),
                                    load_model(result.model_dir).predict(z), rtol=0, atol=0)
@@ -40,7 +40,7 @@ def test_a_directory_logged_by_train_loads_and_a_changed_copy_is_refused(workdir
 
 def test_an_unverifiable_directory_is_refused_without_creating_a_tracking_store(tmp_path, monkeypatch, kin_store,
                                                                                   tiny_kind, workdir):
-    result = train(tiny_config(kin_store, hyper={"epochs": "3"}))
+    result = train(tiny_config(kin_store, epochs=3))
     model_dir = result.model_dir.resolve()
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
@@ -53,7 +53,7 @@ def test_an_unverifiable_directory_is_refused_without_creating_a_tracking_store(
 
 
 def test_a_pickle_payload_as_state_pt_is_the_house_error_and_runs_nothing(workdir, kin_store, tiny_kind, tmp_path):
-    result = train(tiny_config(kin_store, hyper={"epochs": "3"}, register=False))
+    result = train(tiny_config(kin_store, epochs=3, register=False))
     copy = shutil.copytree(result.model_dir, tmp_path / "payload")
     marker = tmp_path / "payload-ran"
     torch.save({"weight": _Payload(marker)}, copy / "state.pt")        # what a tampered checkpoint looks like

@@ -21,7 +21,7 @@ NAME = "bodyschema-planar2-ee_xyz-tiny"
 @pytest.fixture
 def logged(workdir, kin_store, tiny_kind):
     """One trained and registered tiny model in the default store; → (version, its artifact directory)."""
-    result = train(tiny_config(kin_store, hyper={"epochs": "4"}))
+    result = train(tiny_config(kin_store, epochs=4))
     version = MlflowClient(f"sqlite:///{workdir / 'mlflow.db'}").get_model_version(NAME, result.model_version)
     local = Path(mlflow.artifacts.download_artifacts(version.source))     # local store: the stored copy itself
     return version, local
@@ -82,7 +82,7 @@ def test_code_dropped_into_the_artifact_store_does_not_run(logged, tmp_path):
 
 def test_pointing_the_mlmodel_at_another_logged_model_does_not_pass_changed_weights(logged, kin_store):
     _, local = logged
-    other = train(tiny_config(kin_store, hyper={"epochs": "7"}))               # another logged model, own digest
+    other = train(tiny_config(kin_store, epochs=7))               # another logged model, own digest
     other_id = MlflowClient().get_model_version(NAME, other.model_version).source.removeprefix("models:/")
     mlmodel = local / "MLmodel"
     text = mlmodel.read_text()

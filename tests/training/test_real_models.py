@@ -4,18 +4,18 @@ import pytest
 import torch
 
 from bodyschema.models import load_model
+from bodyschema.models.configs import GPRConfig, MDNConfig, MultimodalConfig, PixelConfig, SklearnGPRConfig
 from bodyschema.training.config import TrainConfig
 from bodyschema.training.registry import load
 from bodyschema.training.train import train
 
 CASES = {   # kind: (store fixture, modality, hyper-parameters that keep the fit to about a second)
-    "mdn": ("kin_store", "ee_xyz", {"epochs": "3", "hidden": "[16]"}),
-    "gpr": ("kin_store", "ee_pixel", {"hyper_points": "40", "max_points": "150", "adam_steps": "3",
-                                      "lbfgs_steps": "5"}),
-    "sklearn-gpr": ("kin_store", "ee_xyz", {"hyper_points": "40", "max_points": "150", "max_iter": "5"}),
-    "pixel": ("image_store", "image", {"epochs": "2", "channels": "[8, 4]", "fc_hidden": "16"}),
-    "multimodal": ("image_store", "ee_xyz,image", {"epochs": "2", "channels": "[8, 4]", "fc_hidden": "16",
-                                                   "hidden": "[16]"}),
+    "mdn": ("kin_store", "ee_xyz", MDNConfig(epochs=3, hidden=(16,))),
+    "gpr": ("kin_store", "ee_pixel", GPRConfig(hyper_points=40, max_points=150, adam_steps=3, lbfgs_steps=5)),
+    "sklearn-gpr": ("kin_store", "ee_xyz", SklearnGPRConfig(hyper_points=40, max_points=150, max_iter=5)),
+    "pixel": ("image_store", "image", PixelConfig(epochs=2, channels=(8, 4), fc_hidden=16)),
+    "multimodal": ("image_store", "ee_xyz,image", MultimodalConfig(epochs=2, channels=(8, 4), fc_hidden=16,
+                                                                   hidden=(16,))),
 }
 
 
@@ -26,7 +26,7 @@ SLOW = {"sklearn-gpr"}   # same path through `train` as gpr (no checkpoint, vect
 def test_kind_trains_registers_and_loads_back(kind, workdir, request):
     store_fixture, modality, hyper = CASES[kind]
     store = request.getfixturevalue(store_fixture)
-    result = train(TrainConfig(model=kind, data=store, modality=modality, hyper=hyper, progress=False))
+    result = train(TrainConfig(model=hyper, data=store, modality=modality, progress=False))
     modalities = modality.split(",")
     assert [r.modality for r in result.registered] == modalities
     assert all(r.champion and r.version == "1" for r in result.registered)

@@ -19,7 +19,7 @@ NAME = "bodyschema-planar2-ee_xyz-tiny"
 
 
 def test_champion_moves_only_when_the_validation_metric_improves(workdir, kin_store, tiny_kind):
-    results = [train(tiny_config(kin_store, hyper={"epochs": str(e)})) for e in (10, 2, 40)]
+    results = [train(tiny_config(kin_store, epochs=e)) for e in (10, 2, 40)]
     rmse = [r.metrics["val_rmse"] for r in results]
     assert rmse[1] > rmse[0] > rmse[2], "the tiny model improves with epochs (premise of this test)"
     assert [r.champion for r in results] == [True, False, True]
@@ -39,21 +39,23 @@ def test_champion_moves_only_when_the_validation_metric_improves(workdir, kin_st
 @pytest.fixture(scope="module")
 def registered(tmp_path_factory, kin_store, empty_db):
     """One registered tiny model in an explicit (not default) tracking store; returns its tracking URI."""
-    from bodyschema.training import config as config_module
+    from bodyschema.models import kinds
+    from tests.training.tiny_model import TINY
 
     root = tmp_path_factory.mktemp("registry")
     shutil.copy(empty_db, root / "mlflow.db")
     uri = f"sqlite:///{root / 'mlflow.db'}"
-    kinds, cwd = dict(config_module.MODEL_KINDS), os.getcwd()
-    config_module.MODEL_KINDS["tiny"] = ("tests.training.tiny_model", "TinyModel")
+    before, cwd = kinds.KINDS.get("tiny"), os.getcwd()
+    kinds.register(TINY)
     os.chdir(root)                   # the experiment's artifacts go under the working directory: keep them in tmp
     try:
-        train(tiny_config(kin_store, hyper={"epochs": "3"}, tracking_uri=uri, run_root=root / "runs",
+        train(tiny_config(kin_store, epochs=3, tracking_uri=uri, run_root=root / "runs",
                           experiment="registry-tests"))
     finally:
         os.chdir(cwd)
-        config_module.MODEL_KINDS.clear()
-        config_module.MODEL_KINDS.update(kinds)
+        kinds.KINDS.pop("tiny")
+        if before is not None:
+            kinds.register(before)
     assert (root / "mlartifacts").is_dir()
     return uri
 

@@ -69,7 +69,7 @@ def test_train_register_and_load_through_a_tracking_server(mlflow_server, kin_st
     monkeypatch.setenv("MLFLOW_TRACKING_URI", url)
     monkeypatch.chdir(tmp_path)
     assert tracking_uri() == url
-    result = train(tiny_config(kin_store, hyper={"epochs": "4"}))
+    result = train(tiny_config(kin_store, epochs=4))
     assert result.model_version == "1" and result.champion
     assert MlflowClient(url).get_run(result.run_id).info.status == "FINISHED"
     assert list(artifacts.rglob("state.pt")), "artifacts went to the server's artifact store"

@@ -20,7 +20,7 @@ def _client(workdir):
 
 
 def test_a_run_logs_config_epochs_dataset_versions_plots_and_registers(workdir, kin_store, tiny_kind):
-    result = train(tiny_config(kin_store, hyper={"epochs": "12"}))
+    result = train(tiny_config(kin_store, epochs=12))
     client = _client(workdir)
     run = client.get_run(result.run_id)
     data = load_dataset(kin_store, "ee_xyz")
@@ -61,7 +61,7 @@ def test_a_run_logs_config_epochs_dataset_versions_plots_and_registers(workdir, 
 
 
 def test_killed_run_resumes_its_checkpoint_and_its_mlflow_run(workdir, kin_store, tiny_kind, monkeypatch):
-    config = tiny_config(kin_store, hyper={"epochs": "20"})
+    config = tiny_config(kin_store, epochs=20)
     monkeypatch.setattr(tiny_kind, "fail_at", 7)
     monkeypatch.setattr(tiny_kind, "fail_with", "interrupt")
     with pytest.raises(KeyboardInterrupt):
@@ -81,16 +81,16 @@ def test_killed_run_resumes_its_checkpoint_and_its_mlflow_run(workdir, kin_store
     assert [json.loads(line)["epoch"] for line in lines] == list(range(20))
 
     # Same weights as an uninterrupted run of the same config.
-    fresh = train(tiny_config(kin_store, hyper={"epochs": "20"}, run_root=workdir / "fresh", register=False))
+    fresh = train(tiny_config(kin_store, epochs=20, run_root=workdir / "fresh", register=False))
     assert directory_sha256(fresh.model_dir) == directory_sha256(resumed.model_dir)
 
 
 def test_a_failed_fit_ends_failed_registers_nothing_and_keeps_the_champion(workdir, kin_store, tiny_kind,
                                                                            monkeypatch):
-    good = train(tiny_config(kin_store, hyper={"epochs": "5"}))
+    good = train(tiny_config(kin_store, epochs=5))
     monkeypatch.setattr(tiny_kind, "fail_at", 2)
     with pytest.raises(Boom):
-        train(tiny_config(kin_store, hyper={"epochs": "40"}))
+        train(tiny_config(kin_store, epochs=40))
     client = _client(workdir)
     runs = client.search_runs([client.get_experiment_by_name("bodyschema").experiment_id])
     assert sorted(r.info.status for r in runs) == ["FAILED", "FINISHED"]
@@ -100,14 +100,14 @@ def test_a_failed_fit_ends_failed_registers_nothing_and_keeps_the_champion(workd
 
     # Started again once fixed, the config gets a new run (the FAILED one stays FAILED), from the checkpoint.
     monkeypatch.setattr(tiny_kind, "fail_at", -1)
-    again = train(tiny_config(kin_store, hyper={"epochs": "40"}))
+    again = train(tiny_config(kin_store, epochs=40))
     failed = next(r for r in runs if r.info.status == "FAILED")
     assert again.run_id != failed.info.run_id and client.get_run(failed.info.run_id).info.status == "FAILED"
     assert [m.step for m in client.get_metric_history(again.run_id, "train_loss")] == list(range(3, 40))
 
 
 def test_image_run_logs_a_target_vs_prediction_grid(workdir, image_store, tiny_kind):
-    result = train(tiny_config(image_store, modality="image", hyper={"epochs": "3"}, register=False))
+    result = train(tiny_config(image_store, modality="image", epochs=3, register=False))
     assert set(result.plots) == {"loss_curves", "val_images"} and result.registered_name is None
     assert 0 < result.metrics["val_rmse"] < 1, "image errors are in [0, 1] intensity units"
     logged = {f.path for f in _client(workdir).list_artifacts(result.run_id, "plots")}
@@ -125,10 +125,11 @@ def test_training_score_subset_keeps_rows_aligned(kin_store):
 
 def test_an_image_encoder_is_scored_in_joint_degrees_registered_and_loaded_back(workdir, image_store):
     from bodyschema.models.encoder import ImageEncoder
+    from bodyschema.models.configs import EncoderConfig
     from bodyschema.training.config import TrainConfig
 
-    hyper = {"epochs": "3", "channels": "[8, 8]", "fc_hidden": "16"}
-    result = train(TrainConfig(model="encoder", data=image_store, hyper=hyper, progress=False))
+    hyper = EncoderConfig(epochs=3, channels=(8, 8), fc_hidden=16)
+    result = train(TrainConfig(model=hyper, data=image_store, progress=False))
     data = load_dataset(image_store, "image")
     assert result.registered_name == "bodyschema-planar2-image-encoder" and result.champion
     assert set(result.plots) == {"loss_curves", "val_joints"}
@@ -141,6 +142,7 @@ def test_an_image_encoder_is_scored_in_joint_degrees_registered_and_loaded_back(
 
 
 def test_device_is_checked_at_the_config_and_left_out_of_the_run_identity(kin_store, tiny_kind, monkeypatch):
+    from bodyschema.models.configs import PixelConfig
     from bodyschema.training.config import TrainConfig
 
     config = tiny_config(kin_store)
@@ -150,7 +152,7 @@ def test_device_is_checked_at_the_config_and_left_out_of_the_run_identity(kin_st
     if not torch.cuda.is_available():
         with pytest.raises(ValueError, match=r"device must be 'cpu' or an available CUDA device. Got 'cuda'. CUDA "
                                              r"is not available on this machine: use --device cpu"):
-            TrainConfig(model="pixel", data=kin_store, device="cuda")
+            TrainConfig(model=PixelConfig(), data=kin_store, device="cuda")
     monkeypatch.setattr(torch.cuda, "is_available", lambda: True)     # a one-GPU machine, as far as checks go
     monkeypatch.setattr(torch.cuda, "device_count", lambda: 1)
     with pytest.raises(ValueError, match=r"Got 'cuda:1'. This machine has 1 CUDA device"):

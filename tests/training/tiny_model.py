@@ -9,13 +9,18 @@ can kill a training process (or start a second one) while it is fitting.
 
 from __future__ import annotations
 
+import dataclasses
 import time
+from dataclasses import dataclass
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 import torch
 
+from bodyschema.models.configs import ModelConfig
 from bodyschema.models.contract import BaseSensoryModel, register_kind
+from bodyschema.models.kinds import Kind
 from bodyschema.training.config import TrainConfig
 
 N_FEATURES = 64
@@ -96,8 +101,20 @@ class TinyModel(BaseSensoryModel):
         return model
 
 
+@dataclass(frozen=True)
+class TinyConfig(ModelConfig):
+    kind: ClassVar[str] = "tiny"
+    epochs: int = 30  # gradient steps
+    lr: float = 0.5  # step size
+
+
+TINY = Kind("tiny", __name__, "TinyModel", "TinyModel", TinyConfig)   # `kinds.register(TINY)` makes it trainable
+
+
 def tiny_config(data: Path, **changes) -> TrainConfig:
-    """A TrainConfig for the tiny kind on `data` (ee_xyz, no progress bars); `changes` override fields."""
-    values = dict(model="tiny", data=data, modality="ee_xyz", progress=False)
-    values.update(changes)
-    return TrainConfig(**values)
+    """A TrainConfig for the tiny kind on `data` (ee_xyz, no progress bars); `changes` override TrainConfig fields
+    and TinyConfig's hyper-parameters (epochs, lr) alike."""
+    hyper = {f.name for f in dataclasses.fields(TinyConfig)}
+    values = dict(data=data, modality="ee_xyz", progress=False)
+    values.update({k: v for k, v in changes.items() if k not in hyper})
+    return TrainConfig(model=TinyConfig(**{k: v for k, v in changes.items() if k in hyper}), **values)

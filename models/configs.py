@@ -1,0 +1,163 @@
+"""One frozen config dataclass per trainable model kind: its hyper-parameters, with the model's own defaults.
+
+A config's fields are exactly the keyword arguments of the kind's constructor (after body, modality and shape),
+with the same defaults; `tests/models/test_configs.py` compares them with the signatures, so neither can drift.
+The comment after each field is its help line in `bodyschema train <kind> --help` (tyro reads it).
+This module imports no model code (no torch, gpytorch or sklearn): the CLI builds its help from it cheaply.
+`ModelConfig.__post_init__` checks the values by their annotations (a finite number ≥ 0 where a float goes,
+an integer ≥ 0 where an int goes, a listed word where a Literal goes); the model refines the bounds it needs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import types
+import typing
+from dataclasses import dataclass
+from typing import ClassVar, Literal
+
+from bodyschema.errors import must_be
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """Base of the per-kind configs: `kind` names the model kind (models/kinds.py) the config trains."""
+
+    kind: ClassVar[str] = ""
+    # Constructor keywords a config leaves out on purpose (each with its reason in the subclass).
+    not_on_cli: ClassVar[tuple[str, ...]] = ()
+
+    def __post_init__(self) -> None:
+        hints = typing.get_type_hints(type(self))
+        problems = [must_be(f"--{f.name.replace('_', '-')}", _describe(hints[f.name]), getattr(self, f.name))
+                    for f in dataclasses.fields(self) if not _fits(getattr(self, f.name), hints[f.name])]
+        if problems:
+            raise ValueError("\n".join(problems))
+
+    def to_kwargs(self) -> dict[str, typing.Any]:
+        """The constructor keywords: field name → value (tuples stay tuples, dicts are copied)."""
+        return {f.name: _copy(getattr(self, f.name)) for f in dataclasses.fields(self)}
+
+
+@dataclass(frozen=True)
+class GPRConfig(ModelConfig):
+    kind: ClassVar[str] = "gpr"
+    hyper_points: int = 500  # the marginal likelihood is fitted on this many samples: O(m³) per step
+    max_points: int = 5000  # the GP is conditioned on at most this many samples: O(n³) once, O(n²) memory
+    adam_steps: int = 50  # Adam steps first: a coarse search, robust to a bad start
+    lbfgs_steps: int = 200  # then at most this many L-BFGS evaluations, which converge where Adam crawls
+    lr: float = 0.05  # Adam step on the raw (softplus⁻¹) kernel hyper-parameters
+    noise_floor: float = 1e-7  # noise variance floor on standardized targets (gpytorch's 1e-4 costs accuracy)
+
+
+@dataclass(frozen=True)
+class SklearnGPRConfig(ModelConfig):
+    kind: ClassVar[str] = "sklearn-gpr"
+    hyper_points: int = 500  # the log marginal likelihood is fitted on this many samples
+    max_points: int = 5000  # conditioned on at most this many samples (a seeded random subset beyond)
+    max_iter: int = 500  # L-BFGS-B iterations of the hyper-parameter fit
+    noise_floor: float = 1e-7  # lower bound of the white noise on standardized targets (as gpr)
+
+
+@dataclass(frozen=True)
+class MDNConfig(ModelConfig):
+    kind: ClassVar[str] = "mdn"
+    hidden: tuple[int, ...] = (64, 64)  # hidden layer widths of the MLP
+    n_components: int = 3  # mixture components: kinematics is unimodal, a few absorb noise and contact
+    min_std: float = 1e-3  # std floor in standardized units: bounds the precision
+    mode: Literal["mean", "max"] = "mean"  # prediction: mixture mean, or mean of the most probable component
+    epochs: int = 300  # at most this many passes over the training set
+    batch_size: int = 128  # samples per gradient step
+    lr: float = 3e-3  # Adam learning rate
+    patience: int = 30  # stop after this many epochs without a better validation loss
+    weight_decay: float = 0.0  # Adam's L2 penalty
+
+
+@dataclass(frozen=True)
+class PixelConfig(ModelConfig):
+    kind: ClassVar[str] = "pixel"
+    size: Literal["lean", "pixel_aif"] = "lean"  # capacity preset (models/pixel.py SIZES)
+    fc_hidden: int | None = None  # width of the fully connected layer; None: the preset's
+    channels: tuple[int, ...] | None = None  # one ×2 upsampling per entry; None: the preset's
+    refine: bool | None = None  # a 3×3 conv after each upsampling; None: the preset's
+    precision: float | None = None  # fixed Π_x per pixel; None: 1/σ² of the validation residuals
+    epochs: int = 100  # at most this many passes over the training set
+    batch_size: int = 64  # images per gradient step
+    lr: float = 2e-3  # Adam learning rate
+    patience: int = 10  # stop after this many epochs without a better validation loss
+    weight_decay: float = 0.0  # Adam's L2 penalty
+
+
+@dataclass(frozen=True)
+class MultimodalConfig(ModelConfig):
+    kind: ClassVar[str] = "multimodal"
+    # member_hyper ({modality: {name: value}}, per-member overrides) stays a Python-API argument: the CLI sets
+    # one value per hyper-parameter, shared by all members (each member's fixed precision via --precisions).
+    not_on_cli: ClassVar[tuple[str, ...]] = ("member_hyper",)
+    precisions: dict[str, float] | None = None  # fixed precisions, e.g. image 100; the other modalities learn theirs
+    joint: bool = True  # fit all members in one loop with one early stopping; False: one after the other
+    decoder: Literal["auto", "mlp", "pixel"] = "auto"  # auto: the pixel decoder for images, else an MLP
+    hidden: tuple[int, ...] = (64, 64)  # hidden layer widths of the MLP decoders
+    fc_hidden: int = 64  # fully connected width of the pixel decoders
+    channels: tuple[int, ...] = (32, 16, 8)  # channels of the pixel decoders' upsamplings
+    epochs: int = 200  # at most this many passes over the training set
+    batch_size: int = 64  # samples per gradient step
+    lr: float = 2e-3  # Adam learning rate of the networks
+    patience: int = 15  # stop after this many epochs without a better validation loss
+    weight_decay: float = 0.0  # Adam's L2 penalty
+    precision_lr: float = 1e-2  # learning rate of the learned log-precisions λ
+
+
+@dataclass(frozen=True)
+class EncoderConfig(ModelConfig):
+    kind: ClassVar[str] = "encoder"
+    channels: tuple[int, ...] = (16, 32, 64)  # one stride-2 convolution per entry (56×80 → 28×40 → 14×20 → 7×10)
+    fc_hidden: int = 128  # width of the fully connected head
+    epochs: int = 100  # at most this many passes over the training set
+    batch_size: int = 64  # images per gradient step
+    lr: float = 2e-3  # Adam learning rate
+    patience: int = 10  # stop after this many epochs without a better validation loss
+    weight_decay: float = 0.0  # Adam's L2 penalty
+
+
+# ---- value checks by annotation --------------------------------------------------------------------------
+def _fits(value, hint) -> bool:
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        return any(_fits(value, a) for a in args)
+    if hint is type(None):
+        return value is None
+    if origin is Literal:
+        return value in args
+    if hint is bool:
+        return isinstance(value, bool)
+    if hint is int:
+        return isinstance(value, int) and not isinstance(value, bool) and value >= 0
+    if hint is float:
+        return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value >= 0
+    if hint is str:
+        return isinstance(value, str)
+    if origin is tuple:                                 # tuple[int, ...]: layer sizes, each ≥ 1
+        return isinstance(value, (tuple, list)) and all(_fits(v, args[0]) and v >= 1 for v in value)
+    if origin is dict:                                  # dict[str, float]
+        return isinstance(value, dict) and all(_fits(k, args[0]) and _fits(v, args[1]) for k, v in value.items())
+    raise TypeError(f"no value check for the annotation {hint!r}: add one to models/configs.py _fits")
+
+
+def _describe(hint) -> str:
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        return " or ".join(_describe(a) for a in args)
+    if origin is Literal:
+        return f"one of {list(args)}"
+    if origin is tuple:
+        return "a list of integers ≥ 1"
+    if origin is dict:
+        return "pairs of a name and a finite number ≥ 0"
+    return {bool: "true or false", int: "an integer ≥ 0", float: "a finite number ≥ 0", str: "a word",
+            type(None): "None"}[hint]
+
+
+def _copy(value):
+    return dict(value) if isinstance(value, dict) else value
