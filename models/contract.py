@@ -13,6 +13,7 @@ import pickle
 from pathlib import Path
 from typing import ClassVar, Protocol, runtime_checkable
 
+import numpy as np
 import torch
 
 from bodyschema.errors import NotFittedError, must_be
@@ -143,8 +144,9 @@ class BaseSensoryModel:
 
     def _check_z(self, z) -> torch.Tensor:
         self._require_fitted()
+        z = as_input(z)
         if not isinstance(z, torch.Tensor):
-            raise TypeError(must_be("z", "a torch.Tensor of joint angles in rad", type(z).__name__,
+            raise TypeError(must_be("z", "a torch.Tensor or numpy array of joint angles in rad", type(z).__name__,
                                     "Convert with torch.as_tensor(z, dtype=torch.float64)."))
         if z.dtype not in FLOAT_DTYPES:
             raise TypeError(must_be("z.dtype", "torch.float32 or torch.float64", z.dtype))
@@ -156,11 +158,17 @@ class BaseSensoryModel:
         return z
 
     def _check_v(self, v, z: torch.Tensor) -> torch.Tensor:
+        v = as_input(v)
         if not isinstance(v, torch.Tensor) or tuple(v.shape) != (z.shape[0], *self.output_shape):
             got = tuple(v.shape) if isinstance(v, torch.Tensor) else type(v).__name__
             raise ValueError(must_be("v", f"a tensor of shape ({z.shape[0]}, {', '.join(map(str, self.output_shape))})",
                                      got))
         return v.to(z.dtype)
+
+
+def as_input(a):
+    """A numpy array at the public edge becomes a tensor (sharing its memory); outputs are tensors either way."""
+    return torch.from_numpy(a) if isinstance(a, np.ndarray) else a
 
 
 def load_model(path: str | Path) -> BaseSensoryModel:

@@ -13,6 +13,7 @@ import subprocess
 import sys
 import textwrap
 
+import numpy as np
 import pytest
 import torch
 
@@ -144,11 +145,20 @@ class SensoryModelContract:
         with pytest.raises(ValueError, match=r"z must be finite"):
             model.predict(z)
 
-    def test_integer_or_numpy_input_raises(self, model):
+    def test_integer_or_list_input_raises(self, model):
         with pytest.raises(TypeError, match=r"z.dtype must be"):
             model.predict(torch.zeros(2, model.latent_dim, dtype=torch.int64))
-        with pytest.raises(TypeError, match=r"z must be a torch.Tensor"):
-            model.predict(self.make_inputs(2).numpy())
+        with pytest.raises(TypeError, match=r"z.dtype must be"):
+            model.predict(np.zeros((2, model.latent_dim), dtype=np.int64))
+        with pytest.raises(TypeError, match=r"z must be a torch.Tensor or numpy array"):
+            model.predict(self.make_inputs(2).tolist())
+
+    def test_numpy_input_equals_tensor_input(self, model):
+        z = self.make_inputs(3)
+        v = torch.ones(3, *model.output_shape, dtype=z.dtype)
+        torch.testing.assert_close(model.predict(z.numpy()), model.predict(z))
+        torch.testing.assert_close(model.jacobian(z.numpy()), model.jacobian(z))
+        torch.testing.assert_close(model.vjp(z.numpy(), v.numpy()), model.vjp(z, v))
 
     def test_vjp_with_wrong_shape_raises(self, model):
         z = self.make_inputs(2)
