@@ -26,9 +26,11 @@ import numpy as np
 import torch
 
 from bodyschema.aif.perception import Perception, PerceptionConfig
-from bodyschema.evaluation.level_report import markdown
-from bodyschema.evaluation.levels import LevelsConfig, levels_update, load_robot, resolve_model, run_levels
-from bodyschema.evaluation.targets import eval_rng, initial_beliefs, make_targets
+from bodyschema.evaluation.core.seeds import eval_rng
+from bodyschema.evaluation.core.specs import load_robot, resolve_model
+from bodyschema.evaluation.levels.benchmark import LevelsConfig, levels_update, run_levels
+from bodyschema.evaluation.levels.report import markdown
+from bodyschema.evaluation.levels.targets import initial_beliefs, make_targets
 
 PLAIN = PerceptionConfig(integrator="euler", dt=0.1, k_z=1.0, max_steps=5000, tol=0.0, max_step=None, record=True)
 SIGMA = {"ee_xyz": 1e-3, "ee_pixel": 1.0, "joints": math.radians(2.0)}   # m, px, rad: noise = 1/√precision

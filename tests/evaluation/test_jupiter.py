@@ -9,10 +9,10 @@ import pytest
 
 from bodyschema.aif.aic import AICConfig, AICController
 from bodyschema.datagen.robot import Robot
-from bodyschema.evaluation.jupiter import (READY, JupiterConfig, control_substeps, errors, run_jupiter, sample_poses,
+from bodyschema.evaluation.adaptation.jupiter import (READY, JupiterConfig, control_substeps, errors, run_jupiter, sample_poses,
                                            simulate)
-from bodyschema.evaluation.pd import PDController
-from bodyschema.evaluation.targets import eval_rng
+from bodyschema.evaluation.core.pd import PDController
+from bodyschema.evaluation.core.seeds import eval_rng
 from bodyschema.models.analytic import AnalyticModel
 
 QUIET = dict(mlflow=False, progress=False)
@@ -107,7 +107,7 @@ def test_an_episode_failing_mid_run_is_marked_and_the_others_go_on(panda):
 # ---- the benchmark end to end -------------------------------------------------------------------------------
 def test_run_jupiter_writes_reproducible_tables_plots_and_an_mlflow_run(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    base = dict(episodes=2, duration=0.4, switch_time=0.2, steady_window=0.1, control_rate=100.0, progress=False)
+    base = dict(trials=2, duration=0.4, switch_time=0.2, steady_window=0.1, control_rate=100.0, progress=False)
     uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
     paths = run_jupiter(JupiterConfig(out=tmp_path / "a", tracking_uri=uri, **base))
     again = run_jupiter(JupiterConfig(out=tmp_path / "b", mlflow=False, **base))

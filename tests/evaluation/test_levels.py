@@ -8,10 +8,12 @@ import numpy as np
 import pytest
 
 from bodyschema.aif.perception import Perception, PerceptionConfig
-from bodyschema.evaluation.level_report import plot_sweep
-from bodyschema.evaluation.levels import (LevelsConfig, broken_sweep, evaluate_level, load_robot, noise_sweep,
-                                          run_levels)
-from bodyschema.evaluation.targets import OFFSET_DEG, eval_rng, initial_beliefs, make_targets
+from bodyschema.evaluation.core.seeds import eval_rng
+from bodyschema.evaluation.core.specs import load_robot
+from bodyschema.evaluation.levels.report import plot_sweep
+from bodyschema.evaluation.levels.benchmark import (LevelsConfig, broken_sweep, evaluate_level, noise_sweep,
+                                                    run_levels)
+from bodyschema.evaluation.levels.targets import OFFSET_DEG, initial_beliefs, make_targets
 from bodyschema.models import analytic
 from tests.toy_models import ToyPlanarArm
 
@@ -91,7 +93,7 @@ def test_oracle_nao_arm_fusion_beats_every_sensor_alone():
 
 def test_model_of_another_robot_raises(planar2):
     with pytest.raises(ValueError, match="model body must be robot 'planar2'"):
-        from bodyschema.evaluation.levels import check_models_match
+        from bodyschema.evaluation.core.specs import check_models_match
         check_models_match([ToyPlanarArm()], planar2)
     with pytest.raises(ValueError, match="body must be robot"):
         run_levels(LevelsConfig(models=("analytic:planar2:ee_xyz", "analytic:nao_arm:joints"), trials=2, runs=1,

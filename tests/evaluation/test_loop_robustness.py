@@ -4,10 +4,9 @@ import csv
 
 import pytest
 
-from bodyschema.evaluation.loop_robustness import LoopRobustnessConfig, run_loop_robustness
-from bodyschema.evaluation.reaching import ReachingConfig
+from bodyschema.evaluation.robustness.loop import LoopRobustnessConfig, run_loop_robustness
 
-REACHING = ReachingConfig(targets=3, duration=1.5, progress=False)
+REACHING = {"trials": 3, "duration": 1.5, "progress": False}      # flat flags: --trials, --duration
 
 
 def read_rows(path) -> list[dict]:
@@ -16,8 +15,7 @@ def read_rows(path) -> list[dict]:
 
 
 def test_sweeps_write_tables_and_a_dead_encoder_stops_the_arm(tmp_path):
-    paths = run_loop_robustness(LoopRobustnessConfig(reaching=REACHING, sigmas=(0.0, 0.01), out=tmp_path,
-                                                     mlflow=False))
+    paths = run_loop_robustness(LoopRobustnessConfig(**REACHING, sigmas=(0.0, 0.01), out=tmp_path, mlflow=False))
     for key in ("noise_csv", "noise_png", "broken_csv", "broken_png", "summary_csv", "summary_md"):
         assert paths[key].is_file() and paths[key].stat().st_size > 0
     noise = read_rows(paths["noise_csv"])
@@ -35,4 +33,4 @@ def test_bad_config_raises():
     with pytest.raises(ValueError, match="sigmas"):
         LoopRobustnessConfig(sigmas=(-1.0,))
     with pytest.raises(ValueError, match="modality"):
-        run_loop_robustness(LoopRobustnessConfig(reaching=REACHING, modality="image", mlflow=False))
+        run_loop_robustness(LoopRobustnessConfig(**REACHING, modality="image", mlflow=False))

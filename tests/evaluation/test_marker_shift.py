@@ -9,15 +9,15 @@ import csv
 import numpy as np
 import pytest
 
-from bodyschema.evaluation.levels import load_robot
-from bodyschema.evaluation.marker_shift import (Arms, MarkerShiftConfig, _render_shifted, goal_poses, marker_offsets,
-                                                run_marker_shift, simulate)
-from bodyschema.evaluation.reaching_loop import control_substeps
-from bodyschema.evaluation.marker_shift_report import episode_rows, predicted_correction
+from bodyschema.evaluation.adaptation.marker_shift import (MarkerShiftConfig, goal_poses, marker_offsets,
+                                                           run_marker_shift, simulate)
+from bodyschema.evaluation.adaptation.marker_shift_report import episode_rows, predicted_correction
+from bodyschema.evaluation.core.sim import control_substeps
+from bodyschema.evaluation.core.specs import load_robot
 from bodyschema.models.analytic import AnalyticModel
 
 # 1 s after the shift settles the loop for these precisions (settling ≈ 0.3 s); 100 Hz keeps the sampled loop stable.
-SHORT = dict(episodes=2, duration=1.2, shift_time=0.2, control_rate=100.0, mlflow=False, progress=False)
+SHORT = dict(trials=2, duration=1.2, shift_time=0.2, control_rate=100.0, mlflow=False, progress=False)
 
 
 @pytest.fixture(scope="module")
@@ -32,38 +32,11 @@ def robot(models):
 
 def _run(robot, models, shifts, precision, **overrides):
     config = MarkerShiftConfig(shifts=shifts, **{**SHORT, **overrides})
-    q_goal = goal_poses(robot, config.episodes, config.seed)
-    names = [s for s in shifts for _ in range(config.episodes)]
+    q_goal = goal_poses(robot, config.trials, config.seed)
+    names = [s for s in shifts for _ in range(config.trials)]
     q0 = np.tile(q_goal, (len(shifts), 1))
     series = simulate(robot, models, config, q0, marker_offsets(names, config.offset), precision)
     return names, q0, series
-
-
-def test_marker_is_the_ee_site_moved_by_the_offset_in_the_hand_frame(robot):
-    q = goal_poses(robot, 3, seed=1)
-    offsets = marker_offsets(["left", "finger", "forearm"], 0.03)
-    arms = Arms(robot, q, offsets)
-    np.testing.assert_allclose(arms.marker(), arms.hand(), atol=1e-12)          # not shifted yet: on the hand
-    np.testing.assert_allclose(arms.hand(), robot.fk(q), atol=1e-12)
-    arms.shifted[:] = True
-    moved = arms.marker() - arms.hand()                                           # (3, 3) m in the world
-    np.testing.assert_allclose(np.linalg.norm(moved, axis=1), np.linalg.norm(offsets, axis=1), rtol=1e-12)
-    forearm = robot.model.body("LForeArm").id
-    direction = [d.xmat[forearm].reshape(3, 3)[:, 0] for d in arms.datas]        # the hand's x axis
-    assert np.dot(moved[1], direction[1]) > 0 > np.dot(moved[2], direction[2])   # finger out, forearm back
-
-
-def test_image_models_see_the_rendered_marker_where_it_was_shifted(robot):
-    q = np.repeat(goal_poses(robot, 1, seed=0), 3, axis=0)
-    offsets = marker_offsets(["none", "left", "finger"], 0.03)   # (forearm: inside the forearm capsule, hidden)
-    images = _render_shifted(robot, q, offsets)                                   # (3, H, W) in [0, 1]
-    arms = Arms(robot, q, offsets)
-    arms.shifted[:] = True
-    expected = robot.project(arms.marker())                                       # (3, 2) px
-    for image, (u, v) in zip(images, expected):
-        rows, cols = np.nonzero(image >= image.max() - 0.05)                      # the emissive marker is brightest
-        assert abs(cols.mean() - u) < 1.0 and abs(rows.mean() - v) < 1.0
-    assert np.array_equal(robot.model.geom_pos[robot.model.geom("marker").id], robot.model.site_pos[arms._site])
 
 
 def test_without_a_shift_the_hand_stays_at_the_goal(robot, models):
@@ -110,18 +83,18 @@ def test_bad_input_raises_the_house_error(robot, models):
     with pytest.raises(ValueError, match="shift must be"):
         marker_offsets(["up"], 0.03)
     for bad in (dict(shift_time=5.0, duration=4.0), dict(visual_precisions=(1.0, -1.0)), dict(goal="xyz"),
-                dict(episodes=0)):
+                dict(trials=0)):
         with pytest.raises(ValueError, match="must be"):
             MarkerShiftConfig(**bad)
     with pytest.raises(ValueError, match="control_rate must be"):
-        control_substeps(300.0, robot.model.opt.timestep, "control_rate")                                           # 1.67 MuJoCo steps
+        control_substeps(300.0, robot.model.opt.timestep, "control_rate")      # 1.67 MuJoCo steps
     with pytest.raises(ValueError, match="models must be"):
         run_marker_shift(MarkerShiftConfig(**SHORT), models=[models[1]])          # no proprioception: no conflict
 
 
 def test_run_writes_everything_logs_mlflow_and_the_same_seed_reproduces_the_numbers(tmp_path, monkeypatch, models):
     monkeypatch.chdir(tmp_path)
-    common = dict(SHORT, episodes=1, duration=0.6, visual_precisions=(0.3, 3.0), shifts=("none", "forearm"))
+    common = dict(SHORT, trials=1, duration=0.6, visual_precisions=(0.3, 3.0), shifts=("none", "forearm"))
     first = run_marker_shift(MarkerShiftConfig(out=tmp_path / "a", **{**common, "mlflow": True},
                                                tracking_uri=f"sqlite:///{tmp_path / 'mlflow.db'}"), models)
     again = run_marker_shift(MarkerShiftConfig(out=tmp_path / "b", **common), models)

@@ -3,7 +3,7 @@
 import math
 from dataclasses import dataclass, field
 
-from bodyschema.evaluation.mlflow_log import config_params, metric_name, table_metrics
+from bodyschema.evaluation.core.mlflow_log import config_params, metric_name, table_metrics
 
 
 @dataclass(frozen=True)

@@ -8,12 +8,14 @@ import numpy as np
 import pytest
 import torch
 
-from bodyschema.evaluation.reaching import (ReachingConfig, aif_policy, check_goal, make_goal, prepare,
+from bodyschema.evaluation.reaching.benchmark import (ReachingConfig, aif_policy, check_goal, make_goal, prepare,
                                             run_reaching)
-from bodyschema.evaluation.reaching_loop import Sensors, control_substeps, rollout
-from bodyschema.evaluation.reaching_report import time_to_reach
+from bodyschema.evaluation.core.sensing import Sensors
+from bodyschema.evaluation.core.sim import control_substeps
+from bodyschema.evaluation.reaching.loop import rollout
+from bodyschema.evaluation.reaching.report import time_to_reach
 
-SHORT = dict(targets=4, duration=1.5, mlflow=False, progress=False)
+SHORT = dict(trials=4, duration=1.5, mlflow=False, progress=False)
 
 
 def read_rows(path: Path) -> list[dict]:
@@ -120,7 +122,7 @@ def test_malformed_or_unreachable_goals_raise():
 
 
 def test_panda_runs_the_torque_loop_and_its_pd_baseline_reaches(tmp_path):
-    paths = run_reaching(ReachingConfig(robot="panda", targets=2, duration=1.5, out=tmp_path, mlflow=False,
+    paths = run_reaching(ReachingConfig(robot="panda", trials=2, duration=1.5, out=tmp_path, mlflow=False,
                                         progress=False))
     rows = read_rows(paths["episodes_csv"])
     assert [r["controller"] for r in rows] == ["aif", "aif", "pd", "pd"]
@@ -134,7 +136,7 @@ def test_one_mlflow_run_with_the_outputs_as_artifacts(tmp_path, monkeypatch):
     import mlflow
     monkeypatch.chdir(tmp_path)                        # MLflow puts artifacts under ./mlartifacts
     uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
-    paths = run_reaching(ReachingConfig(targets=2, duration=0.5, baseline=False, progress=False, out=tmp_path / "out",
+    paths = run_reaching(ReachingConfig(trials=2, duration=0.5, baseline=False, progress=False, out=tmp_path / "out",
                                         tracking_uri=uri, experiment="test-reaching"))
     mlflow.set_tracking_uri(uri)
     runs = mlflow.search_runs(experiment_names=["test-reaching"])

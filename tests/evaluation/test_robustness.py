@@ -5,17 +5,15 @@ import csv
 import math
 
 from bodyschema.aif.perception import PerceptionConfig
-from bodyschema.evaluation.levels import LevelsConfig
-from bodyschema.evaluation.robustness import RobustnessConfig, run_robustness
+from bodyschema.evaluation.robustness.perception import RobustnessConfig, run_robustness
 from bodyschema.models.analytic import AnalyticModel
 
 
 def test_robustness_writes_noise_and_broken_sensor_tables_and_plots(tmp_path):
     models = [AnalyticModel("planar2", "ee_xyz"), AnalyticModel("planar2", "joints")]
-    levels = LevelsConfig(trials=20, runs=1, mlflow=False,
-                          perception=PerceptionConfig(precisions=(("ee_xyz", 1e-3 ** -2),
-                                                                  ("joints", math.radians(1.0) ** -2))))
-    config = RobustnessConfig(levels=levels, modality="ee_xyz", sigmas=(0.0, 0.003, 0.03), out=tmp_path)
+    perception = PerceptionConfig(precisions=(("ee_xyz", 1e-3 ** -2), ("joints", math.radians(1.0) ** -2)))
+    config = RobustnessConfig(trials=20, runs=1, mlflow=False, perception=perception, modality="ee_xyz",
+                              sigmas=(0.0, 0.003, 0.03), out=tmp_path)
     paths = run_robustness(config, models=models)
     assert all(p.stat().st_size > 0 for p in paths.values())
     noise = list(csv.DictReader(paths["noise_csv"].open()))

@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 import torch
 
-from bodyschema.evaluation.self_recognition import (NoisySensor, SelfRecognitionConfig, prepare, run_self_recognition,
+from bodyschema.evaluation.self_recognition.benchmark import (NoisySensor, SelfRecognitionConfig, prepare, run_self_recognition,
                                                     score_episodes)
-from bodyschema.evaluation.self_recognition_report import auc, average_ranks, best_threshold, roc_curve
-from bodyschema.evaluation.self_recognition_streams import episode_kinds, make_episodes, mirror
-from bodyschema.evaluation.targets import sense
+from bodyschema.evaluation.self_recognition.report import auc, average_ranks, best_threshold, roc_curve
+from bodyschema.evaluation.self_recognition.streams import episode_kinds, make_episodes, mirror
+from bodyschema.evaluation.core.sensing import sense
 from bodyschema.models.analytic import AnalyticModel
 
-SHORT = SelfRecognitionConfig(episodes=24, steps=4, mlflow=False, progress=False, plots=False)
+SHORT = SelfRecognitionConfig(trials=24, steps=4, mlflow=False, progress=False, plots=False)
 
 
 @pytest.fixture(scope="module")
@@ -130,7 +130,7 @@ def test_image_streams_are_rendered_frames_scaled_as_training_data_and_flipped_i
     from bodyschema.datagen.robot import Robot
     from bodyschema.models.scaling import IMAGE_SCALE
     robot = Robot.load("nao_arm", image_size=(14, 20))
-    config = replace(SHORT, episodes=6, steps=2, visual_noise=(), sources=("mirrored",))
+    config = replace(SHORT, trials=6, steps=2, visual_noise=(), sources=("mirrored",))
     episodes = make_episodes(config, robot, ["image"])
     frames = robot.render(episodes.q.reshape(-1, robot.dq)).reshape(6, 2, 14, 20) / IMAGE_SCALE
     mirrored = episodes.kind == "mirrored"
@@ -148,7 +148,7 @@ def test_an_image_model_runs_the_benchmark_on_frames_from_its_own_camera(tmp_pat
     decoder = PixelDecoder(pixel_model.body, "image", (14, 20), fc_hidden=8, channels=(4,), epochs=2, batch_size=32)
     decoder.fit(q, robot.render(q) / 255.0, progress=False)
     robot.close()
-    paths = run_self_recognition(replace(SHORT, episodes=6, steps=2, out=tmp_path), models=[decoder])
+    paths = run_self_recognition(replace(SHORT, trials=6, steps=2, out=tmp_path), models=[decoder])
     episodes = list(csv.DictReader(paths["episodes_csv"].open()))
     assert len(episodes) == 6 and not any(e["failed"] == "True" for e in episodes)
     assert all(np.isfinite(float(e["score_visual"])) for e in episodes)
@@ -175,7 +175,7 @@ def test_a_model_of_another_robot_raises_the_house_error(tmp_path):
         prepare(SHORT, [AnalyticModel("nao_arm", "joints")])
 
 
-@pytest.mark.parametrize("bad", [dict(episodes=4), dict(sources=("twin",)), dict(score="mean"),
+@pytest.mark.parametrize("bad", [dict(trials=4), dict(sources=("twin",)), dict(score="mean"),
                                  dict(delay=0.01), dict(visual_noise=(("ee_pixel", -1.0),))])
 def test_bad_config_raises_the_house_error(bad):
     with pytest.raises(ValueError, match="must be"):
@@ -196,7 +196,7 @@ def test_the_same_seed_reproduces_the_scores_exactly(setup, short_run):
 def test_short_benchmark_tells_self_from_a_second_arm_and_logs_one_mlflow_run(tmp_path, monkeypatch, pixel_model):
     torch.set_num_threads(1)
     monkeypatch.chdir(tmp_path)
-    config = replace(SHORT, episodes=40, steps=5, out=tmp_path / "out", mlflow=True, plots=True,
+    config = replace(SHORT, trials=40, steps=5, out=tmp_path / "out", mlflow=True, plots=True,
                      tracking_uri=f"sqlite:///{tmp_path / 'mlflow.db'}")
     paths = run_self_recognition(config, models=[pixel_model])
     for name in ("summary_md", "summary_csv", "episodes_csv", "roc", "auc_over_time", "scores", "free_energy"):

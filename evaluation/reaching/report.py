@@ -1,6 +1,6 @@
-"""Metrics, tables, plots and the MLflow run of the reaching benchmark (evaluation/reaching.py).
+"""Metrics, tables, plots and the MLflow run of the reaching benchmark (reaching/benchmark.py).
 
-Writes into config.out: `reaching_episodes.csv` (one row per controller × target), `summary.csv` and `summary.md`
+Writes into the run folder: `reaching_episodes.csv` (one row per controller × target), `summary.csv` and `summary.md`
 (one row per controller), `ee_error.png` (ee error vs time, every target and the mean, per controller) and
 `image_paths.png` (the ee path in the camera image for a few targets).
 """
@@ -12,9 +12,10 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from bodyschema.evaluation.mlflow_log import log_benchmark, table_metrics
-from bodyschema.evaluation.level_report import write_csv
-from bodyschema.evaluation.targets import sense
+from bodyschema.evaluation.core.mlflow_log import table_metrics
+from bodyschema.evaluation.core.publish import publish
+from bodyschema.evaluation.core.sensing import sense
+from bodyschema.evaluation.core.tables import markdown_table, write_csv
 
 SUMMARY_COLUMNS = ("episodes", "success", "goal_success", "ee_err_mm", "ee_err_median_mm", "joint_err_deg",
                    "time_to_reach_s", "failed", "wall_s")
@@ -81,11 +82,6 @@ def summarize(rows: list[dict], walls: dict[str, float]) -> list[dict]:
 
 
 def markdown(table: list[dict], config, modality: str) -> str:
-    head = "| controller | " + " | ".join(SUMMARY_COLUMNS) + " |"
-    lines = [head, "|" + "---|" * (len(SUMMARY_COLUMNS) + 1)]
-    for row in table:
-        cells = [f"{row[c]:.4g}" if isinstance(row[c], float) else str(row[c]) for c in SUMMARY_COLUMNS]
-        lines.append(f"| {row['controller']} | " + " | ".join(cells) + " |")
     tol = {"ee_pixel": f"{config.pixel_tolerance:g} px", "image": f"image MSE {config.image_mse_threshold:g}",
            "ee_xyz": f"{config.success_mm:g} mm", "joints": "1°"}[modality]
     text = (f"Reaching on {config.robot}: {table[0]['episodes']} random reachable targets, {modality} goals, "
@@ -97,11 +93,11 @@ def markdown(table: list[dict], config, modality: str) -> str:
         text += " A pixel goal fixes the ray, not the depth: `success` can fail where `goal_success` holds."
     if config.noise or config.broken or config.frozen:
         text += f" Noise σ {dict(config.noise)}, broken {list(config.broken)}, frozen {list(config.frozen)}."
-    return "\n".join(lines) + "\n\n" + text + "\n"
+    return markdown_table(table, SUMMARY_COLUMNS, "controller") + "\n" + text + "\n"
 
 
 def plot_errors(results: dict, path: Path, success_mm: float) -> Path:
-    from bodyschema.training.plots import plt, save_figure
+    from bodyschema.evaluation.core.plots import plt, save_figure
     fig, axes = plt.subplots(1, len(results), figsize=(5 * len(results), 3.8), squeeze=False, sharey=True)
     for ax, (name, res) in zip(axes[0], results.items()):
         err = np.maximum(1e3 * res.ee_err, 1e-3)                          # (T+1, B) mm, floor for the log axis
@@ -115,7 +111,7 @@ def plot_errors(results: dict, path: Path, success_mm: float) -> Path:
 
 
 def plot_paths(results: dict, goal_px: np.ndarray, robot, path: Path, n: int) -> Path:
-    from bodyschema.training.plots import plt, save_figure
+    from bodyschema.evaluation.core.plots import plt, save_figure
     h, w = robot.image_size
     fig, axes = plt.subplots(1, len(results), figsize=(4.5 * len(results), 4.5 * h / w + 0.6), squeeze=False)
     colors = plt.get_cmap("tab10").colors
@@ -130,9 +126,8 @@ def plot_paths(results: dict, goal_px: np.ndarray, robot, path: Path, n: int) ->
     return save_figure(fig, path)
 
 
-def write_all(config, robot, models, modality, episodes, results: dict, walls: dict) -> dict:
-    out = Path(config.out)
-    out.mkdir(parents=True, exist_ok=True)
+def write_all(config, out: Path, robot, models, modality, episodes, results: dict, walls: dict) -> dict:
+    """Tables and plots into the run folder `out`, then the models, the MLflow run and the latest link."""
     rows = [r for name, res in results.items() for r in episode_rows(config, robot, modality, episodes, name, res)]
     table = summarize(rows, walls)
     paths = {"episodes_csv": write_csv(rows, out / "reaching_episodes.csv"),
@@ -142,6 +137,5 @@ def write_all(config, robot, models, modality, episodes, results: dict, walls: d
     paths["ee_error_png"] = plot_errors(results, out / "ee_error.png", config.success_mm)
     goal_px = robot.project(episodes.target_xyz)
     paths["paths_png"] = plot_paths(results, goal_px, robot, out / "image_paths.png", config.path_plots)
-    if config.mlflow:
-        log_benchmark(config, f"reaching-{config.robot}", table_metrics(table, "controller"), paths.values(), models)
+    publish(config, out, f"reaching-{config.robot}", table_metrics(table, "controller"), paths, models)
     return paths

@@ -45,6 +45,7 @@ class PDController:
 
     def __init__(self, robot: str, config: PDConfig = PDConfig()):
         self._robot = Robot.load(robot, actuators="torque", gravity=config.gravity)   # private model: g_⊕ only
+        self._data = mujoco.MjData(self._robot.model)
         self.dq = self._robot.dq
         if len(config.kp) != self.dq:
             raise ValueError(must_be("PDConfig.kp", f"{self.dq} gains, one per joint of {robot}", len(config.kp)))
@@ -81,7 +82,7 @@ class PDController:
 
     def gravity_torque(self, q: np.ndarray) -> np.ndarray:
         """g(q) (N, Dq) N·m under the configured gravity: the bias force at rest."""
-        m, d = self._robot.model, self._robot._kin
+        m, d = self._robot.model, self._data
         out = np.empty_like(q)
         d.qvel[:] = 0.0
         for q_i, out_i in zip(q, out):

@@ -2,7 +2,7 @@
 
 As in the AIC paper's experiment (Pezzato, Ferrari & Hernández Corbato 2020, §VI), the same joint goals are held
 by three controllers from the same start poses: the PD baseline with Earth-gravity compensation
-(evaluation/pd.py, the "built-in" controller), the unimodal AIC (joint sensors) and the multimodal AIC (joints +
+(core/pd.py, the "built-in" controller), the unimodal AIC (joint sensors) and the multimodal AIC (joints +
 an extra SensoryModel, by default the analytic ee_xyz). Recorded over time: the joint tracking error (deg, mean
 over joints) and the end-effector error (mm). Summary per controller: steady error before and after the switch,
 peak error after it, settle time, failed episodes. An episode whose controller or simulation fails (non-finite
@@ -12,23 +12,25 @@ input, diverged belief, unstable physics) is marked failed with its reason and t
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
-import mujoco
 import numpy as np
 import torch
 
 from bodyschema.aif.aic import AICConfig, AICController
 from bodyschema.datagen.robot import GRAVITY, Robot
 from bodyschema.errors import must_be
-from bodyschema.evaluation.mlflow_log import log_benchmark, table_metrics
-from bodyschema.evaluation.levels import check_models_match, models_field, resolve_models
-from bodyschema.evaluation.reaching_loop import control_substeps
-from bodyschema.evaluation.jupiter_report import summarize, write_report
-from bodyschema.evaluation.pd import PDConfig, PDController
-from bodyschema.evaluation.targets import eval_rng
-from bodyschema.models.scaling import IMAGE_SCALE
+from bodyschema.evaluation.adaptation.jupiter_report import ControllerRun, summarize, write_report
+from bodyschema.evaluation.core.config import TrialsConfig
+from bodyschema.evaluation.core.mlflow_log import table_metrics
+from bodyschema.evaluation.core.pd import PDConfig, PDController
+from bodyschema.evaluation.core.publish import publish
+from bodyschema.evaluation.core.runs import new_run
+from bodyschema.evaluation.core.seeds import eval_rng
+from bodyschema.evaluation.core.sensing import sense_all
+from bodyschema.evaluation.core.sim import ArmBatch, control_substeps
+from bodyschema.evaluation.core.specs import check_models_match, models_field, resolve_models
 
 TIMESTEP = 0.002                   # s, the panda MJCF's MuJoCo step
 READY = (0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785)   # rad, Franka's "ready" pose: goals and starts around it
@@ -37,30 +39,25 @@ SENSED = ("ee_xyz", "ee_pixel", "image")   # extra modalities the loop simulates
 
 
 @dataclass(frozen=True)
-class JupiterConfig:
+class JupiterConfig(TrialsConfig):
     """PD vs unimodal vs multimodal AIC on the panda while gravity jumps to Jupiter's mid-task."""
 
-    episodes: int = 10                 # random reachable joint goals (and start poses) around the ready pose
+    out: Path = Path("results/adaptation/jupiter")
+    experiment: str = "bodyschema-adaptation"
+    trials: int = 10                   # random reachable joint goals (and start poses) around the ready pose
     duration: float = 12.0             # s of simulated time per episode
     switch_time: float = 6.0           # s; gravity 9.81 → jupiter_gravity here
     jupiter_gravity: float = 24.79     # m/s²
     control_rate: float = 500.0        # Hz; 1 / (rate · 0.002 s) must be a whole number of MuJoCo steps
     models: models_field("analytic:panda:ee_xyz (the multimodal AIC's extra sensor)") = ()
-    aic: AICConfig = AICConfig()
-    pd: PDConfig = PDConfig()
+    aic: AICConfig = AICConfig()       # the active inference controller's gains and precisions
+    pd: PDConfig = PDConfig()          # the baseline's gains and the gravity its compensation was identified under
     spread: float = 0.4                # rad; goals and starts uniform in READY ± spread (inside the joint ranges)
     steady_window: float = 1.0         # s; steady error = mean error over the last window before the switch / the end
     settle_deg: float = 0.1            # deg; settled once the joint error stays below this until the end
-    seed: int = 0
-    out: Path = Path("results/adaptation/jupiter")
-    mlflow: bool = True
-    tracking_uri: str | None = None    # None: $MLFLOW_TRACKING_URI, else sqlite:///mlflow.db
-    experiment: str = "bodyschema-adaptation"
-    progress: bool = True
 
     def __post_init__(self):
-        if self.episodes < 1:
-            raise ValueError(must_be("episodes", "at least 1", self.episodes))
+        super().__post_init__()
         if not (0 < self.switch_time < self.duration) or not np.isfinite(self.duration):
             raise ValueError(must_be("switch_time", f"inside (0, duration = {self.duration}) s", self.switch_time))
         if not (0 < self.steady_window <= min(self.switch_time, self.duration - self.switch_time) + 1e-9):
@@ -99,16 +96,6 @@ def load_torque_panda(models: Sequence) -> Robot:
     return robot
 
 
-def sense(robot: Robot, q: np.ndarray, models: Sequence) -> dict[str, torch.Tensor]:
-    """What the extra models observe at the true poses q (B, Dq), from the simulator: modality → (B, *out)."""
-    if not models:
-        return {}
-    xyz = robot._fk(q)                                                     # (B, 3) m, unchecked: q may pass limits
-    obs = {"ee_xyz": lambda: xyz, "ee_pixel": lambda: robot.project(xyz),
-           "image": lambda: robot._render(q).astype(np.float64) / IMAGE_SCALE}
-    return {m.modality: torch.from_numpy(np.asarray(obs[m.modality](), dtype=np.float64)) for m in models}
-
-
 def simulate(robot: Robot, controller, models: Sequence, starts: np.ndarray, goals: np.ndarray,
              config: JupiterConfig, desc: str = "") -> dict[str, np.ndarray | list]:
     """Run B episodes side by side through one controller (reset/act interface); gravity switches at switch_time.
@@ -116,43 +103,30 @@ def simulate(robot: Robot, controller, models: Sequence, starts: np.ndarray, goa
     threads = torch.get_num_threads()
     torch.set_num_threads(1)               # per-tick tensors are tiny: intra-op threads only add sync (6× slower)
     try:
-        return _simulate(robot, controller, models, starts, goals, config, desc)
+        return _simulate(robot, controller, [m.modality for m in models], starts, goals, config, desc)
     finally:
         torch.set_num_threads(threads)
 
 
-def _simulate(robot: Robot, controller, models: Sequence, starts: np.ndarray, goals: np.ndarray,
+def _simulate(robot: Robot, controller, sensed: Sequence[str], starts: np.ndarray, goals: np.ndarray,
               config: JupiterConfig, desc: str) -> dict[str, np.ndarray | list]:
     from tqdm import tqdm
-    m = robot.model
-    substeps = control_substeps(config.control_rate, m.opt.timestep, "control_rate")
-    period = substeps * m.opt.timestep
-    datas = [mujoco.MjData(m) for _ in starts]
-    for d, q0 in zip(datas, starts):
-        d.qpos[:] = q0
-        mujoco.mj_forward(m, d)
-    m.opt.gravity[:] = (0.0, 0.0, -GRAVITY)
-    controller.reset(starts, np.zeros_like(starts), {"joints": torch.from_numpy(goals)})
+    substeps = control_substeps(config.control_rate, robot.model.opt.timestep, "control_rate")
+    period = substeps * robot.model.opt.timestep
     ticks = int(round(config.duration / period))
     t = np.arange(ticks) * period
     qs = np.empty((ticks, *starts.shape))
-    sim_failed = np.zeros(len(starts), dtype=bool)
-    for i in tqdm(range(ticks), desc=desc, disable=not config.progress, leave=False):
-        if t[i] >= config.switch_time:
-            m.opt.gravity[2] = -config.jupiter_gravity
-        q, qd = np.stack([d.qpos for d in datas]), np.stack([d.qvel for d in datas])
-        qs[i] = q
-        torque = controller.act(q, qd, sense(robot, q, models), period)
-        for b, (d, tau) in enumerate(zip(datas, torque)):
-            if sim_failed[b] or controller.failed[b]:
-                continue
-            d.ctrl[:] = tau
-            for _ in range(substeps):
-                mujoco.mj_step(m, d)
-            sim_failed[b] = d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0 or not np.isfinite(d.qpos).all()
-    m.opt.gravity[:] = (0.0, 0.0, -GRAVITY)
-    reasons = [r if r else ("simulation unstable (bad qacc)" if s else None)
-               for r, s in zip(controller.reasons, sim_failed)]
+    with ArmBatch(robot, starts) as arms:                                 # Earth's gravity back on exit
+        arms.set_gravity(GRAVITY)
+        controller.reset(starts, np.zeros_like(starts), {"joints": torch.from_numpy(goals)})
+        for i in tqdm(range(ticks), desc=desc, disable=not config.progress, leave=False):
+            if t[i] >= config.switch_time:
+                arms.set_gravity(config.jupiter_gravity)
+            q, qd = arms.q, arms.qd
+            qs[i] = q
+            torque = controller.act(q, qd, sense_all(robot, sensed, q), period)   # the extra models' streams
+            arms.step(torque, substeps, skip=controller.failed)
+    reasons = [c or a for c, a in zip(controller.reasons, arms.reasons)]
     return {"t": t, "q": qs, "failed": np.array([r is not None for r in reasons]), "reasons": reasons}
 
 
@@ -161,7 +135,7 @@ def errors(robot: Robot, q: np.ndarray, goals: np.ndarray) -> tuple[np.ndarray, 
     """Joint error (T, B) deg (mean |q − q_d| over joints) and ee error (T, B) mm at every tick."""
     joint = np.rad2deg(np.abs(q - goals[None])).mean(-1)
     flat = q.reshape(-1, q.shape[-1])
-    ee = robot._chain(flat)[0].reshape(*q.shape[:2], 3)                    # vectorized FK, (T, B, 3) m
+    ee = robot.fk_and_jacobian(flat, check=False)[0].reshape(*q.shape[:2], 3)   # vectorized FK, (T, B, 3) m
     ee_goal = robot.fk(goals)                                              # (B, 3) m
     return joint, 1e3 * np.linalg.norm(ee - ee_goal[None], axis=-1)
 
@@ -188,23 +162,13 @@ def episode_metrics(t: np.ndarray, joint: np.ndarray, ee: np.ndarray, config: Ju
 
 
 # ---- the benchmark ---------------------------------------------------------------------------------------
-@dataclass
-class _Run:                        # one controller's episodes
-    name: str
-    t: np.ndarray
-    q: np.ndarray                  # (T, B, Dq) rad
-    joint: np.ndarray              # (T, B) deg
-    ee: np.ndarray                 # (T, B) mm
-    rows: list[dict] = field(default_factory=list)
-
-
 def run_jupiter(config: JupiterConfig = JupiterConfig(), models: Sequence | None = None) -> dict[str, Path]:
     """PD, AIC-unimodal and AIC-multimodal on the same goals and starts; writes tables and plots to config.out."""
     models = resolve_models(config.models, ("analytic:panda:ee_xyz",), config.tracking_uri, models)
     robot = load_torque_panda(models)
     control_substeps(config.control_rate, robot.model.opt.timestep, "control_rate")
-    goals = sample_poses(robot, config.episodes, config.spread, eval_rng(config.seed, 0, "targets"))
-    starts = sample_poses(robot, config.episodes, config.spread, eval_rng(config.seed, 0, "starts"))
+    goals = sample_poses(robot, config.trials, config.spread, eval_rng(config.seed, 0, "targets"))
+    starts = sample_poses(robot, config.trials, config.spread, eval_rng(config.seed, 0, "starts"))
     limits = robot.model.actuator_ctrlrange.copy()                          # (Dq, 2) N·m
     multimodal = "AIC " + " + ".join(["joints", *(m.modality for m in models)])
     controllers = {"PD + g(q) on Earth": (PDController("panda", config.pd), []),
@@ -215,13 +179,13 @@ def run_jupiter(config: JupiterConfig = JupiterConfig(), models: Sequence | None
     for name, (controller, extra) in controllers.items():
         sim = simulate(robot, controller, extra, starts, goals, config, desc=name)
         joint, ee = errors(robot, sim["q"], goals)
-        run = _Run(name, sim["t"], sim["q"], joint, ee)
+        run = ControllerRun(name, sim["t"], sim["q"], joint, ee)
         for b, row in enumerate(episode_metrics(sim["t"], joint, ee, config)):
             failed = bool(sim["failed"][b])
             run.rows.append({"controller": name, "episode": b, **{k: (np.nan if failed else v) for k, v in row.items()},
                              "failed": failed, "reason": sim["reasons"][b] or ""})
         runs.append(run)
-    paths = write_report(runs, goals, config)
-    if config.mlflow:
-        log_benchmark(config, "jupiter", table_metrics(summarize(runs), "controller"), paths.values(), models)
+    out = new_run(config)
+    paths = write_report(runs, goals, config, out)
+    publish(config, out, "jupiter", table_metrics(summarize(runs), "controller"), paths, models)
     return paths

@@ -14,8 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from bodyschema.evaluation.mlflow_log import log_benchmark, table_metrics
-from bodyschema.evaluation.level_report import write_csv
+from bodyschema.evaluation.core.mlflow_log import table_metrics
+from bodyschema.evaluation.core.publish import publish
+from bodyschema.evaluation.core.tables import markdown_table, write_csv
 
 SUMMARY_COLUMNS = ("seen_shift_px", "hand_move_mm", "hand_move_px", "correction", "predicted_correction",
                    "marker_err_px", "hand_err_px", "hand_err_mm", "settle_s", "late_motion_mm")
@@ -85,12 +86,8 @@ def summarize(rows: Sequence[Mapping]) -> list[dict]:
 
 
 def markdown(table: Sequence[Mapping], note: str) -> str:
-    cols = ("shift", "visual_precision", "episodes", "failed", *SUMMARY_COLUMNS)
-    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
-    for row in table:
-        cells = [f"{row[c]:.3g}" if isinstance(row[c], float) else str(row[c]) for c in cols]
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n\n" + note + "\n"
+    columns = ("visual_precision", "episodes", "failed", *SUMMARY_COLUMNS)
+    return markdown_table(table, columns, "shift", digits=3) + "\n" + note + "\n"
 
 
 def mean_curves(batches: Mapping[float, Mapping[str, np.ndarray]], shifts: Sequence[str]) -> list[dict]:
@@ -116,7 +113,7 @@ def mean_curves(batches: Mapping[float, Mapping[str, np.ndarray]], shifts: Seque
 # ---- outputs -----------------------------------------------------------------------------------------------
 def plot_over_time(curves: Sequence[Mapping], shift_time: float, path: Path, what: str) -> Path:
     """One panel per shift: `what` (pixel errors, or hand displacement) vs time, one colour per visual precision."""
-    from bodyschema.training.plots import plt, save_figure   # matplotlib only when plotting
+    from bodyschema.evaluation.core.plots import plt, save_figure   # matplotlib only when plotting
     shifts = list(dict.fromkeys(r["shift"] for r in curves))
     precisions = list(dict.fromkeys(r["visual_precision"] for r in curves))
     fig, axes = plt.subplots(1, len(shifts), figsize=(3.6 * len(shifts), 3.4), squeeze=False, sharey=True)
@@ -142,7 +139,7 @@ def plot_image_paths(batches: Mapping[float, Mapping[str, np.ndarray]], shifts: 
                      image_size: tuple[int, int], path: Path) -> Path:
     """Image plane, the first episode of each shift: hand (dashed) and seen marker (solid, from the shift on; ○ where
     it was seen just after the shift) paths, final positions (•), goal (×)."""
-    from bodyschema.training.plots import plt, save_figure   # matplotlib only when plotting
+    from bodyschema.evaluation.core.plots import plt, save_figure   # matplotlib only when plotting
     names = list(dict.fromkeys(shifts))
     fig, axes = plt.subplots(1, len(names), figsize=(3.6 * len(names), 3.4), squeeze=False)
     for ax, shift in zip(axes[0], names):
@@ -166,7 +163,7 @@ def plot_image_paths(batches: Mapping[float, Mapping[str, np.ndarray]], shifts: 
 
 def plot_correction(table: Sequence[Mapping], path: Path) -> Path:
     """Measured vs predicted correction against visual precision, one line per shift: the trust trade-off."""
-    from bodyschema.training.plots import plt, save_figure   # matplotlib only when plotting
+    from bodyschema.evaluation.core.plots import plt, save_figure   # matplotlib only when plotting
     fig, ax = plt.subplots(figsize=(5, 3.6))
     for n, shift in enumerate(dict.fromkeys(r["shift"] for r in table)):
         mine = [r for r in table if r["shift"] == shift and np.isfinite(r["correction"])]
@@ -181,13 +178,13 @@ def plot_correction(table: Sequence[Mapping], path: Path) -> Path:
     return save_figure(fig, path, dpi=120)
 
 
-def write_all(config, robot, rows: list[dict], batches: dict, shifts: list[str]) -> dict[str, Path]:
-    """summary.md/csv, per-episode and mean time-series CSVs, plots into config.out; one MLflow run if asked."""
-    out = Path(config.out)
-    out.mkdir(parents=True, exist_ok=True)
+def write_all(config, out: Path, robot, models, rows: list[dict], batches: dict, shifts: list[str]
+              ) -> dict[str, Path]:
+    """summary.md/csv, per-episode and mean time-series CSVs, plots into the run folder `out`; then the models, one
+    MLflow run if asked and the latest link."""
     table = summarize(rows)
     curves = mean_curves(batches, shifts)
-    note = (f"nao_arm holds {config.episodes} held-out goals ({config.goal}) by active inference; at "
+    note = (f"nao_arm holds {config.trials} held-out goals ({config.goal}) by active inference; at "
             f"t = {config.shift_time:g} s the visual marker moves {config.offset * 1e3:g} mm in the hand frame "
             f"(forearm: 2×). Means over episodes at t = {config.duration:g} s: hand displacement after the shift, "
             "correction = fraction of the seen shift the hand undid (linear theory beside it), final pixel errors "
@@ -202,7 +199,6 @@ def write_all(config, robot, rows: list[dict], batches: dict, shifts: list[str])
              "image_paths_png": plot_image_paths(batches, shifts, robot.image_size, out / "image_paths.png"),
              "correction_png": plot_correction(table, out / "correction_vs_precision.png")}
     paths["summary_md"].write_text(markdown(table, note))
-    if config.mlflow:
-        label = lambda row: f"{row['shift']}.pv{row['visual_precision']:g}"   # noqa: E731
-        log_benchmark(config, "marker_shift", table_metrics(table, label), paths.values())
+    label = lambda row: f"{row['shift']}.pv{row['visual_precision']:g}"   # noqa: E731
+    publish(config, out, "marker_shift", table_metrics(table, label), paths, models)
     return paths

@@ -19,7 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bodyschema.evaluation.targets import EVAL_STREAM, sense
+from bodyschema.evaluation.core.seeds import EVAL_STREAM
+from bodyschema.evaluation.core.sensing import sense
 
 SELF = "self"
 STREAM_WORD = 0x5E1F                       # second entropy word: self-recognition streams, apart from levels'
@@ -50,16 +51,16 @@ def _rng(seed: int, episode: int, role: str) -> np.random.Generator:
 
 def make_episodes(config, robot, modalities: Sequence[str]) -> Episodes:
     """Babbling trajectories of every episode and what the robot feels and sees (noise included). config: a
-    SelfRecognitionConfig (episodes, sources, steps, period, delay, hold_s, noise σ, seed, progress)."""
+    SelfRecognitionConfig (trials, sources, steps, period, delay, hold_s, noise σ, seed, progress)."""
     from tqdm import tqdm
 
     from bodyschema.datagen.samplers import Babbler
-    kinds = episode_kinds(config.episodes, config.sources)
+    kinds = episode_kinds(config.trials, config.sources)
     babbler = Babbler(robot.model, list(robot.joint_names), robot.joint_limits, 1.0 / config.period, config.hold_s)
     period = 1.0 / babbler.rate_hz
     lag = max(1, round(config.delay / period))                      # frames of pre-roll, for q(t − delay)
     low, high = robot.sampling_ranges.T
-    n, t, dq = config.episodes, config.steps, robot.dq
+    n, t, dq = config.trials, config.steps, robot.dq
 
     def babble(i, role):                                            # (T + lag, Dq) rad, clipped to the model box
         q = babbler.episode(_rng(config.seed, i, role), robot.sampling_ranges, t + lag)["q"]
@@ -80,7 +81,7 @@ def make_episodes(config, robot, modalities: Sequence[str]) -> Episodes:
     noise = {**dict(config.visual_noise), "joints": config.proprio_noise}
     visual = {}
     for m in modalities:
-        x = sense(robot, m, seen.reshape(n * t, dq), np.float32)      # (N·T, *out); float32 images
+        x = sense(robot, m, seen.reshape(n * t, dq), image_dtype=np.float32)      # (N·T, *out); float32 images
         x = x.reshape(n, t, *x.shape[1:])
         x[mirrored] = mirror(robot, m, x[mirrored].reshape(-1, *x.shape[2:])).reshape(x[mirrored].shape)
         visual[m] = _noisy(x, noise.get(m, 0.0), config.seed, "visual_noise", m == "image").astype(np.float32)

@@ -5,10 +5,12 @@ from datagen and from the levels benchmark); the goal is what the goal sensor wo
 is reachable by construction): an image (nao_arm with an image model, rendered at the target pose and scaled
 as training images), an ee pixel, an ee position (panda) or joint angles. Every episode starts at rest at
 another random pose, with the belief at that pose.
-  nao_arm  AIF: `aif.action.VelocityController` velocity commands integrated into the position servos;
-           baseline: the servos commanded to the target's joint pose (its true inverse kinematics).
-  panda    AIF: `aif.aic.AICController` torques on motors; baseline: PD + gravity compensation on the target pose.
-Metrics per episode (reaching_report.py): success (simulator ee within `success_mm` of the target's ee at the
+The controllers follow what the robot's actuators take (`robot.actuation`, set per robot in ROBOTS):
+  position (nao_arm)  AIF: `aif.action.VelocityController` velocity commands integrated into the servo targets;
+                      baseline: the servos commanded to the target's joint pose (its true inverse kinematics).
+  torque (panda)      AIF: `aif.aic.AICController` torques on motors; baseline: PD + gravity compensation on the
+                      target pose.
+Metrics per episode (report.py): success (simulator ee within `success_mm` of the target's ee at the
 end), final ee error, final joint error, time to reach (first time within success_mm and staying), the error
 in the goal's own space (px, mm, deg or image MSE) and failures with their reasons.
 An ee pixel goal fixes the ray through the target, not its depth: with the default nao_arm models the AIF meets
@@ -30,61 +32,55 @@ from bodyschema.aif.aic import AICConfig, AICController
 from bodyschema.aif.perception import PerceptionConfig
 from bodyschema.datagen.samplers import uniform
 from bodyschema.errors import must_be
-from bodyschema.evaluation import reaching_report
-from bodyschema.evaluation.levels import load_robot, models_field, resolve_models
-from bodyschema.evaluation.pd import PDController
-from bodyschema.evaluation.reaching_loop import (Sensors, ServoPolicy, TorquePolicy, VelocityPolicy, control_substeps,
-                                                 rollout)
-from bodyschema.evaluation.targets import EVAL_STREAM, sense
+from bodyschema.evaluation.core.config import TrialsConfig
+from bodyschema.evaluation.core.pd import PDController
+from bodyschema.evaluation.core.runs import new_run
+from bodyschema.evaluation.core.seeds import EVAL_STREAM
+from bodyschema.evaluation.core.sensing import Sensors, sense
+from bodyschema.evaluation.core.sim import control_substeps
+from bodyschema.evaluation.core.specs import load_robot, models_field, resolve_models
+from bodyschema.evaluation.reaching import report as reaching_report
+from bodyschema.evaluation.reaching.loop import ServoPolicy, TorquePolicy, VelocityPolicy, rollout
 
 REACHING_STREAM = 0x4EAC_4100          # second entropy word: reaching targets are their own stream
 PURPOSE = {"targets": 0, "starts": 1, "noise": 2}
-ROBOTS = {   # default models, goal sensor, control rate (Hz), duration (s)
-    "nao_arm": {"models": ("analytic:nao_arm:ee_pixel", "analytic:nao_arm:joints"), "hz": 50.0, "duration": 3.0},
-    "panda": {"models": ("analytic:panda:ee_xyz",), "hz": 500.0, "duration": 10.0},   # the Jᵀ attractor is slow
+ROBOTS = {   # default models, control rate (Hz), duration (s), what the actuators take
+    "nao_arm": {"models": ("analytic:nao_arm:ee_pixel", "analytic:nao_arm:joints"), "hz": 50.0, "duration": 3.0,
+                "actuators": "position"},
+    "panda": {"models": ("analytic:panda:ee_xyz",), "hz": 500.0, "duration": 10.0,   # the Jᵀ attractor is slow
+              "actuators": "torque"},
 }
 GOAL_PREFERENCE = ("image", "ee_xyz", "ee_pixel", "joints")   # "auto": the first modality among the models
 
 
 @dataclass(frozen=True)
-class ReachingConfig:
+class ReachingRunConfig(TrialsConfig):
+    """What reaching and its robustness sweeps share: the robot, models, goal, episodes and controllers."""
+
+    out: Path = Path("results/reaching")
+    experiment: str = "bodyschema-reaching"
     robot: str = "nao_arm"                 # "nao_arm" (velocity AIF on servos) | "panda" (AIC torques)
     models: models_field("the robot's analytic defaults (nao_arm: ee_pixel + joints; panda: ee_xyz)") = ()
     goal: str = "auto"                     # goal modality; auto: image > ee_xyz > ee_pixel > joints among the models
-    targets: int = 100                     # random reachable targets (episodes per controller)
+    trials: int = 100                      # random reachable targets (episodes per controller)
     duration: float | None = None          # s per episode; None: 3 (nao_arm), 10 (panda)
     control_hz: float | None = None        # must divide into whole MuJoCo steps; None: 50 (nao_arm), 500 (panda)
-    noise: tuple[tuple[str, float], ...] = ()   # observation noise σ per modality (rad, m, px, intensity)
-    broken: tuple[str, ...] = ()           # modalities whose precision is 0 (a dead sensor)
-    frozen: tuple[str, ...] = ()           # modalities whose stream is frozen at its first reading
-    baseline: bool = True                  # also run the PD baseline
-    action: ActionConfig = ActionConfig()  # nao_arm
-    perception: PerceptionConfig = PerceptionConfig()   # nao_arm: per-tick perception (prior set to attractor)
-    aic: AICConfig = AICConfig()           # panda: the torque controller's gains and precisions
+    action: ActionConfig = ActionConfig()  # position-servo robots: the velocity controller
+    perception: PerceptionConfig = PerceptionConfig(step_control="none")   # servo robots: per-tick perception (prior set to attractor)
+    aic: AICConfig = AICConfig()           # torque robots: the AIC's gains and precisions
     success_mm: float = 10.0               # success: final simulator ee error below this
     pixel_tolerance: float = 1.0           # px; goal-space success of an ee_pixel goal
     image_mse_threshold: float = 7e-4      # image goal success; the median MSE (200 poses) of a 1 cm ee offset
-    image_size: tuple[int, int] | None = None
-    path_plots: int = 6                    # targets drawn in the image-plane path plot
-    seed: int = 0
-    out: Path = Path("results/reaching")
-    mlflow: bool = True
-    tracking_uri: str | None = None        # None: $MLFLOW_TRACKING_URI, else sqlite:///mlflow.db
-    experiment: str = "bodyschema-reaching"
-    progress: bool = True
+    image_size: tuple[int, int] | None = None   # robot camera (H, W); default: the image model's, else the robot's
 
     def __post_init__(self):
+        super().__post_init__()
         if self.robot not in ROBOTS:
             raise ValueError(must_be("robot", f"one of {tuple(ROBOTS)}", self.robot))
-        if self.targets < 1:
-            raise ValueError(must_be("targets", "at least 1", self.targets))
         if self.duration is not None and not self.duration > 0:
             raise ValueError(must_be("duration", "positive (s)", self.duration))
         if self.goal not in ("auto", *GOAL_PREFERENCE):
             raise ValueError(must_be("goal", f"'auto' or one of {GOAL_PREFERENCE}", self.goal))
-        for name, sigma in self.noise:
-            if not (isinstance(sigma, (int, float)) and sigma >= 0):
-                raise ValueError(must_be(f"noise[{name!r}]", "a standard deviation ≥ 0", sigma))
 
     @property
     def default_models(self) -> tuple[str, ...]:
@@ -97,6 +93,23 @@ class ReachingConfig:
     @property
     def seconds(self) -> float:
         return ROBOTS[self.robot]["duration"] if self.duration is None else self.duration
+
+
+@dataclass(frozen=True)
+class ReachingConfig(ReachingRunConfig):
+    """Closed-loop AIF reaching to random reachable goals against the PD baseline."""
+
+    noise: tuple[tuple[str, float], ...] = ()   # observation noise σ per modality (rad, m, px, intensity)
+    broken: tuple[str, ...] = ()           # modalities whose precision is 0 (a dead sensor)
+    frozen: tuple[str, ...] = ()           # modalities whose stream is frozen at its first reading
+    baseline: bool = True                  # also run the PD baseline
+    path_plots: int = 6                    # targets drawn in the image-plane path plot
+
+    def __post_init__(self):
+        super().__post_init__()
+        for name, sigma in self.noise:
+            if not (isinstance(sigma, (int, float)) and sigma >= 0):
+                raise ValueError(must_be(f"noise[{name!r}]", "a standard deviation ≥ 0", sigma))
 
 
 def reaching_rng(seed: int, purpose: str) -> np.random.Generator:
@@ -113,8 +126,13 @@ class Episodes:
 
 
 # ---- goals ------------------------------------------------------------------------------------------------
-def goal_modality(config: ReachingConfig, models) -> str:
-    names = [m.modality for m in models] + (["joints"] if config.robot == "panda" else [])
+def builtin_sensors(robot) -> list[str]:
+    """Sensors a controller has without a model: a torque-driven arm's AIC reads its joint encoders itself."""
+    return ["joints"] if robot.actuation == "torque" else []
+
+
+def goal_modality(config: ReachingRunConfig, models, robot) -> str:
+    names = [m.modality for m in models] + builtin_sensors(robot)
     if config.goal != "auto":
         if config.goal not in names:
             raise ValueError(must_be("goal", f"the modality of one of the models {names}", config.goal))
@@ -175,8 +193,8 @@ def in_view_targets(rng: np.random.Generator, robot, n: int) -> np.ndarray:
 
 
 def make_episodes(config: ReachingConfig, robot, modality: str, output_shape) -> Episodes:
-    q_target = in_view_targets(reaching_rng(config.seed, "targets"), robot, config.targets)
-    q_start = uniform(reaching_rng(config.seed, "starts"), robot.sampling_ranges, config.targets)
+    q_target = in_view_targets(reaching_rng(config.seed, "targets"), robot, config.trials)
+    q_start = uniform(reaching_rng(config.seed, "starts"), robot.sampling_ranges, config.trials)
     goal = make_goal(robot, modality, q_target)
     check_goal(robot, modality, goal, output_shape)
     return Episodes(q_target, q_start, {modality: goal}, robot.fk(q_target))
@@ -185,7 +203,7 @@ def make_episodes(config: ReachingConfig, robot, modality: str, output_shape) ->
 # ---- controllers ------------------------------------------------------------------------------------------
 def aif_policy(config: ReachingConfig, models, robot):
     precisions = {m: 0.0 for m in config.broken}
-    if config.robot == "nao_arm":
+    if robot.actuation == "position":
         return VelocityPolicy(VelocityController(models, config.perception, config.action, precisions))
     if "joints" in config.broken:
         raise ValueError(must_be("broken", "extra sensors only on the panda (the AIC's joint sensor is built in)",
@@ -197,16 +215,17 @@ def aif_policy(config: ReachingConfig, models, robot):
 
 
 def baseline_policy(config: ReachingConfig, robot, episodes: Episodes):
-    if config.robot == "nao_arm":
+    if robot.actuation == "position":
         return ServoPolicy(episodes.q_target)
-    return TorquePolicy(PDController("panda"), goal={"joints": episodes.q_target})
+    return TorquePolicy(PDController(robot.name), goal={"joints": episodes.q_target})
 
 
 # ---- the benchmark ----------------------------------------------------------------------------------------
 def run_reaching(config: ReachingConfig = ReachingConfig(), models=None) -> dict[str, Path]:
-    """AIF (and the PD baseline) on config.targets episodes; writes tables, plots and one MLflow run."""
+    """AIF (and the PD baseline) on config.trials episodes; writes tables and plots to a new run folder under
+    config.out and logs one MLflow run."""
     robot, models, modality, episodes, results, walls = simulate(config, models)
-    return reaching_report.write_all(config, robot, models, modality, episodes, results, walls)
+    return reaching_report.write_all(config, new_run(config), robot, models, modality, episodes, results, walls)
 
 
 def simulate(config: ReachingConfig, models=None):
@@ -238,19 +257,16 @@ def prepare(config: ReachingConfig, models=None):
         bad = next(m for m in models if m.body.robot != config.robot)
         raise ValueError(must_be(f"{bad.modality} model body", f"of robot {config.robot!r}", bad.body.robot,
                                  "Pass models of the benchmark's robot (or change --robot)."))
-    robot = load_robot(models, config.image_size)
-    if config.robot == "panda":
-        from bodyschema.datagen.robot import Robot
-        robot = Robot.load("panda", image_size=robot.image_size, actuators="torque")
+    robot = load_robot(models, config.image_size, actuators=ROBOTS[config.robot]["actuators"])
     names = [m.modality for m in models]
     for what in ("broken", "frozen"):
-        unknown = sorted(set(getattr(config, what)) - set(names) - ({"joints"} if config.robot == "panda" else set()))
+        unknown = sorted(set(getattr(config, what)) - set(names) - set(builtin_sensors(robot)))
         if unknown:
             raise ValueError(must_be(what, f"modalities of the models {names}", unknown))
-    modality = goal_modality(config, models)
+    modality = goal_modality(config, models, robot)
     shape = (robot.dq,) if modality == "joints" else next(m.output_shape for m in models if m.modality == modality)
     episodes = make_episodes(config, robot, modality, shape)
-    sensed = tuple(dict.fromkeys(names + (["joints"] if config.robot == "panda" else [])))
+    sensed = tuple(dict.fromkeys(names + builtin_sensors(robot)))
     unknown = sorted(set(dict(config.noise)) - set(sensed))
     if unknown:
         raise ValueError(must_be("noise modality", f"one of the sensed modalities {list(sensed)}", unknown))

@@ -1,5 +1,6 @@
 """One MLflow run per benchmark: the config as params (nested configs flattened to `<field>.<name>`), a table's
-numbers as metrics named `<row label>.<column>`, and every file the benchmark wrote as an artifact."""
+numbers as metrics named `<row label>.<column>`, every file the benchmark wrote as an artifact, and per model what
+its spec resolved to as tags `bodyschema.model.<i>.<spec|name|version|run_id|sha256>`."""
 
 from __future__ import annotations
 
@@ -8,6 +9,10 @@ import re
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import asdict
 from pathlib import Path
+
+from bodyschema.evaluation.core.specs import provenance_rows
+
+MODEL_TAG = "bodyschema.model"
 
 
 def metric_name(text: str) -> str:
@@ -28,6 +33,11 @@ def config_params(config, models: Sequence = ()) -> dict[str, str]:
     return params
 
 
+def model_tags(models: Sequence) -> dict[str, str]:
+    """`bodyschema.model.<i>.<key>` → value for every model's provenance (resolved name, version, run, digest)."""
+    return {f"{MODEL_TAG}.{i}.{k}": v for i, row in enumerate(provenance_rows(models)) for k, v in row.items()}
+
+
 def table_metrics(table: Iterable[Mapping], label: Callable | str) -> dict[str, float]:
     """Every finite number of every row, named `<label>.<column>`; label: a column name or row → str."""
     name = (lambda row: row[label]) if isinstance(label, str) else label
@@ -42,14 +52,15 @@ def table_metrics(table: Iterable[Mapping], label: Callable | str) -> dict[str, 
 
 
 def log_benchmark(config, run_name: str, metrics: Mapping[str, float], paths: Iterable[Path],
-                  models: Sequence = (), tracking_uri: str | None = None) -> str:
-    """Log one run to `config.experiment` at `config.tracking_uri` (or `tracking_uri`); returns its run id."""
+                  models: Sequence = ()) -> str:
+    """Log one run to `config.experiment` at `config.tracking_uri`; returns its run id."""
     import mlflow
 
     from bodyschema.training.registry import ensure_experiment, use_tracking
-    use_tracking(getattr(config, "tracking_uri", tracking_uri))
+    use_tracking(config.tracking_uri)
     with mlflow.start_run(experiment_id=ensure_experiment(config.experiment), run_name=run_name) as run:
         mlflow.log_params(config_params(config, models))
+        mlflow.set_tags(model_tags(models))
         mlflow.log_metrics(dict(metrics))
         for path in paths:
             mlflow.log_artifact(str(path))

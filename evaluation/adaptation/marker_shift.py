@@ -26,10 +26,13 @@ import torch
 from bodyschema.aif.action import ActionConfig, VelocityController
 from bodyschema.aif.perception import PerceptionConfig
 from bodyschema.errors import must_be
-from bodyschema.evaluation import marker_shift_report as report
-from bodyschema.evaluation.levels import load_robot, models_field, resolve_models
-from bodyschema.evaluation.reaching_loop import control_substeps
-from bodyschema.evaluation.targets import eval_rng
+from bodyschema.evaluation.adaptation import marker_shift_report as report
+from bodyschema.evaluation.core.config import TrialsConfig
+from bodyschema.evaluation.core.runs import new_run
+from bodyschema.evaluation.core.seeds import eval_rng
+from bodyschema.evaluation.core.sensing import sense, sense_all
+from bodyschema.evaluation.core.sim import ArmBatch, control_substeps
+from bodyschema.evaluation.core.specs import load_robot, models_field, resolve_models
 
 # Unit direction of each shift in the hand (LForeArm body) frame: x along the forearm towards the marker, y the
 # side (left at q = 0), times the offset size. "forearm" goes twice as far back: the hand capsule spans the last
@@ -45,37 +48,32 @@ DEFAULT_MODELS = ("analytic:nao_arm:joints", "analytic:nao_arm:ee_pixel")
 
 
 @dataclass(frozen=True)
-class MarkerShiftConfig:
+class MarkerShiftConfig(TrialsConfig):
     """nao_arm holds a goal by active inference while its visual marker is shifted in the hand frame."""
 
+    out: Path = Path("results/adaptation/marker_shift")
+    experiment: str = "bodyschema-adaptation"
     models: models_field(", ".join(DEFAULT_MODELS)) = ()
+    trials: int = 10                   # goal poses per shift (the same poses for every shift and precision)
     shifts: tuple[str, ...] = ("left", "right", "finger", "forearm")   # hand frame ±y, +x, −x; "none": control
     offset: float = 0.03               # m, size of the shift in the hand frame (a few cm; "forearm" goes 2×)
-    episodes: int = 10                 # goal poses per shift (the same poses for every shift and precision)
     duration: float = 4.0              # s per episode
     shift_time: float = 1.0            # s; the hold before it shows the unshifted loop is at rest
     control_rate: float = 100.0        # Hz, whole 2 ms MuJoCo steps; at 50 Hz Π_v = 10 makes limit cycles
     visual_precisions: tuple[float, ...] = (0.1, 1.0, 10.0)   # Π of ee_pixel, px⁻²: low to high trust in vision
     goal: str = "ee_pixel"             # "ee_pixel": marker pixel at the goal pose | "joints": the pose | "image"
-    # Vision drives action too: driven by joints alone the conflict stays in the belief and the hand barely moves.
-    action: ActionConfig = ActionConfig(drive=("joints", "ee_pixel"))
-    perception: PerceptionConfig = PerceptionConfig()
-    seed: int = 0
-    out: Path = Path("results/adaptation/marker_shift")
-    mlflow: bool = True
-    tracking_uri: str | None = None    # None: $MLFLOW_TRACKING_URI, else sqlite:///mlflow.db
-    experiment: str = "bodyschema-adaptation"
-    progress: bool = True
+    action: ActionConfig = ActionConfig(drive=("joints", "ee_pixel"))   # vision drives action too: driven by
+                                       # joints alone the conflict stays in the belief and the hand barely moves
+    perception: PerceptionConfig = PerceptionConfig(step_control="none")   # the per-tick perception of the velocity controller
 
     def __post_init__(self):
+        super().__post_init__()
         bad = [s for s in self.shifts if s not in SHIFTS]
         if not self.shifts or bad:
             raise ValueError(must_be("shifts", f"a non-empty subset of {tuple(SHIFTS)}", self.shifts,
                                      f"Unknown: {bad}." if bad else ""))
         if not (np.isfinite(self.offset) and self.offset >= 0):
             raise ValueError(must_be("offset", "a finite size ≥ 0 in m", self.offset))
-        if self.episodes < 1:
-            raise ValueError(must_be("episodes", "at least 1", self.episodes))
         if not (np.isfinite(self.duration) and self.duration > 0):
             raise ValueError(must_be("duration", "a positive time in s", self.duration))
         if not (0 <= self.shift_time < self.duration):
@@ -95,52 +93,6 @@ def marker_offsets(shifts: Sequence[str], size: float) -> np.ndarray:
     if unknown:
         raise ValueError(must_be("shift", f"one of {tuple(SHIFTS)}", unknown[0]))
     return size * np.array([SHIFTS[s] for s in shifts], dtype=np.float64)
-
-
-class Arms:
-    """B simulated copies of the arm on position servos, with a marker displaced in the hand frame per copy."""
-
-    def __init__(self, robot, q0: np.ndarray, offsets: np.ndarray):
-        import mujoco
-        self._mj = mujoco
-        self.robot, m = robot, robot.model
-        if not (m.nu == robot.dq and np.all(m.actuator_biastype == mujoco.mjtBias.mjBIAS_AFFINE)
-                and np.array_equal(m.actuator_trnid[:, 0], np.arange(robot.dq))):
-            raise ValueError(must_be(f"the actuators of {robot.name}", "one position servo per joint, in order",
-                                     f"{m.nu} actuators", "Load the robot with actuators='position'."))
-        site = m.site("ee")
-        self._body = int(site.bodyid[0])
-        self._site, self._marker_local = site.id, m.site_pos[site.id].copy()   # (3,) m in the hand frame
-        self.offsets = np.asarray(offsets, dtype=np.float64)                      # (B, 3) m in the hand frame
-        self.datas = [mujoco.MjData(m) for _ in range(len(q0))]
-        for d, q in zip(self.datas, q0):
-            d.qpos[:] = q
-            mujoco.mj_forward(m, d)
-            # at rest on q: servo force gain·ctrl + b1·q = gravity torque qfrc_bias
-            d.ctrl[:] = (d.qfrc_bias / m.actuator_gear[:, 0] - m.actuator_biasprm[:, 1] * q) / m.actuator_gainprm[:, 0]
-        self.shifted = np.zeros(len(q0), dtype=bool)
-
-    def step(self, velocity: np.ndarray, dt: float, substeps: int) -> None:
-        """Move every servo target by velocity (B, Dq) rad/s · dt s and simulate the control period."""
-        m, mj = self.robot.model, self._mj
-        low, high = m.actuator_ctrlrange.T
-        for d, v in zip(self.datas, velocity):
-            d.ctrl[:] = np.clip(d.ctrl + v * dt, low, high)
-            for _ in range(substeps):
-                mj.mj_step(m, d)
-            mj.mj_kinematics(m, d)                      # positions of the new qpos (mj_step leaves the old ones)
-
-    def q(self) -> np.ndarray:
-        return np.stack([d.qpos.copy() for d in self.datas])                          # (B, Dq) rad
-
-    def hand(self) -> np.ndarray:
-        return np.stack([d.site_xpos[self._site].copy() for d in self.datas])         # (B, 3) m
-
-    def marker(self) -> np.ndarray:
-        """(B, 3) m, the marker in the world: body position + body rotation @ (marker point + offset if shifted)."""
-        local = self._marker_local + self.offsets * self.shifted[:, None]             # (B, 3) hand frame
-        return np.stack([d.xpos[self._body] + d.xmat[self._body].reshape(3, 3) @ p
-                         for d, p in zip(self.datas, local)])
 
 
 def vision_modality(models: Sequence) -> str:
@@ -176,44 +128,44 @@ def simulate(robot, models: Sequence, config: MarkerShiftConfig, q_goal: np.ndar
     drive = tuple(dict.fromkeys(vision if d in VISUAL else d for d in config.action.drive))   # "ee_pixel" → the seer
     action = replace(config.action, drive=drive)
     controller = VelocityController(models, config.perception, action, precisions={vision: visual_precision})
-    arms = Arms(robot, q_goal, offsets)
-    goal_xyz = arms.hand()
+    arms = ArmBatch(robot, q_goal, hold="gravity", marker_offsets=offsets)
+    low, high = robot.model.actuator_ctrlrange.T
+    goal_xyz = arms.ee_xyz
     goal_px = robot.project(goal_xyz)                                             # (B, 2) px
     goal = {"ee_pixel": goal_px, "joints": q_goal.copy()}.get(config.goal)
-    goal = torch.from_numpy(_render_shifted(robot, q_goal, np.zeros_like(offsets)) if goal is None else goal)
+    goal = torch.from_numpy(sense(robot, "image", q_goal) if goal is None else goal)
     controller.reset(q_goal, {config.goal: goal})
-    image = next((m for m in models if m.modality == "image"), None)
-    known = {m.modality for m in models}
+    known = [m.modality for m in models]
     names = ("q", "belief", "hand_xyz", "hand_px", "marker_px")
     series = {k: [] for k in names}
     for k in tqdm(range(ticks + 1), desc=f"marker shift Π_v={visual_precision:g}", disable=not config.progress):
         arms.shifted[:] = k >= shift_tick
-        q, hand, marker = arms.q(), arms.hand(), arms.marker()
-        marker_px = _project(robot, marker)
+        q, hand, marker = arms.q, arms.ee_xyz, arms.marker_xyz
+        obs = sense_all(robot, known, q, xyz=marker, marker_offsets=arms.shown_offsets)   # the seen marker
+        marker_px = obs["ee_pixel"].numpy() if "ee_pixel" in obs else sense(robot, "ee_pixel", q, xyz=marker)
         for name, value in zip(names, (q, controller.belief, hand, robot.project(hand), marker_px)):
             series[name].append(value)
         if k == ticks:
             break
-        obs = {"joints": torch.from_numpy(q), "ee_pixel": torch.from_numpy(marker_px)}
-        if image is not None:
-            obs["image"] = torch.from_numpy(_render_shifted(robot, q, arms.offsets * arms.shifted[:, None]))
-        velocity = controller.act({n: x for n, x in obs.items() if n in known}, dt)
-        arms.step(velocity, dt, substeps)
+        velocity = controller.act(obs, dt)                                        # (B, Dq) rad/s
+        arms.step(np.clip(arms.ctrl + velocity * dt, low, high), substeps)        # servo targets += a·Δt
     out = {name: np.stack(v) for name, v in series.items()}
-    out.update(t=np.arange(ticks + 1) * dt, goal_px=goal_px, goal_xyz=goal_xyz, failed=controller.failed.copy(),
-               reasons=np.array([r or "" for r in controller.reasons]), shift_tick=np.array(shift_tick))
+    failed = controller.failed | arms.failed
+    reasons = [c or a or "" for c, a in zip(controller.reasons, arms.reasons)]
+    out.update(t=np.arange(ticks + 1) * dt, goal_px=goal_px, goal_xyz=goal_xyz, failed=failed,
+               reasons=np.array(reasons), shift_tick=np.array(shift_tick))
     return out
 
 
 def run_marker_shift(config: MarkerShiftConfig = MarkerShiftConfig(), models: Sequence | None = None
                      ) -> dict[str, Path]:
-    """Every shift × visual precision on the same held-out goal poses; writes tables and plots to config.out and
-    logs one MLflow run. Returns name → Path of what it wrote."""
+    """Every shift × visual precision on the same held-out goal poses; writes tables and plots to a new run folder
+    under config.out and logs one MLflow run. Returns name → Path of what it wrote."""
     models = resolve_models(config.models, DEFAULT_MODELS, config.tracking_uri, models)
     vision = vision_modality(models)
     robot = load_robot(models)
-    q_goal = goal_poses(robot, config.episodes, config.seed)                     # (E, Dq) rad
-    shifts = [s for s in config.shifts for _ in range(config.episodes)]          # episode i: shift of row i
+    q_goal = goal_poses(robot, config.trials, config.seed)                     # (E, Dq) rad
+    shifts = [s for s in config.shifts for _ in range(config.trials)]          # episode i: shift of row i
     q0 = np.tile(q_goal, (len(config.shifts), 1))                                # (S·E, Dq) rad
     offsets = marker_offsets(shifts, config.offset)                              # (S·E, 3) m, hand frame
     jac_px = robot.project_jacobian(robot.fk(q0)) @ robot.jacobian(q0)           # (S·E, 2, Dq) px/rad, true
@@ -229,28 +181,4 @@ def run_marker_shift(config: MarkerShiftConfig = MarkerShiftConfig(), models: Se
             else np.full(len(seen), np.nan)                                      # the theory is in px⁻²
         rows += report.episode_rows(series, shifts, precision, predicted)
         batches[precision] = series
-    return report.write_all(config, robot, rows, batches, shifts)
-
-
-def _project(robot, xyz: np.ndarray) -> np.ndarray:
-    """robot.project, with points that left the scene (non-finite) seen as NaN: their episodes fail."""
-    out = np.full((len(xyz), 2), np.nan)
-    ok = np.isfinite(xyz).all(axis=1)
-    if ok.any():
-        out[ok] = robot.project(xyz[ok])
-    return out
-
-
-def _render_shifted(robot, q: np.ndarray, offsets: np.ndarray) -> np.ndarray:
-    """(B, H, W[, 3]) image intensities in [0, 1] with the marker geom moved by each row's offset (hand frame)."""
-    from bodyschema.models.scaling import IMAGE_SCALE
-    geom = robot.model.geom("marker").id
-    home = robot.model.geom_pos[geom].copy()
-    frames = []
-    try:
-        for q_i, off in zip(q, offsets):
-            robot.model.geom_pos[geom] = home + off
-            frames.append(robot.render(np.clip(q_i, *robot.joint_limits.T)[None])[0])
-    finally:
-        robot.model.geom_pos[geom] = home
-    return np.stack(frames).astype(np.float64) / IMAGE_SCALE
+    return report.write_all(config, new_run(config), robot, models, rows, batches, shifts)

@@ -1,8 +1,12 @@
 """`bodyschema report`: one Markdown page and one self-contained HTML page gathering every benchmark's summary.md,
 plots (PNG) and tables (CSV) found under `results/` — levels, reaching, adaptation, self-recognition, robustness, …
 
-A section is a folder at most two levels under `results` holding a `summary.md`. Files that cannot belong to the last run are skipped and listed at the end: empty or truncated
-files, and plots/CSVs older than their summary.md by more than `stale_after_s`. The HTML embeds images as base64
+A section is one run of a benchmark: for every benchmark folder (`results/<name>/` or `results/<group>/<name>/`,
+holding run folders `<run-id>/` and a `latest` link) the run named with `--runs`, else the latest; a plain folder
+holding a `summary.md` is a section too. Under each section's summary the models the run used (models.csv:
+spec, registered name, version, source run, weights digest). Files that cannot belong to the run are skipped and
+listed at the end: empty or truncated files, and plots/CSVs older than their summary.md by more than
+`stale_after_s`. The HTML embeds images as base64
 and needs no network; `markdown` is not a dependency, so `markdown_to_html` converts what summary.md files hold
 (headings, paragraphs, pipe tables, lists, code, links, images). Both pages are written to temporary files
 and renamed only once complete, so a failure never leaves a half-written report.
@@ -10,6 +14,7 @@ and renamed only once complete, so a failure never leaves a half-written report.
 
 from __future__ import annotations
 
+import csv
 import os
 import re
 import tempfile
@@ -19,10 +24,11 @@ from pathlib import Path
 from urllib.parse import quote, unquote
 
 from bodyschema.errors import must_be
-from bodyschema.evaluation.markdown_html import LINK, embedded_image, html_page, markdown_to_html, slug
+from bodyschema.evaluation.core.runs import MODELS_CSV, is_benchmark_folder, latest_run
+from bodyschema.evaluation.report.markdown_html import LINK, embedded_image, html_page, markdown_to_html, slug
 
 KNOWN_ORDER = ("levels", "reaching", "adaptation", "self_recognition", "robustness")   # then others, A→Z
-MAX_DEPTH = 2                  # results/<benchmark>/summary.md or results/<benchmark>/<case>/summary.md
+MAX_DEPTH = 2                  # results/<benchmark>/<run> or results/<group>/<benchmark>/<run>
 NO_RESULTS_HINT = "Run `bodyschema evaluate levels` first."
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -31,7 +37,9 @@ PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 class ReportConfig:
     """Gather every benchmark's summary table, plots and CSVs under `results` into one Markdown and one HTML page."""
 
-    results: Path = Path("results")    # the folder benchmarks write into: results/<benchmark>/summary.md
+    results: Path = Path("results")    # the folder benchmarks write into: results/<benchmark>/<run-id>/
+    runs: tuple[Path, ...] = ()        # run folders to report instead of their benchmark's latest (e.g.
+                                       # results/levels/20261124T201502.123Z-1a2b3c4d); the others: latest
     out: Path | None = None            # the Markdown page, HTML beside it (.html); None: <results>/report.md
     title: str = "bodyschema benchmark report"
     stale_after_s: float = 3600.0      # a plot/CSV this much older than its summary.md is left from an earlier run
@@ -39,12 +47,16 @@ class ReportConfig:
     def __post_init__(self):
         if not self.stale_after_s >= 0:
             raise ValueError(must_be("stale_after_s", "a number of seconds ≥ 0", self.stale_after_s))
+        for run in self.runs:
+            if not (Path(run).is_dir() and (Path(run) / "summary.md").is_file()):
+                raise ValueError(must_be("runs", "run folders holding a summary.md", str(run),
+                                         "Name a folder such as results/levels/<run-id>."))
 
 
 @dataclass
 class Section:
-    name: str                          # folder relative to results, e.g. "adaptation/jupiter"
-    folder: Path
+    name: str                          # the benchmark folder relative to results, e.g. "adaptation/jupiter"
+    folder: Path                       # the run folder (or a plain folder holding a summary.md)
     summary_path: Path
     summary: str                       # the summary.md text
     plots: list[Path] = field(default_factory=list)
@@ -52,10 +64,12 @@ class Section:
 
 
 # ---- finding the sections ---------------------------------------------------------------------------------
-def find_sections(results: Path, stale_after_s: float = 3600.0) -> tuple[list[Section], list[tuple[Path, str]]]:
-    """Every readable benchmark section under `results`, in report order, and the (file, reason) pairs skipped."""
+def find_sections(results: Path, stale_after_s: float = 3600.0, runs=()
+                  ) -> tuple[list[Section], list[tuple[Path, str]]]:
+    """Every readable benchmark section under `results`, in report order, and the (file, reason) pairs skipped;
+    `runs`: run folders chosen instead of their benchmark's latest."""
     skipped, sections = [], []
-    for folder in _folders(results):
+    for folder in _folders(results, runs=[Path(r).resolve() for r in runs]):
         summary_path = _summary_file(folder)
         if summary_path is None:
             continue
@@ -67,7 +81,8 @@ def find_sections(results: Path, stale_after_s: float = 3600.0) -> tuple[list[Se
         if not text.strip():
             skipped.append((summary_path, "empty summary"))
             continue
-        sections.append(Section(folder.relative_to(results).as_posix(), folder, summary_path, text))
+        name = folder.parent if folder.parent != results and is_benchmark_folder(folder.parent) else folder
+        sections.append(Section(name.relative_to(results).as_posix(), folder, summary_path, text))
     owned = [s.folder for s in sections]
     skipped += [(top, "outputs but no summary.md") for top in _unreported(results, owned)]
     for section in sections:
@@ -81,11 +96,18 @@ def find_sections(results: Path, stale_after_s: float = 3600.0) -> tuple[list[Se
     return sections, sorted(skipped)
 
 
-def _folders(results: Path, depth: int = 1):
+def _folders(results: Path, depth: int = 1, runs=()):
+    """Candidate sections: the chosen run of every benchmark folder, and plain folders (not inside a benchmark)."""
     for child in sorted(p for p in results.iterdir() if p.is_dir() and not p.name.startswith((".", "_"))):
-        yield child
-        if depth < MAX_DEPTH:
-            yield from _folders(child, depth + 1)
+        if is_benchmark_folder(child):
+            chosen = [r for r in runs if r.parent == child.resolve()]
+            run = child / chosen[-1].name if chosen else latest_run(child)
+            if run is not None:
+                yield run
+        else:
+            yield child
+            if depth < MAX_DEPTH:
+                yield from _folders(child, depth + 1, runs)
 
 
 def _summary_file(folder: Path) -> Path | None:
@@ -94,7 +116,7 @@ def _summary_file(folder: Path) -> Path | None:
 
 def _unreported(results: Path, sections: list[Path]) -> list[Path]:
     """Top-level folders holding plots or CSVs but no section: a benchmark that wrote no summary.md."""
-    tops = [p for p in _folders(results) if p.parent == results]
+    tops = [p for p in results.iterdir() if p.is_dir() and not p.name.startswith((".", "_"))]
     return [t for t in tops if not any(t == s or t in s.parents for s in sections) and _owned_files(t, [])]
 
 
@@ -156,6 +178,7 @@ def _section_body(section: Section, page_dir: Path) -> list[str]:
     summary_time = _when(section.summary_path.stat().st_mtime)
     lines = [f"_Folder `{_rel(section.folder, page_dir)}/` · last modified {_when(newest)} "
              f"(`{section.summary_path.name}` {summary_time})._", "", summary.strip(), ""]
+    lines += _models(section.folder / MODELS_CSV)
     plots = [p for p in section.plots if p.resolve() not in linked]
     if plots:
         lines += ["**Plots**", ""]
@@ -167,6 +190,20 @@ def _section_body(section: Section, page_dir: Path) -> list[str]:
         lines += [f"- [{p.relative_to(section.folder).as_posix()}]({_link(p, page_dir)}) · {_when(p.stat().st_mtime)}"
                   for p in section.tables]
     return lines
+
+
+def _models(path: Path) -> list[str]:
+    """The run's models (models.csv) as a Markdown table: which weights produced the numbers above."""
+    if not path.is_file():
+        return []
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    if not rows:
+        return []
+    keys = list(rows[0])
+    lines = ["**Models**", "", "| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
+    lines += ["| " + " | ".join(f"`{r[k]}`" if r[k] else "–" for k in keys) + " |" for r in rows]
+    return lines + [""]
 
 
 def _demote_headings(text: str, by: int) -> str:
@@ -218,7 +255,7 @@ def write_report(config: ReportConfig = ReportConfig()) -> dict[str, Path]:
     results = Path(config.results)
     if not results.is_dir():
         raise ValueError(must_be("results", "a folder holding benchmark outputs", str(results), NO_RESULTS_HINT))
-    sections, skipped = find_sections(results, config.stale_after_s)
+    sections, skipped = find_sections(results, config.stale_after_s, config.runs)
     if not sections:
         raise ValueError(must_be("results", "a folder with at least one <benchmark>/summary.md", str(results),
                                  NO_RESULTS_HINT))

@@ -1,9 +1,8 @@
 """Held-out evaluation targets and the initial beliefs of levels 1–3 ("where is my body?").
 
 Targets are true poses drawn uniformly from the robot's sampling ranges (the distribution babbling sampled)
-with their observations from the simulator. Their seed stream is `SeedSequence([EVAL_STREAM, seed, run,
-purpose])`, disjoint from datagen's `SeedSequence([seed, shard])`, so evaluation poses are held out from any
-training set generated with the same seed. Initial beliefs, as in Pixel-AIF (Sancaktar et al. 2020, §4.1):
+with their observations from the simulator, drawn from `core.seeds.eval_rng` (held out from datagen's seeds).
+Initial beliefs, as in Pixel-AIF (Sancaktar et al. 2020, §4.1):
   level 1  one random joint off by ±5–10° (the sign flipped where the belief would leave the range);
   level 2  every joint off by ±5–10° (same rule per joint);
   level 3  the belief starts at another random target's pose.
@@ -21,15 +20,7 @@ from bodyschema.datagen.samplers import uniform
 from bodyschema.errors import must_be
 from bodyschema.models.scaling import IMAGE_SCALE
 
-EVAL_STREAM = 0xB0D7_E7A1          # first entropy word of every evaluation seed sequence
-PURPOSE = {"targets": 0, "beliefs": 1, "noise": 2, "starts": 3}
 OFFSET_DEG = (5.0, 10.0)           # level 1–2 belief offsets, uniform in magnitude
-
-
-def eval_rng(seed: int, run: int, purpose: str, *keys: int) -> np.random.Generator:
-    """The generator of one evaluation run for one purpose (targets, beliefs, noise, starts) and extra keys."""
-    words = [EVAL_STREAM, int(seed), int(run), PURPOSE[purpose], *map(int, keys)]
-    return np.random.default_rng(np.random.SeedSequence(words))
 
 
 @dataclass
@@ -44,17 +35,6 @@ class Targets:
             raise ValueError(must_be("modalities", f"among the simulated observations {sorted(self.observations)}",
                                      missing, "Models of other modalities cannot be evaluated on this robot."))
         return {m: torch.from_numpy(np.asarray(self.observations[m], dtype=np.float64)) for m in modalities}
-
-
-def sense(robot, modality: str, q: np.ndarray, image_dtype=np.float64) -> np.ndarray:
-    """What a sensor of `modality` reads with the arm at poses q (N, Dq) rad: joints rad, ee_xyz m, ee_pixel px,
-    or images as intensity in [0, 1] scaled as the training data (in `image_dtype`: float32 halves long streams)."""
-    if modality == "joints":
-        return np.asarray(q, dtype=np.float64)
-    if modality == "image":
-        return robot.render(q).astype(image_dtype) / image_dtype(IMAGE_SCALE)
-    xyz = robot.fk(q)                                                      # (N, 3) m
-    return robot.project(xyz) if modality == "ee_pixel" else xyz
 
 
 def make_targets(robot, n: int, rng: np.random.Generator, image: bool = False,

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bodyschema.evaluation.level_report import write_csv
-from bodyschema.evaluation.self_recognition_streams import SELF
+from bodyschema.evaluation.core.tables import write_csv
+from bodyschema.evaluation.self_recognition.streams import SELF
 
 TABLE_COLUMNS = ("others", "auc", "threshold", "tpr", "fpr", "fpr_at_pooled", "t_auc99_s", "median_self",
                  "median_other", "failed")
@@ -111,7 +111,7 @@ def summary_notes(config, robot: str, visual: Sequence[str], period: float, rows
     pooled = rows[0]
     failures = sorted({r for r in scores.reason if r})
     failed = f"{int(scores.failed.sum())}" + (f" ({'; '.join(failures[:5])})" if failures else "")
-    return [f"Self-recognition on {robot} seen through {', '.join(visual)}: {config.episodes} babbling episodes of "
+    return [f"Self-recognition on {robot} seen through {', '.join(visual)}: {config.trials} babbling episodes of "
             f"{config.steps} frames every {period:g} s, half from the robot's own body, half from "
             f"{', '.join(config.sources)} (delay {config.delay:g} s); noise σ: joints {config.proprio_noise:.4g} rad, "
             f"visual {({m: s for m, s in config.visual_noise if m in visual})}.",
@@ -124,7 +124,7 @@ def summary_notes(config, robot: str, visual: Sequence[str], period: float, rows
 
 # ---- plots ---------------------------------------------------------------------------------------------
 def plot_roc(curves: Mapping[str, Mapping[str, np.ndarray]], rows: Sequence[Mapping], path: Path) -> Path:
-    from bodyschema.training.plots import plt, save_figure   # matplotlib only when plotting
+    from bodyschema.evaluation.core.plots import plt, save_figure   # matplotlib only when plotting
     fig, ax = plt.subplots(figsize=(4.6, 4.4))
     aucs = {r["comparison"]: r["auc"] for r in rows}
     for name, roc in curves.items():
@@ -139,7 +139,7 @@ def plot_roc(curves: Mapping[str, Mapping[str, np.ndarray]], rows: Sequence[Mapp
 
 
 def plot_auc_over_time(over_time: Mapping[str, np.ndarray], period: float, path: Path) -> Path:
-    from bodyschema.training.plots import plt, save_figure
+    from bodyschema.evaluation.core.plots import plt, save_figure
     fig, ax = plt.subplots(figsize=(5.4, 3.8))
     for name, curve in over_time.items():
         ax.plot((np.arange(curve.size) + 1) * period, curve, lw=2.2 if name == "pooled" else 1.2, label=name)
@@ -152,7 +152,7 @@ def plot_auc_over_time(over_time: Mapping[str, np.ndarray], period: float, path:
 
 def plot_histogram(kinds: np.ndarray, scores: np.ndarray, failed: np.ndarray, threshold: float, path: Path) -> Path:
     """Score histograms per kind on a log axis (free energies span decades), with the pooled best threshold."""
-    from bodyschema.training.plots import plt, save_figure
+    from bodyschema.evaluation.core.plots import plt, save_figure
     fig, ax = plt.subplots(figsize=(6, 3.8))
     ok = ~failed & np.isfinite(scores)
     positive = np.maximum(scores[ok], 1e-12)
@@ -172,7 +172,7 @@ def plot_histogram(kinds: np.ndarray, scores: np.ndarray, failed: np.ndarray, th
 
 def plot_over_time(kinds: np.ndarray, per_frame: np.ndarray, period: float, path: Path, per_kind: int = 3) -> Path:
     """F(t) of the first `per_kind` episodes of each kind. per_frame (N, T), NaN where an episode failed."""
-    from bodyschema.training.plots import plt, save_figure
+    from bodyschema.evaluation.core.plots import plt, save_figure
     fig, ax = plt.subplots(figsize=(6.4, 4))
     t = np.arange(per_frame.shape[1]) * period
     for c, kind in enumerate(dict.fromkeys(kinds)):

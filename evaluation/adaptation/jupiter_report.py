@@ -1,25 +1,32 @@
-"""Tables and plots of the Jupiter experiment (evaluation/jupiter.py): per-controller summary (steady error before
+"""Tables and plots of the Jupiter experiment (adaptation/jupiter.py): per-controller summary (steady error before
 and after the gravity switch, peak, settle time), episode and time-series CSVs, error-vs-time and joint plots."""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from bodyschema.datagen.robot import GRAVITY
-from bodyschema.evaluation.level_report import write_csv
-
-if TYPE_CHECKING:
-    from bodyschema.evaluation.jupiter import JupiterConfig, _Run
+from bodyschema.evaluation.core.tables import markdown_table, write_csv
 
 SUMMARY_COLUMNS = ("joint_err_before_deg", "joint_err_after_deg", "joint_peak_after_deg", "settle_s",
                    "ee_err_before_mm", "ee_err_after_mm", "ee_peak_after_mm")
 
 
-def summarize(runs: Sequence[_Run]) -> list[dict]:
+@dataclass
+class ControllerRun:               # one controller's episodes
+    name: str
+    t: np.ndarray                  # (T,) s
+    q: np.ndarray                  # (T, B, Dq) rad
+    joint: np.ndarray              # (T, B) deg
+    ee: np.ndarray                 # (T, B) mm
+    rows: list[dict] = field(default_factory=list)
+
+
+def summarize(runs: Sequence[ControllerRun]) -> list[dict]:
     """One row per controller: the mean over its non-failed episodes; settle_s over the episodes that settled."""
     table = []
     for run in runs:
@@ -33,15 +40,13 @@ def summarize(runs: Sequence[_Run]) -> list[dict]:
     return table
 
 
-def markdown(table: Sequence[dict], config: JupiterConfig) -> str:
-    columns = (*SUMMARY_COLUMNS, "settled", "failed")
-    lines = ["| controller | " + " | ".join(columns) + " |", "|" + "---|" * (len(columns) + 1)]
-    lines += [f"| {r['controller']} | " + " | ".join(f"{r[c]:.3g}" for c in columns) + " |" for r in table]
+def markdown(table: Sequence[dict], config) -> str:
+    lines = markdown_table(table, (*SUMMARY_COLUMNS, "settled", "failed"), "controller", digits=3).splitlines()
     aic, pd = config.aic, config.pd
     return "\n".join([
         f"# Jupiter: gravity {GRAVITY} → {config.jupiter_gravity} m/s² at t = {config.switch_time} s (torque panda)",
         "", *lines, "",
-        f"{config.episodes} episodes hold random joint goals (ready pose ± {config.spread} rad) at "
+        f"{config.trials} episodes hold random joint goals (ready pose ± {config.spread} rad) at "
         f"{config.control_rate:g} Hz; joint error = mean |q − q_d| over joints. before / after: mean error over the "
         f"last {config.steady_window} s before the switch / of the run; peak: after the switch.",
         f"settle_s: time after the switch until the joint error stays below {config.settle_deg}° (mean over the "
@@ -51,9 +56,9 @@ def markdown(table: Sequence[dict], config: JupiterConfig) -> str:
         "(integral).", ""])
 
 
-def plot_errors(runs: Sequence[_Run], config: JupiterConfig, path: Path) -> Path:
+def plot_errors(runs: Sequence[ControllerRun], config, path: Path) -> Path:
     """Median and inter-quartile band over episodes of the joint and ee error vs time, the switch marked."""
-    from bodyschema.training.plots import plt, save_figure
+    from bodyschema.evaluation.core.plots import plt, save_figure
     fig, axes = plt.subplots(1, 2, figsize=(12, 4))
     for ax, key, unit in ((axes[0], "joint", "deg"), (axes[1], "ee", "mm")):
         for run in runs:
@@ -68,9 +73,9 @@ def plot_errors(runs: Sequence[_Run], config: JupiterConfig, path: Path) -> Path
     return save_figure(fig, path)
 
 
-def plot_trajectories(runs: Sequence[_Run], goal: np.ndarray, config: JupiterConfig, path: Path) -> Path:
+def plot_trajectories(runs: Sequence[ControllerRun], goal: np.ndarray, config, path: Path) -> Path:
     """Every joint of episode 0 under each controller, the goal dashed, the switch marked."""
-    from bodyschema.training.plots import plt, save_figure
+    from bodyschema.evaluation.core.plots import plt, save_figure
     dq = len(goal)
     fig, axes = plt.subplots(2, (dq + 1) // 2, figsize=(3.2 * ((dq + 1) // 2), 6), squeeze=False)
     for j, ax in enumerate(axes.flat):
@@ -86,9 +91,8 @@ def plot_trajectories(runs: Sequence[_Run], goal: np.ndarray, config: JupiterCon
     return save_figure(fig, path)
 
 
-def write_report(runs: Sequence[_Run], goals: np.ndarray, config: JupiterConfig) -> dict[str, Path]:
-    out = Path(config.out)
-    out.mkdir(parents=True, exist_ok=True)
+def write_report(runs: Sequence[ControllerRun], goals: np.ndarray, config, out: Path) -> dict[str, Path]:
+    """Tables and plots of a JupiterConfig run into its run folder `out`."""
     table = summarize(runs)
     paths = {"summary_csv": write_csv(table, out / "summary.csv"),
              "episodes_csv": write_csv([r for run in runs for r in run.rows], out / "episodes.csv")}

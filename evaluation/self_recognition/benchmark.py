@@ -2,11 +2,11 @@
 
 Every episode the robot babbles, feels its joints (proprioception = q(t) + noise) and sees a visual stream
 (ee_pixel, ee_xyz or images) of its own body or of another source: a second arm, a time-delayed copy of itself or
-a mirrored view (self_recognition_streams.py). All episodes run through time as one batch: at every frame
+a mirrored view (streams.py). All episodes run through time as one batch: at every frame
 `aif.Perception` over [joints model + visual models] takes a few updates warm-started from the previous belief,
 and the Laplace free energy at the new belief is recorded. The score of an episode is the time-averaged F of the
 visual modalities (½ εᵀΠε summed over them) or of all modalities (`score="total"`); "is this me?" = score ≤
-threshold. ROC, AUC and the best threshold: self_recognition_report.py. An episode whose observations turn
+threshold. ROC, AUC and the best threshold: report.py. An episode whose observations turn
 non-finite or whose perception diverges is marked failed with the reason and leaves the batch; the benchmark
 goes on.
 """
@@ -25,10 +25,13 @@ import torch
 from bodyschema.aif.free_energy import sensory_terms
 from bodyschema.aif.perception import Perception, PerceptionConfig
 from bodyschema.errors import must_be
-from bodyschema.evaluation.mlflow_log import log_benchmark, table_metrics
-from bodyschema.evaluation.levels import load_robot, models_field, resolve_models
-from bodyschema.evaluation.self_recognition_report import roc_table, summary_notes, write_report
-from bodyschema.evaluation.self_recognition_streams import Episodes, make_episodes
+from bodyschema.evaluation.core.config import TrialsConfig
+from bodyschema.evaluation.core.mlflow_log import table_metrics
+from bodyschema.evaluation.core.publish import publish
+from bodyschema.evaluation.core.runs import new_run
+from bodyschema.evaluation.core.specs import load_robot, models_field, resolve_models
+from bodyschema.evaluation.self_recognition.report import roc_table, summary_notes, write_report
+from bodyschema.evaluation.self_recognition.streams import Episodes, make_episodes
 
 SOURCES = ("second_arm", "delayed", "mirrored")
 VISUAL = ("ee_pixel", "ee_xyz", "image")
@@ -36,12 +39,14 @@ SCORES = ("visual", "total")
 
 
 @dataclass(frozen=True)
-class SelfRecognitionConfig:
+class SelfRecognitionConfig(TrialsConfig):
     """Babbling episodes seen by the robot itself or by another source; ROC of "is this me?" on free energy."""
 
+    out: Path = Path("results/self_recognition")
+    experiment: str = "bodyschema-self-recognition"
     robot: str = "nao_arm"                # the babbling body; every model must be of it
     models: models_field("analytic:<robot>:ee_pixel") = ()
-    episodes: int = 200                # half self, half others split evenly over `sources`
+    trials: int = 200                  # episodes: half self, half others split evenly over `sources`
     sources: tuple[str, ...] = SOURCES    # other sources of the visual stream: second_arm, delayed, mirrored
     steps: int = 40                    # frames per episode
     period: float = 0.05               # s between frames (control period; realised as whole physics steps)
@@ -51,21 +56,16 @@ class SelfRecognitionConfig:
     visual_noise: tuple[tuple[str, float], ...] = (  # σ per visual modality: px, m, intensity in [0, 1]
         ("ee_pixel", 1.0), ("ee_xyz", 0.002), ("image", 0.02))
     score: str = "visual"              # "visual": F of the visual modalities; "total": F of all modalities
-    perception: PerceptionConfig = PerceptionConfig(max_steps=10, tol=1e-4)   # per frame: ≤ max_steps updates
-    seed: int = 0                      # episode i draws from SeedSequence([eval stream, seed, i, role])
-    out: Path = Path("results/self_recognition")
-    mlflow: bool = True
-    tracking_uri: str | None = None    # None: $MLFLOW_TRACKING_URI, else sqlite:///mlflow.db
-    experiment: str = "bodyschema-self-recognition"
-    progress: bool = True
-    plots: bool = True
+    perception: PerceptionConfig = PerceptionConfig(max_steps=10, tol=1e-4, step_control="none")   # per frame: ≤ max_steps updates
+    plots: bool = True                 # write the PNG plots beside the tables
 
     def __post_init__(self):
+        super().__post_init__()
         if not self.sources or len(set(self.sources)) != len(self.sources) or set(self.sources) - set(SOURCES):
             raise ValueError(must_be("sources", f"distinct names among {SOURCES}", self.sources))
-        if self.episodes < 2 * len(self.sources):
-            raise ValueError(must_be("episodes", f"at least {2 * len(self.sources)} (half self, ≥ 1 per source)",
-                                     self.episodes, "Use ≥ 200 for a stable ROC."))
+        if self.trials < 2 * len(self.sources):
+            raise ValueError(must_be("trials", f"at least {2 * len(self.sources)} (half self, ≥ 1 per source)",
+                                     self.trials, "Use ≥ 200 for a stable ROC."))
         if self.steps < 1:
             raise ValueError(must_be("steps", "at least 1", self.steps))
         for name in ("period", "delay"):
@@ -215,8 +215,8 @@ def _free_energy(perception: Perception, obs: dict[str, torch.Tensor], mu: torch
 # ---- the benchmark --------------------------------------------------------------------------------------
 def run_self_recognition(config: SelfRecognitionConfig = SelfRecognitionConfig(),
                          models: Sequence | None = None) -> dict[str, Path]:
-    """Episodes → perception → scores → ROC; writes summary.md/csv, episodes.csv and plots to config.out and logs
-    one MLflow run (config.mlflow). Returns name → path of what it wrote."""
+    """Episodes → perception → scores → ROC; writes summary.md/csv, episodes.csv and plots to a new run folder under
+    config.out and logs one MLflow run (config.mlflow). Returns name → path of what it wrote."""
     start = time.perf_counter()
     models = resolve_models(config.models, config.default_models, config.tracking_uri, models)
     robot, perception, visual = prepare(config, models)
@@ -229,10 +229,10 @@ def run_self_recognition(config: SelfRecognitionConfig = SelfRecognitionConfig()
                    for i, (k, f, r, v, s) in enumerate(zip(episodes.kind, scores.failed, scores.reason,
                                                            scores.score("visual"), scores.score("total")))]
     lines = summary_notes(config, robot.name, visual, episodes.period, rows, scores, wall)
-    paths = write_report(Path(config.out), per_episode, rows, curves, over_time, lines, episodes.kind,
+    out = new_run(config)
+    paths = write_report(out, per_episode, rows, curves, over_time, lines, episodes.kind,
                          scores.failed, per_frame, episodes.period, config.plots)
-    if config.mlflow:
-        keep = ("comparison", "auc", "threshold", "tpr", "fpr", "fpr_at_pooled", "t_auc99_s", "failed")
-        metrics = table_metrics([{k: r[k] for k in keep} for r in rows], "comparison")
-        log_benchmark(config, "self_recognition", {**metrics, "wall_s": wall}, paths.values(), models)
+    keep = ("comparison", "auc", "threshold", "tpr", "fpr", "fpr_at_pooled", "t_auc99_s", "failed")
+    metrics = table_metrics([{k: r[k] for k in keep} for r in rows], "comparison")
+    publish(config, out, "self_recognition", {**metrics, "wall_s": wall}, paths, models)
     return paths

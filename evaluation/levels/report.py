@@ -3,11 +3,12 @@ per-trial joint error, free-energy curves, and error-vs-noise / broken-sensor pl
 
 from __future__ import annotations
 
-import csv
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
+
+from bodyschema.evaluation.core.tables import markdown_table, write_csv
 
 MAIN_COLUMNS = ("joint_err_deg", "joint_err_median_deg", "ee_err_mm", "success", "all_joints_2deg",
                 "evaluations_per_trial", "converged", "diverged", "wall_s")
@@ -30,33 +31,13 @@ def aggregate(rows: Sequence[Mapping]) -> list[dict]:
     return table
 
 
-def write_csv(rows: Sequence[Mapping], path: Path) -> Path:
-    keys = list(dict.fromkeys(k for r in rows for k in r))
-    with open(path, "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=keys)
-        writer.writeheader()
-        writer.writerows(rows)
-    return path
-
-
 def markdown(table: Sequence[Mapping], columns: Sequence[str] = MAIN_COLUMNS, key: str = "level") -> str:
     """A Markdown table of the main metrics, mean ± std over runs, one row per value of `key`."""
-    head = f"| {key} | " + " | ".join(columns) + " |"
-    lines = [head, "|" + "---|" * (len(columns) + 1)]
-    for row in table:
-        cells = []
-        for c in columns:
-            if c not in row:
-                cells.append("–")
-                continue
-            std = row.get(f"{c}_std")
-            cells.append(f"{row[c]:.4g} ± {std:.2g}" if std is not None else f"{row[c]:.4g}")
-        lines.append(f"| {row[key]} | " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+    return markdown_table(table, columns, key)
 
 
 def plot_boxes(per_trial: Mapping[str, np.ndarray], path: Path) -> Path:
-    from bodyschema.training.plots import plt, save_figure   # matplotlib only when plotting
+    from bodyschema.evaluation.core.plots import plt, save_figure   # matplotlib only when plotting
     fig, ax = plt.subplots(figsize=(1.6 + 1.2 * len(per_trial), 4))
     labels = list(per_trial)
     ax.boxplot([np.maximum(per_trial[k], 1e-9) for k in labels], showfliers=True)
@@ -70,7 +51,7 @@ def plot_boxes(per_trial: Mapping[str, np.ndarray], path: Path) -> Path:
 
 def plot_curves(curves: Mapping[str, np.ndarray], path: Path) -> Path:
     """Median and inter-quartile band of F(t) − F_final per level (trials that stopped hold their last F)."""
-    from bodyschema.training.plots import plt, save_figure   # matplotlib only when plotting
+    from bodyschema.evaluation.core.plots import plt, save_figure   # matplotlib only when plotting
     fig, ax = plt.subplots(figsize=(6, 4))
     for level, f in curves.items():                                       # (T, N), NaN once a trial stopped
         held = _hold_last(f)
@@ -88,7 +69,7 @@ def plot_curves(curves: Mapping[str, np.ndarray], path: Path) -> Path:
 
 def plot_sweep(rows: Sequence[Mapping], x: str, path: Path, y: str = "joint_err_deg") -> Path:
     """Error vs a swept quantity (noise σ), or a bar per case (broken sensor) when x is not numeric."""
-    from bodyschema.training.plots import plt, save_figure   # matplotlib only when plotting
+    from bodyschema.evaluation.core.plots import plt, save_figure   # matplotlib only when plotting
     fig, ax = plt.subplots(figsize=(5, 3.5))
     xs = [r[x] for r in rows]
     ys = np.maximum([r[y] for r in rows], 1e-9)                           # log axis: an exact 0 shows at 1e-9

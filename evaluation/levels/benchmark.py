@@ -15,79 +15,72 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import Annotated
 
 import numpy as np
 import torch
-import tyro
 
 from bodyschema.aif.multistart import infer_multistart
 from bodyschema.aif.perception import METHODS, Perception, PerceptionConfig
 from bodyschema.errors import must_be
-from bodyschema.evaluation import level_report
-from bodyschema.evaluation.mlflow_log import log_benchmark, table_metrics
 from bodyschema.datagen.samplers import uniform
-from bodyschema.evaluation.targets import eval_rng, initial_beliefs, make_targets
-
-
-MODELS_HELP = ('"models:/<name>@<alias>" (registry), a saved model directory, or "analytic:<robot>:<modality>"; '
-               'several models of one body are fused')
+from bodyschema.evaluation.core.config import TrialsConfig
+from bodyschema.evaluation.core.mlflow_log import table_metrics
+from bodyschema.evaluation.core.publish import publish
+from bodyschema.evaluation.core.runs import new_run
+from bodyschema.evaluation.core.seeds import eval_rng
+from bodyschema.evaluation.core.specs import (check_models_match, load_robot, models_field, on_device, resolve_model,
+                                              resolve_models)
+from bodyschema.evaluation.levels import report as level_report
+from bodyschema.evaluation.levels.targets import initial_beliefs, make_targets
 
 
 DEFAULT_MODELS = ("analytic:planar2:ee_xyz",)
 
 
-def models_field(when_empty: str):
-    """The `models` field of a benchmark config: `--model SPEC`, repeated to fuse several models (a flag that takes
-    one value each time, so a second --model never silently replaces the first); none given: `when_empty`."""
-    return Annotated[tuple[str, ...], tyro.conf.UseAppendAction,
-                     tyro.conf.arg(aliases=("--model",), help=f"{MODELS_HELP}. None given: {when_empty}")]
-
-
-def resolve_models(specs: Sequence[str], when_empty: Sequence[str], tracking_uri: str | None = None,
-                   models: Sequence | None = None) -> list:
-    """The models of a benchmark run: `models` when given as objects, else the specs (or `when_empty`) resolved."""
-    if models is not None:
-        return list(models)
-    return [resolve_model(spec, tracking_uri) for spec in (specs or when_empty)]
-
-
 @dataclass(frozen=True)
-class LevelsConfig:
+class PerceptionRunConfig(TrialsConfig):
+    """What the levels and the robustness sweeps share: the models, trials × runs and the perception update."""
+
     models: models_field(", ".join(DEFAULT_MODELS)) = ()
-    levels: tuple[int, ...] = (1, 2, 3)  # 1: one joint off 5–10°, 2: all joints off, 3: another target's pose
     trials: int = 500                  # per run, as in Pixel-AIF
     runs: int = 5                      # runs with different target seeds
-    seed: int = 0
-    out: Path = Path("results/levels")
     noise: tuple[tuple[str, float], ...] = ()   # observation noise σ per modality (m, px, rad, intensity)
     perception: PerceptionConfig = PerceptionConfig(record=True, step_control="descent")  # monotone: see perception.py
     update: str = "auto"               # perception.method for this run; "auto": "adam+lm" with an image model (its F
                                        # has shallow local minima that Gauss–Newton jumps land in; bench/aif.py [2]),
                                        # else "flow" (Gauss–Newton descent: exact in ~5–20 steps on kinematics)
+    success_deg: float = 1.0           # a trial succeeds when its mean |joint error| is below this
+    device: str = "cpu"                # where networks run: "cpu", "cuda" or "cuda:N" (the belief stays on the CPU)
+    image_size: tuple[int, int] | None = None   # robot camera (H, W); default: the image model's, else the robot's
+    plots: bool = True                 # write the PNG plots beside the tables
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.runs < 1:
+            raise ValueError(must_be("runs", "at least 1", self.runs))
+        if self.update not in ("auto", *METHODS):
+            raise ValueError(must_be("update", f"'auto' or one of {METHODS}", self.update))
+
+
+@dataclass(frozen=True)
+class LevelsConfig(PerceptionRunConfig):
+    """Estimation levels 1–3 on held-out targets: batched AIF perception from perturbed beliefs."""
+
+    out: Path = Path("results/levels")
+    experiment: str = "bodyschema-levels"
+    levels: tuple[int, ...] = (1, 2, 3)  # 1: one joint off 5–10°, 2: all joints off, 3: another target's pose
     multistart: int = 8                # starts per trial for the level-3 remedy (0: off)
     screen_steps: int = 5              # multi-start: updates before pruning (a descent trial converges in ~15)
     keep: int = 2                      # multi-start: starts per trial refined to convergence
-    success_deg: float = 1.0           # a trial succeeds when its mean |joint error| is below this
     encoder: str | None = None         # an image encoder (kind "encoder", same spec forms as --model): level 3 is
                                        # also run from its estimate, alone and as one multi-start seed
-    device: str = "cpu"                # where networks run: "cpu", "cuda" or "cuda:N" (the belief stays on the CPU)
-    image_size: tuple[int, int] | None = None   # robot camera (H, W); default: the image model's, else the robot's
-    mlflow: bool = True
-    tracking_uri: str | None = None    # None: $MLFLOW_TRACKING_URI, else sqlite:///mlflow.db
-    experiment: str = "bodyschema-levels"
-    plots: bool = True
 
     def __post_init__(self):
+        super().__post_init__()
         if not self.levels or any(level not in (1, 2, 3) for level in self.levels):
             raise ValueError(must_be("levels", "a non-empty subset of (1, 2, 3)", self.levels))
-        for name in ("trials", "runs"):
-            if getattr(self, name) < 1:
-                raise ValueError(must_be(name, "at least 1", getattr(self, name)))
-        if self.update not in ("auto", *METHODS):
-            raise ValueError(must_be("update", f"'auto' or one of {METHODS}", self.update))
         if self.multistart < 0 or self.multistart == 1:
             raise ValueError(must_be("multistart", "0 (off) or at least 2 starts", self.multistart))
 
@@ -101,60 +94,7 @@ class LevelsSummary:
     run_id: str | None = None
 
 
-# ---- models and robot -----------------------------------------------------------------------------------
-def resolve_model(spec: str, tracking_uri: str | None = None):
-    """"analytic:<robot>:<modality>" | "models:/…" (registry at `tracking_uri`) | a model directory → SensoryModel.
-
-    A model directory loads only when its digest is recorded in the tracking database (`registry.load_local`);
-    "trusted:<dir>" loads one unchecked, by the user's explicit choice (tensors only: no code runs either way)."""
-    if spec.startswith("analytic:"):
-        parts = spec.split(":")
-        if len(parts) != 3:
-            raise ValueError(must_be("model spec", "'analytic:<robot>:<modality>'", spec))
-        from bodyschema.models.analytic import AnalyticModel
-        return AnalyticModel(parts[1], parts[2])
-    if spec.startswith("models:/"):
-        from bodyschema.training.registry import load
-        return load(spec, tracking=tracking_uri)
-    if spec.startswith("trusted:") and Path(spec[len("trusted:"):]).is_dir():
-        from bodyschema.models import load_model
-        return load_model(spec[len("trusted:"):])
-    if Path(spec).is_dir():
-        from bodyschema.training.registry import load_local
-        return load_local(spec, tracking=tracking_uri)
-    raise ValueError(must_be("model spec", "'analytic:<robot>:<modality>', 'models:/<name>@<alias>', a model "
-                             "directory logged by `bodyschema train` or 'trusted:<model directory>'", spec))
-
-
-def load_robot(models: Sequence, image_size: tuple[int, int] | None = None):
-    """The benchmark robot of the models, with the camera the image model (if any) was trained for."""
-    from bodyschema.datagen.robot import Robot
-    image = next((m for m in models if m.modality == "image"), None)
-    rgb = False
-    if image is not None:
-        image_size = image_size or tuple(image.output_shape[:2])
-        rgb = len(image.output_shape) == 3 and image.output_shape[2] == 3
-    pixel = next((m for m in models if getattr(m, "image_size", None)), None)
-    if image_size is None and pixel is not None:
-        image_size = tuple(pixel.image_size)
-    robot = Robot.load(models[0].body.robot, image_size=image_size, rgb=rgb)
-    check_models_match(models, robot)
-    robot.sampling_ranges = trained_workspace(models, robot)
-    return robot
-
-
-def trained_workspace(models: Sequence, robot) -> np.ndarray:
-    """The joint box every model was trained on (their latent scaling ranges, intersected, inside the joint
-    limits): evaluation poses come from there, not from poses a model never saw. # (Dq, 2) rad"""
-    low = np.max([m.body.q_low for m in models], axis=0)
-    high = np.min([m.body.q_high for m in models], axis=0)
-    low, high = np.maximum(low, robot.joint_limits[:, 0]), np.minimum(high, robot.joint_limits[:, 1])
-    if (high <= low).any():
-        raise ValueError(must_be("the models' joint ranges", "overlapping", [list(m.body.q_low) for m in models],
-                                 "Evaluate together only models trained on overlapping workspaces."))
-    return np.stack([low, high], axis=1)
-
-
+# ---- models ------------------------------------------------------------------------------------------
 def levels_update(config: LevelsConfig, models: Sequence) -> PerceptionConfig:
     """config.perception with the update method of this run (config.update, "auto" resolved per model kind)."""
     method = config.update
@@ -177,24 +117,6 @@ def resolve_encoder(spec: str | None, robot, tracking_uri: str | None = None):
         raise ValueError(must_be("encoder image shape", f"the benchmark camera's {want}", encoder.image_shape,
                                  "Train the encoder on images of the same camera and size as the decoder."))
     return encoder
-
-
-def on_device(models: Sequence, device: str) -> None:
-    """Move every network to `device` (checked: the house error when CUDA is asked for but absent)."""
-    from bodyschema.models.device import check_device
-    target = check_device(device)
-    for m in models:
-        if hasattr(m, "to"):
-            m.to(target)
-
-
-def check_models_match(models: Sequence, robot) -> None:
-    """Every model must be over the benchmark robot and its joints, in order."""
-    for m in models:
-        if (m.body.robot, tuple(m.body.joint_names)) != (robot.name, tuple(robot.joint_names)):
-            raise ValueError(must_be(f"{m.modality} model body", f"robot {robot.name!r} with joints "
-                                     f"{list(robot.joint_names)}", f"robot {m.body.robot!r} with joints "
-                                     f"{list(m.body.joint_names)}", "Evaluate models of the benchmark's robot."))
 
 
 # ---- one level ----------------------------------------------------------------------------------------
@@ -251,9 +173,20 @@ def _broken(perception: Perception) -> set[str]:
 
 # ---- the benchmark ------------------------------------------------------------------------------------
 def run_levels(config: LevelsConfig = LevelsConfig(), models: Sequence | None = None) -> LevelsSummary:
-    """Levels × runs on held-out targets; writes tables and plots to config.out and logs one MLflow run."""
-    from tqdm import tqdm
+    """Levels × runs on held-out targets; writes tables and plots to a new run folder under config.out and logs one
+    MLflow run."""
     models = resolve_models(config.models, DEFAULT_MODELS, config.tracking_uri, models)
+    summary, curves = measure_levels(config, models)
+    folder = new_run(config)
+    summary.paths = level_report.write_all(summary, curves, folder, plots=config.plots)
+    summary.run_id = publish(config, folder, "levels", table_metrics(summary.table, lambda r: f"L{r['level']}"),
+                             summary.paths, models)
+    return summary
+
+
+def measure_levels(config: LevelsConfig, models: Sequence) -> tuple[LevelsSummary, dict[str, np.ndarray]]:
+    """The levels × runs of config on resolved models, nothing written: (summary, F(t) curves per level)."""
+    from tqdm import tqdm
     robot = load_robot(models, config.image_size)
     encoder = resolve_encoder(config.encoder, robot, config.tracking_uri)
     on_device(models + ([encoder] if encoder else []), config.device)
@@ -264,7 +197,7 @@ def run_levels(config: LevelsConfig = LevelsConfig(), models: Sequence | None = 
             for enc in ((False, True) if level == 3 and encoder else (False,))
             for ms in ((0, config.multistart) if level == 3 and config.multistart else (0,))]
     targets = None
-    for run, level, ms, enc in tqdm(jobs, desc="levels", disable=len(jobs) < 2):
+    for run, level, ms, enc in tqdm(jobs, desc="levels", disable=not config.progress or len(jobs) < 2):
         if targets is None or targets[0] != run:
             targets = (run, make_targets(robot, config.trials, eval_rng(config.seed, run, "targets"), has_image,
                                          dict(config.noise), eval_rng(config.seed, run, "noise")))
@@ -276,28 +209,23 @@ def run_levels(config: LevelsConfig = LevelsConfig(), models: Sequence | None = 
         if result.trajectory is not None and not ms and row["level"] not in curves:   # ms: refinement only
             curves[row["level"]] = result.trajectory["F"].numpy()          # (T, N), first run
     summary = LevelsSummary(rows, level_report.aggregate(rows), {k: np.concatenate(v) for k, v in per_trial.items()})
-    summary.paths = level_report.write_all(summary, curves, Path(config.out), plots=config.plots)
-    if config.mlflow:
-        summary.run_id = log_benchmark(config, "levels", table_metrics(summary.table, lambda r: f"L{r['level']}"),
-                                       summary.paths.values(), models)
-    return summary
+    return summary, curves
 
 
-def noise_sweep(config: LevelsConfig, modality: str, sigmas: Sequence[float], level: int = 2,
+def noise_sweep(config: PerceptionRunConfig, modality: str, sigmas: Sequence[float], level: int = 2,
                 models: Sequence | None = None) -> list[dict]:
     """Mean joint error vs observation noise σ on one modality (precisions unchanged: a mis-specified Π); one row
-    per σ. Plot with `level_report.plot_sweep(rows, "sigma", path)` (evaluation/robustness.py does)."""
+    per σ. Plot with `level_report.plot_sweep(rows, "sigma", path)` (evaluation/robustness does)."""
+    models = resolve_models(config.models, DEFAULT_MODELS, config.tracking_uri, models)
     out = []
     for sigma in sigmas:
         noise = tuple((m, s) for m, s in config.noise if m != modality) + ((modality, float(sigma)),)
-        cfg = replace(config, levels=(level,), multistart=0, noise=noise, mlflow=False, plots=False,
-                      perception=replace(config.perception, record=False), out=Path(config.out) / f"noise_{sigma:g}")
-        table = run_levels(cfg, models).table
-        out.append({"modality": modality, "sigma": float(sigma), **table[0]})
+        cfg = at_level(config, level, noise=noise, perception=replace(config.perception, record=False))
+        out.append({"modality": modality, "sigma": float(sigma), **measure_levels(cfg, models)[0].table[0]})
     return out
 
 
-def broken_sweep(config: LevelsConfig, models: Sequence | None = None, level: int = 2) -> list[dict]:
+def broken_sweep(config: PerceptionRunConfig, models: Sequence | None = None, level: int = 2) -> list[dict]:
     """One row per modality set to precision 0 (a dead sensor), plus the intact baseline; plot with
     `level_report.plot_sweep(rows, "broken", path)`."""
     models = resolve_models(config.models, DEFAULT_MODELS, config.tracking_uri, models)
@@ -305,7 +233,13 @@ def broken_sweep(config: LevelsConfig, models: Sequence | None = None, level: in
     for dead in (None, *[m.modality for m in models]):
         pcfg = replace(config.perception, record=False,
                        precisions=config.perception.precisions + (((dead, 0.0),) if dead else ()))
-        cfg = replace(config, levels=(level,), multistart=0, perception=pcfg, mlflow=False, plots=False,
-                      out=Path(config.out) / f"broken_{dead or 'none'}")
-        out.append({"broken": dead or "none", **run_levels(cfg, models).table[0]})
+        out.append({"broken": dead or "none", **measure_levels(at_level(config, level, perception=pcfg), models)[0]
+                    .table[0]})
     return out
+
+
+def at_level(config: PerceptionRunConfig, level: int, **changes) -> LevelsConfig:
+    """The levels config of one level (no multi-start, no plots, no MLflow) with config's shared fields."""
+    shared = {f.name: getattr(config, f.name) for f in fields(PerceptionRunConfig)}
+    return LevelsConfig(**{**shared, "levels": (level,), "multistart": 0, "mlflow": False, "plots": False,
+                           "progress": False, **changes})

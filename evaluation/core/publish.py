@@ -1,0 +1,22 @@
+"""The end of every benchmark run: the models it used (`models.csv`: spec, registered name, version, source run,
+weights digest) beside its tables, one MLflow run (when `config.mlflow`), and `<out>/latest` moved to the run."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, MutableMapping, Sequence
+from pathlib import Path
+
+from bodyschema.evaluation.core.mlflow_log import log_benchmark
+from bodyschema.evaluation.core.runs import MODELS_CSV, mark_latest
+from bodyschema.evaluation.core.specs import provenance_rows
+from bodyschema.evaluation.core.tables import write_csv
+
+
+def publish(config, folder: Path, name: str, metrics: Mapping[str, float], paths: MutableMapping[str, Path],
+            models: Sequence = ()) -> str | None:
+    """Write models.csv into `folder` (added to `paths`), log the run and mark it latest; → MLflow run id or None."""
+    if models:
+        paths["models_csv"] = write_csv(provenance_rows(models), folder / MODELS_CSV)
+    run_id = log_benchmark(config, name, metrics, paths.values(), models) if config.mlflow else None
+    mark_latest(folder)
+    return run_id

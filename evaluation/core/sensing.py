@@ -1,0 +1,91 @@
+"""The one sensing function of the benchmarks: what a sensor of each modality reads with the arm at poses q.
+
+    joints    q, rad
+    ee_xyz    the end-effector (or the visual marker, when its simulated position is given) in the world, m
+    ee_pixel  its projection in the robot camera, px (NaN for a point that left the scene)
+    image     the camera image as intensity in [0, 1] scaled as the training data, the marker geom moved by
+              per-row offsets (hand frame, m) when given
+`Sensors` adds what the loop benchmarks vary: Gaussian noise σ per modality and streams frozen at their first value.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from bodyschema.models.scaling import IMAGE_SCALE
+
+MODALITIES = ("joints", "ee_xyz", "ee_pixel", "image")
+
+
+def sense(robot, modality: str, q: np.ndarray, xyz: np.ndarray | None = None,
+          marker_offsets: np.ndarray | None = None, image_dtype=np.float64) -> np.ndarray:
+    """What a `modality` sensor reads at poses q (N, Dq) rad → (N, *out). xyz (N, 3) m: the simulated point the
+    camera tracks (default: the ee by forward kinematics). image_dtype float32 halves long image streams."""
+    if modality == "joints":
+        return np.asarray(q, dtype=np.float64)
+    if modality == "image":
+        return _image(robot, q, marker_offsets, image_dtype)
+    xyz = robot.fk(q, check=False) if xyz is None else xyz                # (N, 3) m; q may pass the limits
+    return _project(robot, xyz) if modality == "ee_pixel" else np.asarray(xyz, dtype=np.float64)
+
+
+def sense_all(robot, modalities: Sequence[str], q: np.ndarray, xyz: np.ndarray | None = None,
+              marker_offsets: np.ndarray | None = None) -> dict[str, torch.Tensor]:
+    """`sense` for several modalities at once (forward kinematics done once) as float64 tensors."""
+    if xyz is None and {"ee_xyz", "ee_pixel"} & set(modalities):
+        xyz = robot.fk(q, check=False)
+    return {m: torch.from_numpy(np.asarray(sense(robot, m, q, xyz, marker_offsets), dtype=np.float64))
+            for m in modalities}
+
+
+def _project(robot, xyz: np.ndarray) -> np.ndarray:
+    """robot.project, with points that left the scene (non-finite) seen as NaN: their episodes fail."""
+    out = np.full((len(xyz), 2), np.nan)
+    ok = np.isfinite(xyz).all(axis=1)
+    if ok.any():
+        out[ok] = robot.project(xyz[ok])
+    return out
+
+
+def _image(robot, q: np.ndarray, offsets: np.ndarray | None, dtype) -> np.ndarray:
+    q = np.clip(q, robot.joint_limits[:, 0], robot.joint_limits[:, 1])    # a simulated arm may pass its limits
+    if offsets is None or not np.any(offsets):
+        return robot.render(q).astype(dtype) / dtype(IMAGE_SCALE)
+    geom = robot.model.geom("marker").id
+    home = robot.model.geom_pos[geom].copy()
+    frames = []
+    try:
+        for q_i, off in zip(q, offsets):
+            robot.model.geom_pos[geom] = home + off
+            frames.append(robot.render(q_i[None])[0])
+    finally:
+        robot.model.geom_pos[geom] = home
+    return np.stack(frames).astype(dtype) / dtype(IMAGE_SCALE)
+
+
+@dataclass
+class Sensors:
+    """What a controller senses of an ArmBatch: noise σ per modality (its units: rad, m, px, intensity) and
+    streams frozen at their first reading."""
+
+    modalities: tuple[str, ...]
+    noise: Mapping[str, float] = field(default_factory=dict)
+    frozen: frozenset[str] = frozenset()
+    rng: np.random.Generator = field(default_factory=lambda: np.random.default_rng(0))
+    _held: dict = field(default_factory=dict)
+
+    def read(self, arm) -> dict[str, torch.Tensor]:
+        fresh = [m for m in self.modalities if m not in self._held]
+        out = sense_all(arm.robot, fresh, arm.q, arm.ee_xyz) if fresh else {}
+        for name in fresh:
+            sigma = self.noise.get(name, 0.0)
+            if sigma > 0:
+                x = out[name].numpy() + sigma * self.rng.standard_normal(tuple(out[name].shape))
+                out[name] = torch.from_numpy(np.clip(x, 0.0, 1.0) if name == "image" else x)
+            if name in self.frozen:
+                self._held[name] = out[name]
+        return {name: self._held.get(name, out.get(name)) for name in self.modalities}

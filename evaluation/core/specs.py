@@ -1,0 +1,146 @@
+"""Model specs and the benchmark robot: `--model SPEC` → SensoryModel, with what it resolved to (provenance), and
+the robot the models are of, with the camera and joint box they were trained for.
+
+Specs: "analytic:<robot>:<modality>", "models:/<name>@<alias>" or "models:/<name>/<version>" (the registry: the
+alias is resolved once and the version it named is what loads and what is recorded), a model directory logged by
+`bodyschema train` (its digest must be recorded in the tracking database) or "trusted:<dir>" (loaded unchecked).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Annotated
+
+import numpy as np
+import tyro
+
+from bodyschema.errors import must_be
+
+MODELS_HELP = ('"models:/<name>@<alias>" (registry), a saved model directory, or "analytic:<robot>:<modality>"; '
+               'several models of one body are fused')
+PROVENANCE_KEYS = ("spec", "name", "version", "run_id", "sha256")
+_REGISTRY = re.compile(r"^models:/(?P<name>[^/@]+)(?:@(?P<alias>[^/@]+)|/(?P<version>\d+))$")
+
+
+def models_field(when_empty: str):
+    """The `models` field of a benchmark config: `--model SPEC`, repeated to fuse several models (a flag that takes
+    one value each time, so a second --model never silently replaces the first); none given: `when_empty`."""
+    return Annotated[tuple[str, ...], tyro.conf.UseAppendAction,
+                     tyro.conf.arg(aliases=("--model",), help=f"{MODELS_HELP}. None given: {when_empty}")]
+
+
+def resolve_models(specs: Sequence[str], when_empty: Sequence[str], tracking_uri: str | None = None,
+                   models: Sequence | None = None) -> list:
+    """The models of a benchmark run: `models` when given as objects, else the specs (or `when_empty`) resolved.
+    Each model carries `provenance` (PROVENANCE_KEYS → str): what its spec resolved to."""
+    if models is not None:
+        for m in models:
+            _attach(m, {"spec": f"<{type(m).__name__} object>", "name": getattr(m, "kind", type(m).__name__)})
+        return list(models)
+    return [resolve_model(spec, tracking_uri) for spec in (specs or when_empty)]
+
+
+def resolve_model(spec: str, tracking_uri: str | None = None):
+    """"analytic:<robot>:<modality>" | "models:/…" (registry at `tracking_uri`) | a model directory → SensoryModel.
+
+    A model directory loads only when its digest is recorded in the tracking database (`registry.load_local`);
+    "trusted:<dir>" loads one unchecked, by the user's explicit choice (tensors only: no code runs either way)."""
+    if spec.startswith("analytic:"):
+        parts = spec.split(":")
+        if len(parts) != 3:
+            raise ValueError(must_be("model spec", "'analytic:<robot>:<modality>'", spec))
+        from bodyschema.models.analytic import AnalyticModel
+        return _attach(AnalyticModel(parts[1], parts[2]), {"spec": spec, "name": spec, "sha256": "no weights"})
+    if spec.startswith("models:/"):
+        return _registered(spec, tracking_uri)
+    if spec.startswith("trusted:") and Path(spec[len("trusted:"):]).is_dir():
+        from bodyschema.models import load_model
+        from bodyschema.training.digest import directory_sha256
+        folder = spec[len("trusted:"):]
+        return _attach(load_model(folder), {"spec": spec, "name": folder, "sha256": directory_sha256(folder)})
+    if Path(spec).is_dir():
+        from bodyschema.training.digest import directory_sha256
+        from bodyschema.training.registry import load_local
+        return _attach(load_local(spec, tracking=tracking_uri), {"spec": spec, "name": spec,
+                                                                 "sha256": directory_sha256(spec)})
+    raise ValueError(must_be("model spec", "'analytic:<robot>:<modality>', 'models:/<name>@<alias>', a model "
+                             "directory logged by `bodyschema train` or 'trusted:<model directory>'", spec))
+
+
+def _registered(spec: str, tracking_uri: str | None):
+    """A registry spec: the alias resolved to a version once, that version loaded (digest-checked) and recorded."""
+    from bodyschema.training.digest import DIGEST_TAG
+    from bodyschema.training.registry import load, use_tracking
+    match = _REGISTRY.match(spec)
+    if match is None or not match["alias"]:
+        return _attach(load(spec, tracking=tracking_uri), {"spec": spec, "name": match["name"] if match else spec,
+                                                           "version": match["version"] if match else ""})
+    from mlflow.exceptions import MlflowException
+    try:
+        version = use_tracking(tracking_uri).get_model_version_by_alias(match["name"], match["alias"])
+    except MlflowException:
+        return load(spec, tracking=tracking_uri)              # its house error: not a registered version
+    model = load(f"models:/{match['name']}/{version.version}", tracking=tracking_uri)
+    return _attach(model, {"spec": spec, "name": match["name"], "version": str(version.version),
+                           "run_id": version.run_id or "", "sha256": version.tags.get(DIGEST_TAG, "")})
+
+
+def _attach(model, provenance: dict[str, str]):
+    model.provenance = {k: str(provenance.get(k, "")) for k in PROVENANCE_KEYS}
+    return model
+
+
+def provenance_rows(models: Sequence) -> list[dict[str, str]]:
+    """One row per model: its spec, registered name, version, source run id and weights digest, and modality."""
+    return [{**getattr(m, "provenance", {"spec": "?"}), "modality": m.modality} for m in models]
+
+
+# ---- the robot of the models ------------------------------------------------------------------------------
+def load_robot(models: Sequence, image_size: tuple[int, int] | None = None, actuators: str = "position"):
+    """The benchmark robot of the models, with the camera the image model (if any) was trained for, its sampling
+    ranges the joint box every model was trained on."""
+    from bodyschema.datagen.robot import Robot
+    image = next((m for m in models if m.modality == "image"), None)
+    rgb = False
+    if image is not None:
+        image_size = image_size or tuple(image.output_shape[:2])
+        rgb = len(image.output_shape) == 3 and image.output_shape[2] == 3
+    pixel = next((m for m in models if getattr(m, "image_size", None)), None)
+    if image_size is None and pixel is not None:
+        image_size = tuple(pixel.image_size)
+    robot = Robot.load(models[0].body.robot, image_size=image_size, rgb=rgb, actuators=actuators)
+    check_models_match(models, robot)
+    robot.sampling_ranges = trained_workspace(models, robot)
+    return robot
+
+
+def trained_workspace(models: Sequence, robot) -> np.ndarray:
+    """The joint box every model was trained on (their latent scaling ranges, intersected, inside the joint
+    limits): evaluation poses come from there, not from poses a model never saw. # (Dq, 2) rad"""
+    low = np.max([m.body.q_low for m in models], axis=0)
+    high = np.min([m.body.q_high for m in models], axis=0)
+    low, high = np.maximum(low, robot.joint_limits[:, 0]), np.minimum(high, robot.joint_limits[:, 1])
+    if (high <= low).any():
+        raise ValueError(must_be("the models' joint ranges", "overlapping", [list(m.body.q_low) for m in models],
+                                 "Evaluate together only models trained on overlapping workspaces."))
+    return np.stack([low, high], axis=1)
+
+
+def check_models_match(models: Sequence, robot) -> None:
+    """Every model must be over the benchmark robot and its joints, in order."""
+    for m in models:
+        if (m.body.robot, tuple(m.body.joint_names)) != (robot.name, tuple(robot.joint_names)):
+            raise ValueError(must_be(f"{m.modality} model body", f"robot {robot.name!r} with joints "
+                                     f"{list(robot.joint_names)}", f"robot {m.body.robot!r} with joints "
+                                     f"{list(m.body.joint_names)}", "Evaluate models of the benchmark's robot."))
+
+
+def on_device(models: Sequence, device: str) -> None:
+    """Move every network to `device` (checked: the house error when CUDA is asked for but absent)."""
+    from bodyschema.models.device import check_device
+    target = check_device(device)
+    for m in models:
+        if hasattr(m, "to"):
+            m.to(target)

@@ -1,0 +1,110 @@
+"""The closed reaching loop: B episodes of one robot in the core simulator (`core.sim.ArmBatch`) at a fixed
+control rate.
+
+Per control tick: simulator state → observations (`core.sensing.Sensors`: the sensors' units, + Gaussian noise σ,
+or a stream frozen at its first value) → policy → actuation (servo targets or torques) → the simulator's control
+period. Policies wrap a controller into one interface: `reset(arm, goal)`, `command(arm, observations, dt) ->
+(B, nu)`, `failed`, `reasons`.
+  VelocityPolicy  AIF velocity commands on position servos: ctrl ← clip(ctrl + a·Δt, ctrlrange)   (nao_arm)
+  ServoPolicy     baseline on position servos: ctrl = the target's joint pose (its true inverse kinematics)
+  TorquePolicy    torques on motors from a controller with AICController's interface: the AIC (aif/aic.py) or,
+                  as baseline, PD + gravity compensation on the target's joint pose (core/pd.py)  (panda)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from bodyschema.evaluation.core.sensing import Sensors
+from bodyschema.evaluation.core.sim import ArmBatch
+
+
+# ---- policies ---------------------------------------------------------------------------------------------
+class VelocityPolicy:
+    """AIF velocity commands (aif.action.VelocityController) integrated into the position servos' targets."""
+
+    def __init__(self, controller):
+        self.controller = controller
+
+    def reset(self, arm: ArmBatch, goal: Mapping[str, torch.Tensor]) -> None:
+        self.low, self.high = arm.model.actuator_ctrlrange.T
+        self.ctrl = np.clip(arm.q, self.low, self.high)
+        self.controller.reset(arm.q, goal)
+
+    def command(self, arm: ArmBatch, observations, dt: float) -> np.ndarray:
+        velocity = self.controller.act(observations, dt)                   # (B, Dq) rad/s
+        self.ctrl = np.clip(self.ctrl + velocity * dt, self.low, self.high)
+        return self.ctrl
+
+    failed = property(lambda self: self.controller.failed)
+    reasons = property(lambda self: self.controller.reasons)
+
+
+class TorquePolicy:
+    """Torques from a controller with AICController's interface; its joint sensor is the observed "joints" stream
+    (the true q when that is not sensed). goal: a fixed goal for this controller (the PD's {"joints": q*})."""
+
+    def __init__(self, controller, goal: Mapping[str, np.ndarray] | None = None):
+        self.controller, self.goal = controller, goal
+
+    def reset(self, arm: ArmBatch, goal) -> None:
+        self.controller.reset(arm.q, arm.qd, self.goal if self.goal is not None else goal)
+
+    def command(self, arm: ArmBatch, observations, dt: float) -> np.ndarray:
+        extra = {k: x for k, x in observations.items() if k != "joints"}
+        q = observations["joints"].numpy() if "joints" in observations else arm.q
+        return self.controller.act(q, arm.qd, extra, dt)
+
+    failed = property(lambda self: self.controller.failed)
+    reasons = property(lambda self: self.controller.reasons)
+
+
+class ServoPolicy:
+    """Baseline on position servos: the target's joint pose (true inverse kinematics) as the servo target."""
+
+    def __init__(self, q_target: np.ndarray):
+        self.q_target = q_target                                           # (B, Dq) rad
+
+    def reset(self, arm: ArmBatch, goal) -> None:
+        self.failed = np.zeros(len(self.q_target), dtype=bool)
+        self.reasons = [None] * len(self.q_target)
+
+    def command(self, arm: ArmBatch, observations, dt: float) -> np.ndarray:
+        return self.q_target
+
+
+# ---- one rollout ------------------------------------------------------------------------------------------
+@dataclass
+class Rollout:
+    t: np.ndarray              # (T+1,) s
+    ee_err: np.ndarray         # (T+1, B) m, simulator ee distance to the target's ee
+    ee_pixel: np.ndarray       # (T+1, B, 2) px, the ee in the camera image
+    q: np.ndarray              # (B, Dq) rad, final joints
+    failed: np.ndarray         # (B,) bool
+    reasons: list[str | None]
+
+
+def rollout(robot, policy, q0: np.ndarray, goal: Mapping[str, torch.Tensor], target_xyz: np.ndarray,
+            sensors: Sensors, ticks: int, substeps: int, progress: bool = False, desc: str = "") -> Rollout:
+    """Run B episodes for `ticks` control periods of substeps·timestep s each, all from rest at q0 (B, Dq)."""
+    from tqdm import tqdm
+    arm = ArmBatch(robot, q0)
+    dt = substeps * robot.model.opt.timestep
+    policy.reset(arm, goal)
+    errs, pixels = [], []
+    for _ in tqdm(range(ticks), desc=desc, disable=not progress, leave=False):
+        xyz = arm.ee_xyz
+        errs.append(np.linalg.norm(xyz - target_xyz, axis=1))
+        pixels.append(robot.project(xyz))
+        ctrl = policy.command(arm, sensors.read(arm), dt)
+        arm.step(ctrl, substeps)
+    xyz = arm.ee_xyz
+    errs.append(np.linalg.norm(xyz - target_xyz, axis=1))
+    pixels.append(robot.project(xyz))
+    failed = arm.failed | np.asarray(policy.failed, dtype=bool)
+    reasons = [a or p for a, p in zip(arm.reasons, policy.reasons)]
+    return Rollout(np.arange(ticks + 1) * dt, np.array(errs), np.array(pixels), arm.q, failed, reasons)

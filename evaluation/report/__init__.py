@@ -1,0 +1,6 @@
+"""`bodyschema report`: one Markdown and one HTML page of every benchmark's latest run (page.py), with a
+dependency-free Markdown → HTML converter (markdown_html.py)."""
+
+from bodyschema.evaluation.report.page import ReportConfig, write_report
+
+__all__ = ["ReportConfig", "write_report"]
