@@ -119,7 +119,7 @@ def test_ctrl_c_exits_130_with_one_line(monkeypatch, capsys):
 
 # ---- the tracking check ---------------------------------------------------------------------------------
 @pytest.mark.parametrize("argv, uses", [
-    (["train", "--model", "gpr", "--data", "d.zarr"], True),
+    (["train", "gpr", "--data", "d.zarr"], True),
     (["registry", "list"], True),
     (["evaluate", "levels"], True),
     (["evaluate", "levels", "--no-mlflow"], False),
