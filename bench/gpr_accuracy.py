@@ -1,4 +1,4 @@
-"""Accuracy and training time of `gpr` and `sklearn_gpr` on a robot's ee_xyz, against the true kinematics.
+"""Accuracy and training time of `gpr` and `sklearn-gpr` on a robot's ee_xyz, against the true kinematics.
 
     .venv/bin/python bench/gpr_accuracy.py [--robot nao_arm] [--n-train 2000] [--noise-mm 1.0] [--threads 1]
                                            [--hyper-all] [--cg-demo] [--skip-sklearn]
@@ -71,7 +71,7 @@ def main() -> None:
     if args.hyper_all:
         kinds.append(("gpr, hyper on all points", lambda: GPRModel(body, "ee_xyz", (3,), hyper_points=args.n_train)))
     if not args.skip_sklearn:
-        kinds.append(("sklearn_gpr", lambda: SklearnGPRModel(body, "ee_xyz", (3,), hyper_points=args.hyper_points)))
+        kinds.append(("sklearn-gpr", lambda: SklearnGPRModel(body, "ee_xyz", (3,), hyper_points=args.hyper_points)))
     for label, x_train in (("noise-free", x_clean), (f"{args.noise_mm:g} mm noise", x_noisy)):
         print(f"{label} targets:")
         for name, make in kinds:

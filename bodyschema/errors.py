@@ -69,8 +69,8 @@ def explain(error: BaseException) -> str | None:
         return _explain_os_error(error)
     if isinstance(error, FloatingPointError):
         return must_be("the computation", "finite", _first_line(text),
-                       "Lower the learning rate (--hyper lr), check the data (`bodyschema validate`), or rerun with "
-                       "--debug to see where.")
+                       "Lower the learning rate (`bodyschema train KIND --lr`), check the data (`bodyschema "
+                       "validate`), or rerun with --debug to see where.")
     if isinstance(error, MemoryError):
         return must_be("the memory this run needs", "available", "MemoryError",
                        "Ask for less: fewer samples (--n, --max-train), smaller images or fewer trials.")
