@@ -1,4 +1,4 @@
-"""One decoder per modality over one shared latent z: `MultimodalModel` and its members (kind "mm_member").
+"""One decoder per modality over one shared latent z: `MultimodalModel` and its members (kind "multimodal").
 
 A member is a SensoryModel: an MLP (tanh, standardized outputs) for vector modalities (joints, ee_xyz,
 ee_pixel, touch) or the pixel decoder's network for images, plus a log-precision λ per modality. Training

@@ -44,7 +44,7 @@ def make_kernel(latent_dim: int, noise_floor: float, lengthscale=0.5, outputscal
 
 @register_kind
 class SklearnGPRModel(BaseSensoryModel):
-    """scikit-learn GP sensory model, kind "sklearn_gpr". `__init__` stores hyper-parameters only."""
+    """scikit-learn GP sensory model, kind "sklearn-gpr". `__init__` stores hyper-parameters only."""
 
     kind = "sklearn-gpr"
     precision_varies = True      # 1 / predictive std² at z
