@@ -109,7 +109,7 @@ def resolve_encoder(spec: str | None, robot, tracking_uri: str | None = None):
         return None
     encoder = resolve_model(spec, tracking_uri)
     if getattr(encoder, "kind", None) != "encoder":
-        raise ValueError(must_be("encoder", "a model of kind 'encoder' (bodyschema train --model encoder)",
+        raise ValueError(must_be("encoder", "a model of kind 'encoder' (bodyschema train encoder)",
                                  getattr(encoder, "kind", type(encoder).__name__)))
     check_models_match([encoder], robot)
     want = (*robot.image_size, *((3,) if robot.channels == 3 else ()))
