@@ -86,8 +86,11 @@ class VelocityController:
 
     def __init__(self, models: Sequence, perception: PerceptionConfig = PerceptionConfig(),
                  action: ActionConfig = ActionConfig(), precisions: Mapping[str, float] | None = None):
+        # "auto" step control is no descent control here: the attractor moves F every tick, so a step that raises
+        # F is the loop working, not a step to undo
+        control = "none" if perception.step_control == "auto" else perception.step_control
         self._perception_config = replace(perception, prior="attractor", attractor_gain=action.attractor_gain,
-                                          max_steps=action.perception_steps, record=False)
+                                          max_steps=action.perception_steps, record=False, step_control=control)
         self._precision_overrides = dict(precisions or {})
         self.perception = Perception(models, self._perception_config, self._precision_overrides)
         self.models = self.perception.models

@@ -32,10 +32,11 @@ from bodyschema.aif.free_energy import check_models, check_observations, model_i
 from bodyschema.aif.generalized import implicit_step, local_linear_step, shift, shift_matrix
 from bodyschema.aif.priors import PRIORS, attractor_flow, prior_terms
 from bodyschema.errors import must_be
+from bodyschema.models.contract import as_input
 
 INTEGRATORS = ("local_linear", "implicit", "euler")
 STEPS = {"local_linear": local_linear_step, "implicit": implicit_step}
-STEP_CONTROLS = ("descent", "none")
+STEP_CONTROLS = ("auto", "descent", "none")
 METHODS = ("flow", *descent.DESCENT_METHODS)
 DESCENT_SLACK = 1e-7     # relative rise of F still accepted: float32 models evaluate F to ~1e-7
 DT_GROW, DT_SHRINK = 2.0, 0.1   # Δt of a trial after an accepted / a rejected step (never above config.dt)
@@ -59,7 +60,9 @@ class PerceptionConfig:
     precisions: tuple[tuple[str, float], ...] = ()   # per-modality overrides, e.g. (("ee_xyz", 1e4),)
     precision_update: str = "step"  # "step": Π from model.precision(μ) at every step; "initial": at μ0 only
     record: bool = False           # keep the trajectory of μ̃, F and the prediction errors
-    step_control: str = "none"     # "descent": a step that raises F is undone and that trial's Δt shrinks (order 0)
+    step_control: str = "auto"     # "descent": a step that raises F is undone and that trial's Δt shrinks (order 0);
+                                   # "none": every step is taken; "auto": descent at order 0 (the default of
+                                   # `evaluate levels`: monotone, no jitter at the noise floor), none above
     method: str = "flow"           # "flow": generalized filtering (integrator above); order 0 only: "lm"
                                    # (Levenberg–Marquardt), "adam" (adaptive first-order flow) or "adam+lm"
                                    # (Adam, then LM once in a basin): descent.py
@@ -67,6 +70,11 @@ class PerceptionConfig:
     lr: float = 0.02               # adam: initial step per joint, rad
     patience: int = 5              # adam: steps without a new best F before the step halves
     handover: float = 1e-2         # adam+lm: Adam's step (rad) below which LM takes over (one halving of lr)
+
+    @property
+    def descends(self) -> bool:
+        """Whether steps are under descent control ("auto" resolved by the order)."""
+        return self.step_control == "descent" or (self.step_control == "auto" and self.order == 0)
 
     def __post_init__(self):
         for name in ("dt", "k_z", "prior_precision", "attractor_gain", "tol", "divergence_step"):
@@ -119,6 +127,11 @@ class PerceptionResult:
     @property
     def n_diverged(self) -> int:
         return int(self.diverged.sum())
+
+
+def as_inputs(named):
+    """{name: numpy array or tensor} → {name: tensor}; anything else is left for the checks to judge."""
+    return {k: as_input(v) for k, v in named.items()} if isinstance(named, Mapping) else named
 
 
 class _Cache:
@@ -195,8 +208,9 @@ class Perception:
         """Run inference for B trials. observations: modality → (B, *out); mu0: (B, Dz) or (B, K, Dz) rad.
 
         goal: for prior "attractor", one modality → (B, *out) target x_d in that model's output space.
-        Inference is deterministic: no generator is needed.
+        Inference is deterministic: no generator is needed. numpy arrays are accepted for every input.
         """
+        observations, mu0, goal = as_inputs(observations), as_input(mu0), as_inputs(goal)
         cfg = self.config
         u = self._initial_belief(mu0)                                      # (B, K, Dz)
         b, k, dz = u.shape
@@ -214,7 +228,7 @@ class Perception:
         active = torch.arange(b)
         trajectory = {"mu": [], "F": []} if cfg.record else None
         evaluations = 0
-        descent = cfg.step_control == "descent"
+        descent = cfg.descends
         dt = torch.full((b,), cfg.dt, dtype=torch.float64)                 # per trial: shrinks on rejected steps
         cand = u.clone()                                                   # the point each trial evaluates next
         cache = _Cache(b, k * dz, need_h) if descent else None

@@ -32,7 +32,8 @@ from bodyschema.evaluation.levels.benchmark import LevelsConfig, levels_update, 
 from bodyschema.evaluation.levels.report import markdown
 from bodyschema.evaluation.levels.targets import initial_beliefs, make_targets
 
-PLAIN = PerceptionConfig(integrator="euler", dt=0.1, k_z=1.0, max_steps=5000, tol=0.0, max_step=None, record=True)
+PLAIN = PerceptionConfig(integrator="euler", dt=0.1, k_z=1.0, max_steps=5000, tol=0.0, max_step=None, record=True,
+                         step_control="none")
 SIGMA = {"ee_xyz": 1e-3, "ee_pixel": 1.0, "joints": math.radians(2.0)}   # m, px, rad: noise = 1/√precision
 COLUMNS = ("joint_err_deg", "joint_err_median_deg", "ee_err_mm", "success", "steps", "evaluations_per_trial",
            "diverged", "wall_s")

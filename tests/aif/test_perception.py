@@ -83,7 +83,7 @@ def test_zero_precision_modality_is_ignored(arm):
 def test_absurd_dt_marks_trials_diverged_and_the_run_goes_on(arm):
     q = planar_poses(6, seed=11)
     precision = torch.tensor([1e4, 1e4, 1e4, 1e-8, 1e-8, 1e-8], dtype=torch.float64)[:, None].expand(6, 3)
-    config = PerceptionConfig(integrator="euler", dt=1e6, k_z=1.0, max_steps=50, max_step=None)
+    config = PerceptionConfig(integrator="euler", dt=1e6, k_z=1.0, max_steps=50, max_step=None, step_control="none")
     result = Perception([arm], config, precisions={"ee_xyz": precision}).infer({"ee_xyz": arm.predict(q)},
                                                                                 perturb(q, seed=12))
     assert result.diverged[:3].all() and (result.diverged_step[:3] == 0).all()
@@ -97,7 +97,7 @@ def test_descent_step_control_never_raises_F_and_tames_an_absurd_euler_step(arm)
     mu0 = perturb(q, seed=22)
     obs = {"ee_xyz": arm.predict(q)}
     wild = dict(integrator="euler", dt=1e3, k_z=1.0, max_steps=400, max_step=None, record=True)
-    plain = Perception([arm], PerceptionConfig(**wild)).infer(obs, mu0)
+    plain = Perception([arm], PerceptionConfig(**wild, step_control="none")).infer(obs, mu0)
     assert plain.diverged.all(), "without step control this Euler step must blow up"
     result = Perception([arm], PerceptionConfig(**wild, step_control="descent")).infer(obs, mu0)
     f = result.trajectory["F"]                                             # (T, B) at the accepted beliefs
@@ -111,7 +111,7 @@ def test_descent_step_control_matches_the_plain_update_where_every_step_descends
     q = planar_poses(16, seed=23)
     mu0 = perturb(q, seed=24)
     obs = {"ee_xyz": arm.predict(q)}
-    plain = Perception([arm], PerceptionConfig()).infer(obs, mu0)
+    plain = Perception([arm], PerceptionConfig(step_control="none")).infer(obs, mu0)
     descent = Perception([arm], PerceptionConfig(step_control="descent")).infer(obs, mu0)
     assert (descent.mu - q).abs().max() < 0.1 * DEG and (plain.mu - q).abs().max() < 0.1 * DEG
     assert descent.converged.all()
@@ -194,7 +194,8 @@ def test_bad_mu0_and_config_raise(arm):
 
 def test_unstable_update_bouncing_between_limits_is_flagged_diverged(arm):
     q = planar_poses(50, seed=22)                                          # Euler with Δt·λ_max ≈ 30: unstable,
-    config = PerceptionConfig(integrator="euler", dt=0.01, max_steps=300, max_step=None)   # steps stay < 1e3 rad
+    config = PerceptionConfig(integrator="euler", dt=0.01, max_steps=300, max_step=None,   # steps stay < 1e3 rad
+                              step_control="none")
     result = Perception([arm], config).infer({"ee_xyz": arm.predict(q)}, perturb(q, seed=23))
     assert result.n_diverged > 25 and not (result.converged & result.diverged).any()
     assert (result.diverged_step[result.diverged] < 20).all()
@@ -212,3 +213,11 @@ def test_image_model_gradient_uses_vjp_or_the_curvature_jacobian_and_recovers_th
     image.calls = {"vjp": 0, "jacobian": 0}
     Perception([image], PerceptionConfig(integrator="euler", dt=1e-6, max_steps=5)).infer(obs, mu0)
     assert image.calls == {"vjp": 5, "jacobian": 0}, "Euler never builds the image Jacobian"
+
+
+def test_the_default_step_control_is_descent_at_order_0_and_none_above():
+    """As `evaluate levels` (the CLI's perception): monotone descent for static perception; generalized motion
+    (order > 0) cannot use it (F is no Lyapunov function of that flow), and needs no opt-out to be valid."""
+    assert PerceptionConfig().descends and PerceptionConfig(step_control="descent").descends
+    assert not PerceptionConfig(order=1, prior="damping").descends
+    assert not PerceptionConfig(step_control="none").descends
