@@ -1,6 +1,56 @@
 """bodyschema: a robot learns its body by motor babbling and perceives and moves it by active inference.
 
 Subpackages (one direction of data flow): datagen → models → training → aif → evaluation.
+
+The entry points a script needs, importable from here (each loaded on first use, so `import bodyschema` stays
+fast and pulls in neither torch nor MuJoCo):
+
+    data     = bodyschema.load_dataset("data/nao.zarr", "ee_xyz")          # validated, split train/val
+    model    = bodyschema.GPRModel(data.body, "ee_xyz", (3,)).fit(data.train.q, data.train.x)
+    belief   = bodyschema.Perception([model]).infer({"ee_xyz": x}, mu0)   # numpy or torch in, tensors out
+    champion = bodyschema.load_registered("models:/bodyschema-nao_arm-ee_xyz-gpr@champion")
+
+Model kinds: GPRModel, SklearnGPRModel, MDNModel, PixelDecoder, MultimodalModel, ImageEncoder, AnalyticModel
+(`load_model(dir)` reads any saved one). Datasets: generate / DatagenConfig, load_dataset, validate_store,
+show_store, export_dataset. Models out: export_onnx. Perception: Perception, PerceptionConfig, infer_multistart.
 """
 
+from __future__ import annotations
+
+import importlib
+
 __version__ = "0.1.0"
+
+_EXPORTS = {   # public name → module defining it (imported on first access)
+    "DatagenConfig": "bodyschema.datagen.config", "generate": "bodyschema.datagen.generate",
+    "validate_store": "bodyschema.datagen.validate", "show_store": "bodyschema.datagen.show",
+    "export_dataset": "bodyschema.datagen.export",
+    "load_dataset": "bodyschema.training.data", "Dataset": "bodyschema.training.data",
+    "BodySpec": "bodyschema.models.scaling", "SensoryModel": "bodyschema.models.contract",
+    "load_model": "bodyschema.models.contract",
+    "GPRModel": "bodyschema.models.gpr", "SklearnGPRModel": "bodyschema.models.sklearn_gpr",
+    "MDNModel": "bodyschema.models.mdn", "PixelDecoder": "bodyschema.models.pixel",
+    "MultimodalModel": "bodyschema.models.multimodal", "ImageEncoder": "bodyschema.models.encoder",
+    "AnalyticModel": "bodyschema.models.analytic", "export_onnx": "bodyschema.models.onnx_export",
+    "Perception": "bodyschema.aif.perception", "PerceptionConfig": "bodyschema.aif.perception",
+    "PerceptionResult": "bodyschema.aif.perception", "infer_multistart": "bodyschema.aif.multistart",
+}
+_RENAMED = {"load_registered": ("bodyschema.training.registry", "load")}   # registry.load: models:/<name>@<alias>
+
+__all__ = sorted([*_EXPORTS, *_RENAMED, "__version__"])
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        value = getattr(importlib.import_module(_EXPORTS[name]), name)
+    elif name in _RENAMED:
+        module, attr = _RENAMED[name]
+        value = getattr(importlib.import_module(module), attr)
+    else:
+        raise AttributeError(f"module 'bodyschema' has no attribute {name!r}. Public names: {', '.join(__all__)}")
+    globals()[name] = value          # cached: the next access is a plain attribute
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *__all__})

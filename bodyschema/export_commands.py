@@ -84,9 +84,11 @@ def run_export_onnx(args: ExportOnnxArgs) -> int:
 
 
 def _load(spec: str, tracking_uri: str | None):
-    """The model a spec names (the evaluation core's resolution: registry, logged directory or trusted:<dir>)."""
+    """The model a spec names (the evaluation core's resolution: registry, logged directory or trusted:<dir>); a
+    `bodyschema train` run directory stands for the model directory it saved."""
     from bodyschema.evaluation.core.specs import resolve_model
 
+    spec = model_dir_of_run(spec)
     if spec.startswith("models:/") or (not spec.startswith(("trusted:", "analytic:")) and Path(spec).is_dir()):
         from bodyschema.training.registry import check_tracking, tracking_uri as resolve_uri
 
@@ -97,3 +99,20 @@ def _load(spec: str, tracking_uri: str | None):
 
 
 RUNNERS = {ShowArgs: run_show, ExportDatasetArgs: run_export_dataset, ExportOnnxArgs: run_export_onnx}
+
+
+def model_dir_of_run(spec: str) -> str:
+    """runs/<kind>-<modality>-<hash> → its model/ (model-<modality>/ for a multimodal run: named, one per export)."""
+    prefix = "trusted:" if spec.startswith("trusted:") else ""
+    folder = Path(spec.removeprefix(prefix))
+    if not folder.is_dir() or (folder / "meta.json").is_file() or spec.startswith(("models:/", "analytic:")):
+        return spec
+    saved = sorted(p.parent for p in folder.glob("model*/meta.json"))
+    if len(saved) == 1:
+        return prefix + str(saved[0])
+    if len(saved) > 1:
+        from bodyschema.errors import must_be
+
+        raise ValueError(must_be("MODEL", "one model", f"run directory {str(folder)!r} with {len(saved)} models",
+                                 "Name one: " + ", ".join(prefix + str(p) for p in saved) + "."))
+    return spec

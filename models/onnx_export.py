@@ -6,10 +6,10 @@ public wrapper: the wrapper's edge checks (`isfinite`, shape and dtype errors, d
     rad → [-1, 1] (the body's `to_unit`) → network (or the GP's k(u, X) α) → output de-standardization
 with no second copy of any of it, and `verify_onnx` checks it against the wrapper's `predict` with onnxruntime.
 
-Kinds: "mdn" (either mode), "pixel", "mm_member" (MLP or pixel decoder) and "gpr" (its posterior mean: the
+Kinds: "mdn" (either mode), "pixel", "multimodal" (a member: MLP or pixel decoder) and "gpr" (its posterior mean: the
 RBF kernel against the cached training inputs and α, a few matmuls and one exp) map q (B, Dz) rad → x (B, *out);
 "encoder" maps images (B, H, W[, C]) in [0, 1] → q (B, Dz) rad. Not exportable: "analytic" (MuJoCo's forward
-kinematics, no tensor graph) and "sklearn_gpr" (scikit-learn computes its mean in numpy).
+kinematics, no tensor graph) and "sklearn-gpr" (scikit-learn computes its mean in numpy).
 
 dtype: float64 graphs for vector models (error vs `predict` ~1e-12); float32 for models with convolutions,
 because onnxruntime's CPU provider has no float64 Conv / ConvTranspose kernels. Their weights are float32
@@ -21,6 +21,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -31,7 +32,7 @@ from bodyschema.errors import must_be
 
 OPSET = 18                              # onnxruntime ≥ 1.14 runs it; torch's exporter targets ≥ 18
 TOLERANCE = 1e-5                        # max |onnxruntime − model| accepted (output units; rad for an encoder)
-NETWORK_KINDS = ("mdn", "pixel", "mm_member")
+NETWORK_KINDS = ("mdn", "pixel", "multimodal")     # models/kinds.py spellings
 EXPORTABLE = (*NETWORK_KINDS, "encoder", "gpr")
 CONV_KINDS = ("pixel", "encoder")       # float32 graphs (see the module doc)
 
@@ -75,7 +76,7 @@ def check_exportable(model) -> None:
     kind = getattr(model, "kind", type(model).__name__)
     if kind not in EXPORTABLE:
         why = {"analytic": "MuJoCo's forward kinematics has no tensor graph: export the robot's MJCF instead",
-               "sklearn_gpr": "scikit-learn computes its mean in numpy: train kind 'gpr' for an exportable GP"}
+               "sklearn-gpr": "scikit-learn computes its mean in numpy: train kind 'gpr' for an exportable GP"}
         raise ValueError(must_be("model kind", f"one of {list(EXPORTABLE)} to export ONNX", kind,
                                  why.get(kind, "")))
     if not model.is_fitted:
@@ -93,7 +94,8 @@ def export_onnx(model, out: str | Path, *, opset: int = OPSET) -> Path:
     graph, example, names = _graph(model)
     # torch's exporter warns once per torchvision operator it cannot register (torchvision is not a dependency)
     logging.getLogger("torch.onnx._internal.exporter._registration").setLevel(logging.ERROR)
-    with torch.no_grad():
+    with torch.no_grad(), warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*LeafSpec.*", category=FutureWarning)   # torch.export's own
         program = torch.onnx.export(graph, (example,), dynamo=True, opset_version=opset, verbose=False,
                                     input_names=[names[0]], output_names=[names[1]], optimize=True,
                                     dynamic_shapes=({0: torch.export.Dim("batch", min=1)},), external_data=False)

@@ -63,7 +63,7 @@ def _gpr():
 
 
 KINDS = {"mdn-mean": lambda: _mdn("mean"), "mdn-max": lambda: _mdn("max"), "pixel": _pixel,
-         "mm_member-mlp": lambda: _member("mlp"), "mm_member-pixel": lambda: _member("pixel"),
+         "multimodal-mlp": lambda: _member("mlp"), "multimodal-pixel": lambda: _member("pixel"),
          "encoder": _encoder, "gpr": _gpr}
 
 
