@@ -55,7 +55,7 @@ class Dataset:
     attrs: dict[str, Any]    # the store's root attrs (robot, mjcf_sha256, config, ...)
     train: Split
     val: Split
-    sha256: str              # content digest of the arrays read (q, modalities, episode), in row order
+    sha256: str              # content digest of the whole store (`store_digest`): one per store, any modality
     split_by: str            # "episode" or "random"
 
     def output_shape(self, modality: str) -> tuple[int, ...]:
@@ -101,9 +101,8 @@ def load_dataset(path: str | Path, modality: str | tuple[str, ...], *, val_fract
         raise ValueError(f"Dataset {str(path)!r} cannot be used for training:\n - " + "\n - ".join(problems))
     root = zarr.open_group(str(path), mode="r", zarr_format=3)
     attrs = dict(root.attrs)
-    digest = hashlib.sha256()
     names = ["q", *modalities] + (["episode"] if "episode" in root.array_keys() else [])
-    arrays = {name: _read_chunked(root[name], name, digest, progress) for name in names}
+    arrays = {name: _read_chunked(root[name], name, hashlib.sha256(), progress) for name in names}
     q = arrays["q"].astype(np.float32, copy=False)
     xs = {m: arrays[m] if arrays[m].dtype == np.uint8 else arrays[m].astype(np.float32, copy=False)
           for m in modalities}
@@ -113,7 +112,27 @@ def load_dataset(path: str | Path, modality: str | tuple[str, ...], *, val_fract
         train_rows = np.sort(rng.choice(train_rows, size=max_train, replace=False))
     whole = Split(q, xs, np.arange(len(q)))
     return Dataset(path, modalities, body_from_attrs(attrs, q), attrs, whole.take(train_rows), whole.take(val_rows),
-                   digest.hexdigest(), split_by)
+                   store_digest(root, progress), split_by)
+
+
+def store_digest(root: zarr.Group, progress: bool = False) -> str:
+    """The store's content digest, the same whichever modality a run reads from it: sha256 of every data array's
+    name, dtype and shape and of the per-shard checksums datagen recorded (`shard_done`: each covers all arrays'
+    rows of its shard, and `validate_store` has just recomputed them). Stores without checksums (schema 1): sha256
+    of every data array read in full."""
+    from bodyschema.datagen.integrity import data_arrays
+    from bodyschema.datagen.store import has_checksums, shard_digests
+
+    digest = hashlib.sha256(b"bodyschema-store;")
+    names = data_arrays(root)
+    for name in names:
+        digest.update(f"{name}|{root[name].dtype}|{root[name].shape};".encode())
+    if has_checksums(root):
+        digest.update(shard_digests(root).astype("<u8").tobytes())
+    else:
+        for name in names:
+            _read_chunked(root[name], name, digest, progress)
+    return digest.hexdigest()
 
 
 def split_rows(episode: np.ndarray | None, n: int, val_fraction: float,

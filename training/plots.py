@@ -12,24 +12,33 @@ import numpy as np  # noqa: E402
 
 
 def loss_curves(history: dict[int, dict[str, float]], path: Path, title: str) -> Path | None:
-    """One curve per *loss* metric over epochs (log scale when all positive). None when nothing to plot."""
-    epochs = sorted(history)
-    keys = sorted({k for m in history.values() for k in m if "loss" in k or k.startswith("val_")})
-    if not epochs or not keys:
+    """One curve per loss metric over epochs (GP: marginal-likelihood evaluations), log scale when all positive.
+    None when nothing to plot."""
+    lines = curves(history)
+    if not lines:
         return None
     fig, ax = plt.subplots(figsize=(6, 4), dpi=100)
     positive = True
-    for key in keys:
-        pts = [(e, history[e][key]) for e in epochs if key in history[e] and np.isfinite(history[e][key])]
-        if pts:
-            ax.plot(*zip(*pts), label=key, marker="." if len(pts) < 30 else None)
-            positive &= all(v > 0 for _, v in pts)
-    if positive:
-        ax.set_yscale("log")
-    ax.set(xlabel="epoch", ylabel="loss / metric", title=title)
+    for key, pts in lines.items():
+        ax.plot(*zip(*pts), label=key, marker="." if len(pts) < 30 else None)
+        positive &= all(v > 0 for _, v in pts)
+    # log: losses span decades; symlog where some are ≤ 0 (a GP's −MLL), which also keeps an L-BFGS line-search
+    # probe of 1e6 from flattening the rest of the curve
+    ax.set_yscale("log") if positive else ax.set_yscale("symlog", linthresh=1.0)
+    gp = any("mll" in key for key in lines)
+    ax.set(xlabel="marginal-likelihood evaluation" if gp else "epoch", ylabel="loss / metric", title=title)
     ax.grid(alpha=0.3)
     ax.legend()
     return save_figure(fig, path)
+
+
+def curves(history: dict[int, dict[str, float]]) -> dict[str, list[tuple[int, float]]]:
+    """{metric: [(epoch, finite value)]} of the metrics worth a curve: losses (NN), the negative marginal
+    log-likelihood (GP: `train_neg_mll`, one value per evaluation) and validation scores."""
+    keys = sorted({k for m in history.values() for k in m if "loss" in k or "mll" in k or k.startswith("val_")})
+    out = {key: [(e, history[e][key]) for e in sorted(history) if key in history[e] and np.isfinite(history[e][key])]
+           for key in keys}
+    return {key: pts for key, pts in out.items() if pts}
 
 
 def prediction_scatter(target: np.ndarray, pred: np.ndarray, path: Path, unit: str, title: str) -> Path:

@@ -58,6 +58,12 @@ def test_digest_changes_with_content_and_max_train_caps(kin_store, tmp_path):
     assert changed.sha256 != base.sha256
 
 
+def test_the_digest_is_the_stores_whichever_modality_is_read(image_store, kin_store):
+    """One store, one dataset digest in MLflow: reading ee_xyz, image or both from it gives the same sha256."""
+    digests = {load_dataset(image_store, m).sha256 for m in ("ee_xyz", "image", "ee_pixel,image")}
+    assert len(digests) == 1 and digests != {load_dataset(kin_store, "ee_xyz").sha256}
+
+
 def test_incomplete_store_is_refused_with_every_problem(kin_store, tmp_path):
     copy = shutil.copytree(kin_store, tmp_path / "copy.zarr")
     zarr.open_group(str(copy), mode="r+").attrs["complete"] = False

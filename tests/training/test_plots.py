@@ -15,6 +15,15 @@ def test_loss_curves_draws_losses_and_skips_an_empty_history(tmp_path):
     assert plots.loss_curves({}, tmp_path / "none.png", "t") is None and not (tmp_path / "none.png").exists()
 
 
+def test_the_gp_marginal_likelihood_is_a_curve_not_one_point(tmp_path):
+    """GPR logs `train_neg_mll` at every MLL evaluation and its validation scores once at the end: both are drawn."""
+    history = {step: {"train_neg_mll": 3.0 - 0.01 * step} for step in range(1, 251)}
+    history[250] = {**history[250], "val_rmse": 1e-4, "val_mean_error": 8e-5}
+    lines = plots.curves(history)
+    assert len(lines["train_neg_mll"]) == 250 and lines["val_rmse"] == [(250, 1e-4)]
+    assert plots.loss_curves(history, tmp_path / "gp.png", "gp").read_bytes().startswith(PNG)
+
+
 @pytest.mark.parametrize("shape", [(8, 8), (8, 6, 3)])
 def test_image_grid_handles_gray_and_rgb(tmp_path, shape):
     rng = np.random.default_rng(0)
