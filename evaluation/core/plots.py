@@ -1,21 +1,11 @@
-"""The plotting helper of every benchmark: matplotlib on the file-only Agg backend and one way to save a figure."""
+"""The plotting helper of every benchmark: matplotlib on the file-only Agg backend and one way to save a figure.
+
+Benchmarks import plotting from here only. The project keeps a single `save_figure` (training/plots.py, which
+also sets the Agg backend before pyplot loads); this module is evaluation's one door to it, so a change of
+backend, dpi or layout policy for benchmark plots is made here."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
-import matplotlib
-
-matplotlib.use("Agg")   # files only, no display; set before pyplot is imported
-import matplotlib.pyplot as plt  # noqa: E402
+from bodyschema.training.plots import plt, save_figure
 
 __all__ = ["plt", "save_figure"]
-
-
-def save_figure(fig, path: Path, dpi: float | str = "figure") -> Path:
-    """Lay out, write the PNG (creating its folder) and free the figure."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
-    return path
