@@ -42,8 +42,8 @@ SENSED = ("ee_xyz", "ee_pixel", "image")   # extra modalities the loop simulates
 class JupiterConfig(TrialsConfig):
     """PD vs unimodal vs multimodal AIC on the panda while gravity jumps to Jupiter's mid-task."""
 
-    out: Path = Path("results/adaptation/jupiter")
-    experiment: str = "bodyschema-adaptation"
+    out: Path = Path("results/adaptation/jupiter")   # runs go to <out>/<run-id>/, <out>/latest
+    experiment: str = "bodyschema-adaptation"        # the MLflow experiment
     trials: int = 10                   # random reachable joint goals (and start poses) around the ready pose
     duration: float = 12.0             # s of simulated time per episode
     switch_time: float = 6.0           # s; gravity 9.81 → jupiter_gravity here

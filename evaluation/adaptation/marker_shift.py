@@ -51,8 +51,8 @@ DEFAULT_MODELS = ("analytic:nao_arm:joints", "analytic:nao_arm:ee_pixel")
 class MarkerShiftConfig(TrialsConfig):
     """nao_arm holds a goal by active inference while its visual marker is shifted in the hand frame."""
 
-    out: Path = Path("results/adaptation/marker_shift")
-    experiment: str = "bodyschema-adaptation"
+    out: Path = Path("results/adaptation/marker_shift") # runs go to <out>/<run-id>/, <out>/latest
+    experiment: str = "bodyschema-adaptation"        # the MLflow experiment
     models: models_field(", ".join(DEFAULT_MODELS)) = ()
     trials: int = 10                   # goal poses per shift (the same poses for every shift and precision)
     shifts: tuple[str, ...] = ("left", "right", "finger", "forearm")   # hand frame ±y, +x, −x; "none": control

@@ -48,9 +48,9 @@ class PerceptionRunConfig(TrialsConfig):
     runs: int = 5                      # runs with different target seeds
     noise: tuple[tuple[str, float], ...] = ()   # observation noise σ per modality (m, px, rad, intensity)
     perception: PerceptionConfig = PerceptionConfig(record=True, step_control="descent")  # monotone: see perception.py
-    update: str = "auto"               # perception.method for this run; "auto": "adam+lm" with an image model (its F
-                                       # has shallow local minima that Gauss–Newton jumps land in; bench/aif.py [2]),
-                                       # else "flow" (Gauss–Newton descent: exact in ~5–20 steps on kinematics)
+    # "auto": "adam+lm" with an image model (its F has shallow local minima that Gauss–Newton jumps land in;
+    # bench/aif.py [2]), else "flow" (Gauss–Newton descent: exact in ~5–20 steps on kinematics)
+    update: str = "auto"               # perception.method; "auto": adam+lm with an image model, else flow
     success_deg: float = 1.0           # a trial succeeds when its mean |joint error| is below this
     device: str = "cpu"                # where networks run: "cpu", "cuda" or "cuda:N" (the belief stays on the CPU)
     image_size: tuple[int, int] | None = None   # robot camera (H, W); default: the image model's, else the robot's
@@ -68,14 +68,13 @@ class PerceptionRunConfig(TrialsConfig):
 class LevelsConfig(PerceptionRunConfig):
     """Estimation levels 1–3 on held-out targets: batched AIF perception from perturbed beliefs."""
 
-    out: Path = Path("results/levels")
-    experiment: str = "bodyschema-levels"
+    out: Path = Path("results/levels")               # runs go to <out>/<run-id>/, <out>/latest
+    experiment: str = "bodyschema-levels"            # the MLflow experiment
     levels: tuple[int, ...] = (1, 2, 3)  # 1: one joint off 5–10°, 2: all joints off, 3: another target's pose
     multistart: int = 8                # starts per trial for the level-3 remedy (0: off)
     screen_steps: int = 5              # multi-start: updates before pruning (a descent trial converges in ~15)
     keep: int = 2                      # multi-start: starts per trial refined to convergence
-    encoder: str | None = None         # an image encoder (kind "encoder", same spec forms as --model): level 3 is
-                                       # also run from its estimate, alone and as one multi-start seed
+    encoder: str | None = None         # an image encoder spec (kind "encoder"): level 3 also starts from its guess
 
     def __post_init__(self):
         super().__post_init__()

@@ -57,8 +57,8 @@ GOAL_PREFERENCE = ("image", "ee_xyz", "ee_pixel", "joints")   # "auto": the firs
 class ReachingRunConfig(TrialsConfig):
     """What reaching and its robustness sweeps share: the robot, models, goal, episodes and controllers."""
 
-    out: Path = Path("results/reaching")
-    experiment: str = "bodyschema-reaching"
+    out: Path = Path("results/reaching")             # runs go to <out>/<run-id>/, <out>/latest
+    experiment: str = "bodyschema-reaching"          # the MLflow experiment
     robot: str = "nao_arm"                 # "nao_arm" (velocity AIF on servos) | "panda" (AIC torques)
     models: models_field("the robot's analytic defaults (nao_arm: ee_pixel + joints; panda: ee_xyz)") = ()
     goal: str = "auto"                     # goal modality; auto: image > ee_xyz > ee_pixel > joints among the models

@@ -30,8 +30,8 @@ COLUMNS = ("success", "goal_success", "ee_err_mm", "ee_err_median_mm", "time_to_
 class LoopRobustnessConfig(ReachingRunConfig):
     """Sweep observation noise on one modality and break each sensor in turn, in the closed reaching loop."""
 
-    out: Path = Path("results/loop_robustness")
-    experiment: str = "bodyschema-loop-robustness"
+    out: Path = Path("results/loop_robustness")      # runs go to <out>/<run-id>/, <out>/latest
+    experiment: str = "bodyschema-loop-robustness"   # the MLflow experiment
     trials: int = 30                                           # reaching targets per case (AIF only)
     modality: str = "joints"                                   # the modality the noise is added to
     sigmas: tuple[float, ...] = (0.0, 0.002, 0.005, 0.01, 0.02, 0.05)   # σ in that modality's unit (rad: joints)

@@ -22,8 +22,8 @@ from bodyschema.evaluation.levels.report import markdown, plot_sweep
 class RobustnessConfig(PerceptionRunConfig):
     """Sweep observation noise on one modality and break each modality in turn, at one estimation level."""
 
-    out: Path = Path("results/robustness")
-    experiment: str = "bodyschema-robustness"
+    out: Path = Path("results/robustness")           # runs go to <out>/<run-id>/, <out>/latest
+    experiment: str = "bodyschema-robustness"        # the MLflow experiment
     trials: int = 200                               # per run and case
     runs: int = 1                                   # runs with different target seeds
     modality: str = "ee_xyz"                        # the modality the noise is added to

@@ -42,8 +42,8 @@ SCORES = ("visual", "total")
 class SelfRecognitionConfig(TrialsConfig):
     """Babbling episodes seen by the robot itself or by another source; ROC of "is this me?" on free energy."""
 
-    out: Path = Path("results/self_recognition")
-    experiment: str = "bodyschema-self-recognition"
+    out: Path = Path("results/self_recognition")     # runs go to <out>/<run-id>/, <out>/latest
+    experiment: str = "bodyschema-self-recognition"  # the MLflow experiment
     robot: str = "nao_arm"                # the babbling body; every model must be of it
     models: models_field("analytic:<robot>:ee_pixel") = ()
     trials: int = 200                  # episodes: half self, half others split evenly over `sources`
