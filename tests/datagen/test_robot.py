@@ -272,3 +272,24 @@ def test_check_ranges_rejects_a_range_outside_the_limits():
         other = robot(name) if name != "nao_arm" else r
         assert ((other.sampling_ranges[:, 0] >= other.joint_limits[:, 0])
                 & (other.sampling_ranges[:, 1] <= other.joint_limits[:, 1])).all()
+
+
+@pytest.mark.parametrize("name", ROBOT_NAMES)
+def test_unchecked_kinematics_serve_simulated_states_past_the_limits(name):
+    r = robot(name)
+    q = random_q(r, 8, seed=3)
+    past = q.copy()
+    past[:, 0] = r.joint_limits[0, 1] + LIMIT_TOLERANCE + 0.05                 # a simulated arm overshoots a little
+    with pytest.raises(ValueError, match="inside the joint limits"):
+        r.fk(past)
+    np.testing.assert_array_equal(r.fk(q, check=False), r.fk(q))              # same numbers inside the limits
+    xyz, jac = r.fk_and_jacobian(past, check=False)
+    np.testing.assert_allclose(xyz, r.fk(past, check=False), atol=1e-12)
+    np.testing.assert_allclose(jac, r.jacobian(past, check=False), atol=1e-12)
+    assert np.isfinite(xyz).all() and not np.allclose(xyz, r.fk(q))
+
+
+def test_actuation_says_what_the_actuators_take():
+    assert robot("nao_arm").actuation == "position"
+    assert robot("panda", actuators="torque").actuation == "torque"
+    assert robot("panda").actuation == "position"
