@@ -11,7 +11,7 @@ from __future__ import annotations
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 import tyro
 
@@ -20,7 +20,7 @@ import tyro
 class ShowArgs:
     """Summarize a dataset store and draw a contact sheet of its images (PNG) with the stored ee_pixel on each."""
 
-    path: tyro.conf.Positional[Path]   # the .zarr store
+    path: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="STORE")]   # the .zarr store
     out: Path | None = None            # the PNG; None: <store name>_contact_sheet.png beside the store
     n: int = 16                        # images on the sheet, evenly spread over the store
 
@@ -30,8 +30,8 @@ class ExportDatasetArgs:
     """Write a dataset store as HDF5 (one file) or in LeRobot's v3.0 dataset layout (a directory)."""
 
     to: Literal["hdf5", "lerobot"]     # the format
-    store: tyro.conf.Positional[Path]  # the .zarr store (it must validate)
-    out: tyro.conf.Positional[Path]    # .h5 file (hdf5) or a directory (lerobot)
+    store: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="STORE")]   # the .zarr store (it must validate)
+    out: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="OUT")]   # .h5 file (hdf5), a directory (lerobot)
     overwrite: bool = False            # replace OUT if it exists
 
 
@@ -40,8 +40,9 @@ class ExportOnnxArgs:
     """Export a fitted model to ONNX: joint angles in rad in, its prediction out (scaling inside), checked with
     onnxruntime against the model before it is reported."""
 
-    model: tyro.conf.Positional[str]   # models:/<name>@<alias>, a model directory logged by `bodyschema train`, or trusted:<dir>
-    out: tyro.conf.Positional[Path]    # the .onnx file
+    model: Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="MODEL_SPEC")]
+    """models:/<name>@<alias>, a `bodyschema train` run or model directory, or trusted:<dir>"""
+    out: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="OUT")]   # the .onnx file
     opset: int = 18                    # ONNX opset (recorded in the file's metadata)
     tracking_uri: str | None = None    # None: $MLFLOW_TRACKING_URI, else sqlite:///<cwd>/mlflow.db
     overwrite: bool = False            # replace OUT if it exists
@@ -52,7 +53,10 @@ def run_show(args: ShowArgs) -> int:
 
     shown = show_store(args.path, args.out, args.n)
     print(shown.summary)
-    print(f"contact sheet: {shown.sheet}" if shown.sheet else shown.note, file=sys.stdout if shown.sheet else sys.stderr)
+    if shown.sheet is not None:
+        print(f"contact sheet: {shown.sheet}")
+    else:
+        print(shown.note, file=sys.stderr)
     return 0
 
 
