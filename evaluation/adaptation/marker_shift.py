@@ -64,7 +64,7 @@ class MarkerShiftConfig(TrialsConfig):
     goal: str = "ee_pixel"             # "ee_pixel": marker pixel at the goal pose | "joints": the pose | "image"
     action: ActionConfig = ActionConfig(drive=("joints", "ee_pixel"))   # vision drives action too: driven by
                                        # joints alone the conflict stays in the belief and the hand barely moves
-    perception: PerceptionConfig = PerceptionConfig(step_control="none")   # the per-tick perception of the velocity controller
+    perception: PerceptionConfig = PerceptionConfig(step_control="none")   # the velocity controller's per tick
 
     def __post_init__(self):
         super().__post_init__()

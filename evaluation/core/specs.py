@@ -70,18 +70,20 @@ def resolve_model(spec: str, tracking_uri: str | None = None):
 
 
 def _registered(spec: str, tracking_uri: str | None):
-    """A registry spec: the alias resolved to a version once, that version loaded (digest-checked) and recorded."""
+    """A registry spec: an alias resolved to its version once, that version loaded (digest-checked) and recorded."""
+    from mlflow.exceptions import MlflowException
+
     from bodyschema.training.digest import DIGEST_TAG
     from bodyschema.training.registry import load, use_tracking
     match = _REGISTRY.match(spec)
-    if match is None or not match["alias"]:
-        return _attach(load(spec, tracking=tracking_uri), {"spec": spec, "name": match["name"] if match else spec,
-                                                           "version": match["version"] if match else ""})
-    from mlflow.exceptions import MlflowException
+    if match is None:
+        return load(spec, tracking=tracking_uri)                  # its house error: not a registry URI
+    client = use_tracking(tracking_uri)
     try:
-        version = use_tracking(tracking_uri).get_model_version_by_alias(match["name"], match["alias"])
+        version = (client.get_model_version_by_alias(match["name"], match["alias"]) if match["alias"]
+                   else client.get_model_version(match["name"], match["version"]))
     except MlflowException:
-        return load(spec, tracking=tracking_uri)              # its house error: not a registered version
+        return load(spec, tracking=tracking_uri)                  # its house error: not a registered version
     model = load(f"models:/{match['name']}/{version.version}", tracking=tracking_uri)
     return _attach(model, {"spec": spec, "name": match["name"], "version": str(version.version),
                            "run_id": version.run_id or "", "sha256": version.tags.get(DIGEST_TAG, "")})

@@ -66,7 +66,7 @@ class ReachingRunConfig(TrialsConfig):
     duration: float | None = None          # s per episode; None: 3 (nao_arm), 10 (panda)
     control_hz: float | None = None        # must divide into whole MuJoCo steps; None: 50 (nao_arm), 500 (panda)
     action: ActionConfig = ActionConfig()  # position-servo robots: the velocity controller
-    perception: PerceptionConfig = PerceptionConfig(step_control="none")   # servo robots: per-tick perception (prior set to attractor)
+    perception: PerceptionConfig = PerceptionConfig(step_control="none")   # servo robots: per tick (attractor prior)
     aic: AICConfig = AICConfig()           # torque robots: the AIC's gains and precisions
     success_mm: float = 10.0               # success: final simulator ee error below this
     pixel_tolerance: float = 1.0           # px; goal-space success of an ee_pixel goal

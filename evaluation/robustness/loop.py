@@ -95,9 +95,9 @@ def _write(config: LoopRobustnessConfig, models, noise, broken) -> dict[str, Pat
 
 def _markdown(rows, config: LoopRobustnessConfig) -> str:
     text = (f"Closed-loop AIF reaching on {config.robot} ({config.trials} targets, {config.seconds:g} s at "
-            f"{config.rate:g} Hz, seed {config.seed}) with Gaussian noise σ on {config.modality} (its unit) and with each sensor broken: "
-            "precision 0 (the controller ignores it) or its stream frozen at the first reading (it trusts a stale "
-            f"value). `success`: final ee error < {config.success_mm:g} mm; `goal_success`: within the goal tolerance.")
+            f"{config.rate:g} Hz, seed {config.seed}) with Gaussian noise σ on {config.modality} (its unit) and with "
+            "each sensor broken: precision 0 (the controller ignores it) or its stream frozen at the first reading "
+            f"(it trusts a stale value). `success`: final ee error < {config.success_mm:g} mm; `goal_success`: within the goal tolerance.")
     return markdown_table(rows, COLUMNS, "case") + "\n" + text + "\n"
 
 

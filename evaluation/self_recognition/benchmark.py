@@ -56,7 +56,7 @@ class SelfRecognitionConfig(TrialsConfig):
     visual_noise: tuple[tuple[str, float], ...] = (  # σ per visual modality: px, m, intensity in [0, 1]
         ("ee_pixel", 1.0), ("ee_xyz", 0.002), ("image", 0.02))
     score: str = "visual"              # "visual": F of the visual modalities; "total": F of all modalities
-    perception: PerceptionConfig = PerceptionConfig(max_steps=10, tol=1e-4, step_control="none")   # per frame: ≤ max_steps updates
+    perception: PerceptionConfig = PerceptionConfig(max_steps=10, tol=1e-4, step_control="none")   # ≤ 10 per frame
     plots: bool = True                 # write the PNG plots beside the tables
 
     def __post_init__(self):

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import torch
 
-from bodyschema.evaluation.self_recognition.benchmark import (NoisySensor, SelfRecognitionConfig, prepare, run_self_recognition,
-                                                    score_episodes)
+from bodyschema.evaluation.self_recognition.benchmark import (NoisySensor, SelfRecognitionConfig, prepare,
+                                                             run_self_recognition, score_episodes)
 from bodyschema.evaluation.self_recognition.report import auc, average_ranks, best_threshold, roc_curve
 from bodyschema.evaluation.self_recognition.streams import episode_kinds, make_episodes, mirror
 from bodyschema.evaluation.core.sensing import sense
