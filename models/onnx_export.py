@@ -76,7 +76,8 @@ def check_exportable(model) -> None:
     kind = getattr(model, "kind", type(model).__name__)
     if kind not in EXPORTABLE:
         why = {"analytic": "MuJoCo's forward kinematics has no tensor graph: export the robot's MJCF instead",
-               "sklearn-gpr": "scikit-learn computes its mean in numpy: train kind 'gpr' for an exportable GP"}
+               "sklearn-gpr": "scikit-learn computes its mean in numpy: train kind 'gpr' for an exportable GP",
+               "MultimodalModel": "Export each member, one file per modality: model.members[modality]"}
         raise ValueError(must_be("model kind", f"one of {list(EXPORTABLE)} to export ONNX", kind,
                                  why.get(kind, "")))
     if not model.is_fitted:
