@@ -20,8 +20,8 @@ def write_csv(rows: Sequence[Mapping], path: Path) -> Path:
 
 
 def markdown_table(table: Sequence[Mapping], columns: Sequence[str], key: str, digits: int = 4) -> str:
-    """A Markdown table, one row per value of `key`; a number shows as `<value> ± <std>` when the row holds
-    `<column>_std`, a missing cell as "–"."""
+    """A Markdown table, one row per value of `key`; a float with `digits` significant digits, as `<value> ± <std>`
+    when the row holds `<column>_std`; a count or a name as it is; a missing cell as "–"."""
     lines = [f"| {key} | " + " | ".join(columns) + " |", "|" + "---|" * (len(columns) + 1)]
     for row in table:
         cells = []
@@ -30,7 +30,8 @@ def markdown_table(table: Sequence[Mapping], columns: Sequence[str], key: str, d
                 cells.append("–")
                 continue
             std = row.get(f"{c}_std")
-            cells.append(f"{row[c]:.{digits}g} ± {std:.2g}" if std is not None else f"{row[c]:.{digits}g}")
+            value = f"{row[c]:.{digits}g}" if isinstance(row[c], float) else str(row[c])   # counts, names: as is
+            cells.append(f"{value} ± {std:.2g}" if std is not None else value)
         lines.append(f"| {row[key]} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bodyschema.evaluation.core.tables import write_csv
+from bodyschema.evaluation.core.tables import markdown_table, write_csv
 from bodyschema.evaluation.self_recognition.streams import SELF
 
 TABLE_COLUMNS = ("others", "auc", "threshold", "tpr", "fpr", "fpr_at_pooled", "t_auc99_s", "median_self",
@@ -98,11 +98,7 @@ def time_to_auc(curve: np.ndarray, period: float, level: float = 0.99) -> float:
 
 def markdown(rows: Sequence[Mapping], notes: Sequence[str]) -> str:
     """The summary table (self vs each kind of other) and a few lines of what was measured."""
-    lines = ["| comparison | " + " | ".join(TABLE_COLUMNS) + " |", "|" + "---|" * (len(TABLE_COLUMNS) + 1)]
-    for row in rows:
-        cells = [f"{row[c]:.4g}" if isinstance(row[c], float) else str(row[c]) for c in TABLE_COLUMNS]
-        lines.append(f"| {row['comparison']} | " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n\n" + "\n".join(notes) + "\n"
+    return markdown_table(rows, TABLE_COLUMNS, "comparison") + "\n" + "\n".join(notes) + "\n"
 
 
 def summary_notes(config, robot: str, visual: Sequence[str], period: float, rows: Sequence[Mapping], scores,
