@@ -70,3 +70,18 @@ def test_export_onnx_of_a_trusted_directory_reports_opset_and_error(tmp_path, ca
 def test_export_onnx_of_a_kind_without_a_graph_is_a_house_error(tmp_path, capsys):
     assert main(["export", "onnx", "analytic:planar2:ee_xyz", str(tmp_path / "a.onnx")]) == 2
     assert "model kind must be one of" in capsys.readouterr().err
+
+
+def test_a_train_run_directory_stands_for_its_model(tmp_path):
+    from bodyschema.export_commands import model_dir_of_run
+
+    single, multi = tmp_path / "mdn-ee_xyz-1a2b", tmp_path / "multimodal-ee_xyz+image-3c4d"
+    for folder in (single / "model", multi / "model-ee_xyz", multi / "model-image"):
+        folder.mkdir(parents=True)
+        (folder / "meta.json").write_text("{}")
+    assert model_dir_of_run(str(single)) == str(single / "model")
+    assert model_dir_of_run(f"trusted:{single}") == f"trusted:{single / 'model'}"
+    assert model_dir_of_run(str(single / "model")) == str(single / "model")          # a model directory as it is
+    assert model_dir_of_run("models:/x@champion") == "models:/x@champion"
+    with pytest.raises(ValueError, match=r"MODEL must be one model.*Name one: .*model-ee_xyz, .*model-image"):
+        model_dir_of_run(str(multi))

@@ -35,10 +35,13 @@ def _mdn(mode):
     return MDNModel(BODY, "ee_pixel", (3,), mode=mode, hidden=(16,), epochs=3).fit(q, xyz, progress=False)
 
 
-def _pixel():
+def _pixel(rgb: bool = False):
     from bodyschema.models.pixel import PixelDecoder
     q, _, image = _data()
-    return PixelDecoder(BODY, "image", IMAGE, channels=(8, 4), fc_hidden=16, epochs=2).fit(q, image, progress=False)
+    if rgb:                                                           # (n, H, W, 3): the channel axis last
+        image = torch.stack([image, 1 - image, image.roll(3, -1)], -1)
+    shape = (*IMAGE, 3) if rgb else IMAGE
+    return PixelDecoder(BODY, "image", shape, channels=(8, 4), fc_hidden=16, epochs=2).fit(q, image, progress=False)
 
 
 def _member(decoder):
@@ -63,6 +66,7 @@ def _gpr():
 
 
 KINDS = {"mdn-mean": lambda: _mdn("mean"), "mdn-max": lambda: _mdn("max"), "pixel": _pixel,
+         "pixel-rgb": lambda: _pixel(rgb=True),
          "multimodal-mlp": lambda: _member("mlp"), "multimodal-pixel": lambda: _member("pixel"),
          "encoder": _encoder, "gpr": _gpr}
 
