@@ -127,8 +127,18 @@ def metadata(model, opset: int) -> dict[str, str]:
             "bodyschema.input": (f"image (B, {', '.join(map(str, model.image_shape))}) {dtype} in [0, 1]" if encoder
                                  else f"q (B, {model.latent_dim}) {dtype} rad, joints {list(model.body.joint_names)}"),
             "bodyschema.output": (f"q (B, {model.latent_dim}) rad" if encoder
-                                  else f"x (B, {', '.join(map(str, model.output_shape))}) {model.modality}"),
+                                  else f"x (B, {', '.join(map(str, model.output_shape))}) {model.modality} in "
+                                       f"{unit(model.modality)}"),
             "bodyschema.source": json.dumps(getattr(model, "provenance", None) or {})}   # registry name, version, sha
+
+
+def unit(modality: str) -> str:
+    """The unit of a modality's predictions: the dataset schema's, except images, which models predict in [0, 1]."""
+    from bodyschema.datagen.store import features
+
+    if modality == "image":
+        return "intensity [0, 1]"
+    return features(1, None, touch=True, babble=True).get(modality, {}).get("unit") or "its dataset units"
 
 
 def read_metadata(path: str | Path) -> dict[str, str]:

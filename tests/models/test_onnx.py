@@ -71,6 +71,10 @@ KINDS = {"mdn-mean": lambda: _mdn("mean"), "mdn-max": lambda: _mdn("max"), "pixe
          "encoder": _encoder, "gpr": _gpr}
 
 
+UNITS = {"mdn-mean": "in px", "mdn-max": "in px", "pixel": "in intensity [0, 1]", "pixel-rgb": "in intensity [0, 1]",
+         "multimodal-mlp": "in m", "multimodal-pixel": "in intensity [0, 1]", "encoder": "rad", "gpr": "in px"}
+
+
 @pytest.mark.parametrize("kind", list(KINDS))
 def test_export_runs_in_onnxruntime_and_equals_the_model(kind, tmp_path):
     model = KINDS[kind]()
@@ -80,6 +84,7 @@ def test_export_runs_in_onnxruntime_and_equals_the_model(kind, tmp_path):
     meta = read_metadata(path)
     assert meta["opset"] == str(OPSET) == meta["bodyschema.opset"]
     assert meta["bodyschema.kind"] == model.kind and meta["bodyschema.modality"] == model.modality
+    assert meta["bodyschema.output"].endswith(UNITS[kind]), meta["bodyschema.output"]
     assert BodySpec.from_dict(__import__("json").loads(meta["bodyschema.body"])) == BODY
 
 
