@@ -1,7 +1,8 @@
 """`bodyschema <stage> ...`: one CLI over the pipeline's frozen dataclass configs (tyro).
 
     bodyschema datagen --robot nao_arm --n 2000 --sampler babble --workers 2 --out data/nao.zarr
-    bodyschema validate data/nao.zarr
+    bodyschema validate data/nao.zarr | bodyschema show data/nao.zarr   (summary + contact sheet PNG)
+    bodyschema export dataset --to lerobot|hdf5 data/nao.zarr OUT | bodyschema export onnx MODEL_SPEC OUT.onnx
     bodyschema train gpr --data data/nao.zarr --modality ee_xyz --noise-floor 1e-6   (train KIND --help: its flags)
     bodyschema registry list | bodyschema registry promote NAME VERSION
     bodyschema evaluate levels --model models:/bodyschema-nao_arm-ee_xyz-gpr@champion --levels 1 2 3
