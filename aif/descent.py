@@ -86,6 +86,18 @@ def _clamp(mu, low, high):
     return torch.minimum(torch.maximum(mu, low), high)
 
 
+def _start(objective: Objective, mu0: torch.Tensor, low, high, need_hess: bool, record: bool):
+    """What both descents begin with: the clamped float64 belief, F (and derivatives) there, zeroed step and
+    convergence counters, the recorder, and the active trials (those whose F is finite at the start)."""
+    b = mu0.shape[0]
+    mu = _clamp(mu0.to(torch.float64), low, high)
+    rows = torch.arange(b)
+    terms = objective(rows, mu, True, need_hess)
+    diverged = ~torch.isfinite(terms.free)
+    steps, converged = torch.zeros(b, dtype=torch.long), torch.zeros(b, dtype=torch.bool)
+    return mu, terms, steps, converged, diverged, _Recorder(b, record), rows[~diverged]
+
+
 def _bound(step: torch.Tensor, max_step: float | None) -> torch.Tensor:
     """Scale each trial's step so that no joint moves more than max_step rad. # (b, Dz)"""
     if max_step is None:
@@ -98,18 +110,11 @@ def levenberg_marquardt(objective: Objective, mu0: torch.Tensor, low, high, *, m
                         damping: float, max_step: float | None, record: bool) -> DescentResult:
     """Batched Levenberg–Marquardt on F from mu0 (B, Dz) rad; λ₀ = `damping` (relative to diag H)."""
     b, dz = mu0.shape
-    mu = _clamp(mu0.to(torch.float64), low, high)
-    rows = torch.arange(b)
-    t = objective(rows, mu, True, True)
+    mu, t, steps, converged, diverged, rec, active = _start(objective, mu0, low, high, True, record)
     free, grad, hess, errors = t.free.clone(), t.grad.clone(), t.hess.clone(), dict(t.errors)
     lam = torch.full((b,), float(damping), dtype=torch.float64)
     nu = torch.full((b,), 2.0, dtype=torch.float64)
-    steps = torch.zeros(b, dtype=torch.long)
-    converged = torch.zeros(b, dtype=torch.bool)
-    diverged = ~torch.isfinite(free)
     evaluations = b
-    rec = _Recorder(b, record)
-    active = rows[~diverged]
     eye = torch.eye(dz, dtype=torch.float64)
     for _ in range(max_steps):
         if active.numel() == 0:
@@ -151,9 +156,7 @@ def adam(objective: Objective, mu0: torch.Tensor, low, high, *, max_steps: int, 
          patience: int, max_step: float | None, record: bool) -> DescentResult:
     """Batched Adam on F from mu0 (B, Dz) rad: step lr rad per joint, halved on a plateau of `patience` steps."""
     b, dz = mu0.shape
-    mu = _clamp(mu0.to(torch.float64), low, high)
-    rows = torch.arange(b)
-    t = objective(rows, mu, True, False)
+    mu, t, steps, converged, diverged, rec, active = _start(objective, mu0, low, high, False, record)
     free, grad, errors = t.free.clone(), t.grad.clone(), dict(t.errors)
     best_mu, best_free, best_grad = mu.clone(), free.clone(), grad.clone()
     best_errors = {k: v.clone() for k, v in errors.items()}
@@ -161,12 +164,7 @@ def adam(objective: Objective, mu0: torch.Tensor, low, high, *, max_steps: int, 
     age = torch.zeros(b, dtype=torch.float64)            # steps since the moments were reset
     rate = torch.full((b,), float(lr), dtype=torch.float64)
     since = torch.zeros(b, dtype=torch.long)             # steps without a new best F
-    steps = torch.zeros(b, dtype=torch.long)
-    converged = torch.zeros(b, dtype=torch.bool)
-    diverged = ~torch.isfinite(free)
     evaluations = b
-    rec = _Recorder(b, record)
-    active = rows[~diverged]
     b1, b2 = ADAM_BETAS
     for _ in range(max_steps):
         if active.numel() == 0:
