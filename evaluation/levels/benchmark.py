@@ -74,7 +74,7 @@ class LevelsConfig(PerceptionRunConfig):
     multistart: int = 8                # starts per trial for the level-3 remedy (0: off)
     screen_steps: int = 5              # multi-start: updates before pruning (a descent trial converges in ~15)
     keep: int = 2                      # multi-start: starts per trial refined to convergence
-    encoder: str | None = None         # an image encoder spec (kind "encoder"): level 3 also starts from its guess
+    encoder: str | None = None         # an image encoder spec (kind "encoder"): extra "+enc" rows start from its guess
 
     def __post_init__(self):
         super().__post_init__()
@@ -124,17 +124,22 @@ def evaluate_level(perception: Perception, robot, targets, level: int, rng: np.r
                    encoder=None):
     """Infer every target from its level-`level` belief; returns (metrics row, per-trial arrays, result).
 
-    encoder: an image encoder whose estimate from the target images is the initial belief (the level's own start
-    then becomes the second multi-start seed)."""
+    encoder: an image encoder; its estimate from the target images is a start. Level 3 (the belief knows nothing
+    of the pose): the start, the level's own one becoming the second multi-start seed. Levels 1–2 (the belief is
+    near the pose): a second start beside the level's own; both run to convergence and the lower F wins."""
     models = perception.models
     obs = targets.tensors([m.modality for m in models if m.modality not in _broken(perception)])
     mu0 = initial_beliefs(level, targets.q, robot.sampling_ranges, rng)   # (N, Dq) rad
     start = time.perf_counter()
+    label = str(level) + ("+enc" if encoder is not None else "") + ("+ms" if multistart else "")
     seeds = [mu0]
     if encoder is not None:
         low, high = robot.sampling_ranges.T
-        seeds.insert(0, np.clip(encoder.encode(targets.observations["image"]).double().numpy(), low, high))
+        guess = np.clip(encoder.encode(targets.observations["image"]).double().numpy(), low, high)
+        seeds = [guess, mu0] if level == 3 else [mu0, guess]
         mu0 = seeds[0]
+        if level != 3 and not multistart:
+            multistart, screen_steps, keep = 2, 1, 2                     # both starts refined, the lower F wins
     if multistart:
         extra = uniform(rng, robot.sampling_ranges, len(mu0) * max(multistart - len(seeds), 0))
         starts = np.concatenate([s[:, None] for s in seeds] + [extra.reshape(len(mu0), -1, mu0.shape[1])],
@@ -150,7 +155,7 @@ def evaluate_level(perception: Perception, robot, targets, level: int, rng: np.r
     mean_err = err.mean(axis=1)
     lim = robot.joint_limits
     ee_mm = 1e3 * np.linalg.norm(robot.fk(np.clip(mu, lim[:, 0], lim[:, 1])) - robot.fk(targets.q), axis=1)
-    row = {"level": str(level) + ("+enc" if encoder is not None else "") + ("+ms" if multistart else ""),
+    row = {"level": label,
            "trials": len(mu),
            "joint_err_deg": float(mean_err.mean()), "joint_err_median_deg": float(np.median(mean_err)),
            **{f"joint_err_deg/{name}": float(e) for name, e in zip(robot.joint_names, err.mean(axis=0))},
@@ -193,7 +198,7 @@ def measure_levels(config: LevelsConfig, models: Sequence) -> tuple[LevelsSummar
     has_image = any(m.modality == "image" for m in models) or encoder is not None
     rows, per_trial, curves = [], {}, {}
     jobs = [(run, level, ms, enc) for run in range(config.runs) for level in config.levels
-            for enc in ((False, True) if level == 3 and encoder else (False,))
+            for enc in ((False, True) if encoder else (False,))
             for ms in ((0, config.multistart) if level == 3 and config.multistart else (0,))]
     targets = None
     for run, level, ms, enc in tqdm(jobs, desc="levels", disable=not config.progress or len(jobs) < 2):

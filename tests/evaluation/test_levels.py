@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -161,6 +162,20 @@ def test_level3_runs_from_the_encoder_alone_and_as_a_multistart_seed(planar2_xyz
                           mlflow=False, plots=False, out=tmp_path / "out")
     rows = run_levels(config, models=[planar2_xyz]).table
     assert [r["level"] for r in rows] == ["3", "3+ms", "3+enc", "3+enc+ms"]
+    config = replace(config, levels=(1,), trials=4, multistart=0)
+    assert [r["level"] for r in run_levels(config, models=[planar2_xyz]).table] == ["1", "1+enc"]
+
+
+def test_levels_1_2_with_the_encoder_keep_the_lower_free_energy_of_both_starts(planar2_xyz, planar2, tmp_path):
+    from bodyschema.models import load_model
+    encoder = load_model(_encoder("planar2", planar2.image_size, tmp_path).removeprefix("trusted:"))
+    perception = Perception([planar2_xyz], PerceptionConfig(step_control="descent"))
+    targets = make_targets(planar2, 16, eval_rng(0, 0, "targets"), True, {}, eval_rng(0, 0, "noise"))
+    for level in (1, 2):
+        own = evaluate_level(perception, planar2, targets, level, eval_rng(0, 0, "beliefs", level))
+        both = evaluate_level(perception, planar2, targets, level, eval_rng(0, 0, "beliefs", level), encoder=encoder)
+        assert both[0]["level"] == f"{level}+enc"
+        assert (both[2].F <= own[2].F + 1e-9 * own[2].F.abs()).all()
 
 
 def test_encoder_of_another_robot_is_refused_before_any_work(planar2_xyz, tmp_path):
