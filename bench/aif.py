@@ -196,8 +196,11 @@ def main():
                         help="fit a pixel decoder on N planar2 renders (32×32) and run the levels with it")
     parser.add_argument("--pixel-epochs", type=int, default=40)
     parser.add_argument("--skip", type=int, nargs="*", default=[], help="sections to skip (1 2 3)")
+    parser.add_argument("--trials", type=int, default=None,
+                        help="trials per level (default: 500, --quick 100); the plain protocol keeps its 5000 steps")
     args = parser.parse_args()
     n, runs = (100, 1) if args.quick else (500, 5)
+    n = args.trials or n
     global PLAIN
     if args.quick:
         PLAIN = replace(PLAIN, max_steps=1000)
