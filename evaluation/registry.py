@@ -53,6 +53,7 @@ BENCHMARKS = (
               lambda out: JupiterConfig(trials=1, duration=0.2, switch_time=0.1, steady_window=0.05, out=out,
                                         **QUIET)),
     Benchmark(("self-recognition",), SelfRecognitionConfig, run_self_recognition,
-              "Is this me? ROC/AUC of the free energy: own body vs others.",
-              lambda out: SelfRecognitionConfig(trials=6, steps=3, plots=False, out=out, **QUIET)),
+              "Is this me? AUC of the free energy vs an imitator's delay and viewing time: own body vs others.",
+              lambda out: SelfRecognitionConfig(trials=3, steps=3, delays=(0.0, 0.1), plots=False, out=out,
+                                                **QUIET)),
 )

@@ -1,14 +1,14 @@
-"""Self-recognition, "is this me?": does the visual stream come from my own body or from another source?
+"""Self-recognition, "is this me?": does the visual stream come from my own body or from another agent?
 
 Every episode the robot babbles, feels its joints (proprioception = q(t) + noise) and sees a visual stream
-(ee_pixel, ee_xyz or images) of its own body or of another source: a second arm, a time-delayed copy of itself or
-a mirrored view (streams.py). All episodes run through time as one batch: at every frame
-`aif.Perception` over [joints model + visual models] takes a few updates warm-started from the previous belief,
-and the Laplace free energy at the new belief is recorded. The score of an episode is the time-averaged F of the
-visual modalities (½ εᵀΠε summed over them) or of all modalities (`score="total"`); "is this me?" = score ≤
-threshold. ROC, AUC and the best threshold: report.py. An episode whose observations turn
-non-finite or whose perception diverges is marked failed with the reason and leaves the batch; the benchmark
-goes on.
+(ee_pixel, ee_xyz or images) of its own body or of another source: an imitator copying its babbling with a delay,
+a gain and motor noise (one condition per delay), a second arm, or an unexplained mirror view (streams.py). All
+episodes run through time as one batch: at every frame `aif.Perception` over [joints model + visual models] takes
+a few updates warm-started from the previous belief, and the Laplace free energy at the new belief is recorded.
+The score of an episode is the time-averaged F of the visual modalities (½ εᵀΠε summed over them) or of all
+modalities (`score="total"`); "is this me?" = score ≤ threshold. ROC, AUC vs delay and vs viewing time, time to a
+95 % decision: report.py. An episode whose observations turn non-finite or whose perception diverges is marked
+failed with the reason and leaves the batch; the benchmark goes on.
 """
 
 from __future__ import annotations
@@ -31,9 +31,9 @@ from bodyschema.evaluation.core.publish import publish
 from bodyschema.evaluation.core.runs import new_run
 from bodyschema.evaluation.core.specs import load_robot, models_field, resolve_models
 from bodyschema.evaluation.self_recognition.report import roc_table, summary_notes, write_report
-from bodyschema.evaluation.self_recognition.streams import Episodes, make_episodes
+from bodyschema.evaluation.self_recognition.streams import IMITATOR, Episodes, frames_of, make_episodes
 
-SOURCES = ("second_arm", "delayed", "mirrored")
+SOURCES = (IMITATOR, "second_arm", "mirrored")
 VISUAL = ("ee_pixel", "ee_xyz", "image")
 SCORES = ("visual", "total")
 
@@ -46,15 +46,17 @@ class SelfRecognitionConfig(TrialsConfig):
     experiment: str = "bodyschema-self-recognition"  # the MLflow experiment
     robot: str = "nao_arm"                # the babbling body; every model must be of it
     models: models_field("analytic:<robot>:ee_pixel") = ()
-    trials: int = 200                  # episodes: half self, half others split evenly over `sources`
-    sources: tuple[str, ...] = SOURCES    # other sources of the visual stream: second_arm, delayed, mirrored
-    steps: int = 40                    # frames per episode
+    trials: int = 100                  # episodes per condition: self, each imitator delay, each other source
+    sources: tuple[str, ...] = (IMITATOR, "second_arm")   # other sources: imitator, second_arm, mirrored
+    steps: int = 20                    # frames per episode: a 1 s viewing window
     period: float = 0.05               # s between frames (control period; realised as whole physics steps)
-    delay: float = 0.2                 # s, lag of the "delayed" source: about one babbling movement
+    delays: tuple[float, ...] = (0.0, 0.05, 0.1, 0.2, 0.3, 0.5)   # s, the imitator's lags (0: it moves with me)
+    imitation_gain: float = 0.97       # the imitator's amplitude about the centre of the joint box (a close copy)
+    imitation_noise: float = math.radians(0.5)   # rad, σ of the imitator's white motor noise per frame
     hold_s: tuple[float, float] = (0.2, 0.8)   # s, how long the babbler holds each random target
     proprio_noise: float = math.radians(1.0)   # rad, σ of the joint readings (1°)
     visual_noise: tuple[tuple[str, float], ...] = (  # σ per visual modality: px, m, intensity in [0, 1]
-        ("ee_pixel", 1.0), ("ee_xyz", 0.002), ("image", 0.02))
+        ("ee_pixel", 2.0), ("ee_xyz", 0.004), ("image", 0.02))   # 2 px: at 1 px an exact model's AUC is 1
     score: str = "visual"              # "visual": F of the visual modalities; "total": F of all modalities
     perception: PerceptionConfig = PerceptionConfig(max_steps=10, tol=1e-4, step_control="none")   # ≤ 10 per frame
     plots: bool = True                 # write the PNG plots beside the tables
@@ -63,16 +65,14 @@ class SelfRecognitionConfig(TrialsConfig):
         super().__post_init__()
         if not self.sources or len(set(self.sources)) != len(self.sources) or set(self.sources) - set(SOURCES):
             raise ValueError(must_be("sources", f"distinct names among {SOURCES}", self.sources))
-        if self.trials < 2 * len(self.sources):
-            raise ValueError(must_be("trials", f"at least {2 * len(self.sources)} (half self, ≥ 1 per source)",
-                                     self.trials, "Use ≥ 200 for a stable ROC."))
+        if self.trials < 2:
+            raise ValueError(must_be("trials", "at least 2 episodes per condition", self.trials,
+                                     "Use ≥ 100 for a stable ROC."))
         if self.steps < 1:
             raise ValueError(must_be("steps", "at least 1", self.steps))
-        for name in ("period", "delay"):
-            if not getattr(self, name) > 0:
-                raise ValueError(must_be(name, "a positive duration in s", getattr(self, name)))
-        if "delayed" in self.sources and round(self.delay / self.period) < 1:
-            raise ValueError(must_be("delay", f"at least half a frame ({self.period / 2:g} s)", self.delay))
+        if not self.period > 0:
+            raise ValueError(must_be("period", "a positive duration in s", self.period))
+        self._check_imitator()
         if not 0 < self.hold_s[0] <= self.hold_s[1]:
             raise ValueError(must_be("hold_s", "(low, high) s with 0 < low ≤ high", self.hold_s))
         noise = dict(self.visual_noise)
@@ -82,6 +82,21 @@ class SelfRecognitionConfig(TrialsConfig):
                                      (self.visual_noise, self.proprio_noise)))
         if self.score not in SCORES:
             raise ValueError(must_be("score", f"one of {SCORES}", self.score))
+
+    def _check_imitator(self):
+        """Delays inside the episode (the imitator copies what the robot did in view), distinct in whole frames."""
+        if IMITATOR not in self.sources:
+            return
+        episode = self.steps * self.period
+        if not self.delays or not all(np.isfinite(d) and 0 <= d < episode for d in self.delays):
+            raise ValueError(must_be("delays", f"s in [0, {episode:g}) (the episode: steps × period)", self.delays,
+                                     "Shorten the delays or lengthen the episode (--steps)."))
+        if len(set(frames_of(self.delays, self.period))) != len(self.delays):
+            raise ValueError(must_be("delays", f"distinct in whole frames of {self.period:g} s", self.delays))
+        if not (np.isfinite(self.imitation_gain) and self.imitation_gain > 0 and np.isfinite(self.imitation_noise)
+                and self.imitation_noise >= 0):
+            raise ValueError(must_be("imitation_gain and imitation_noise", "a gain > 0 and a σ ≥ 0 rad",
+                                     (self.imitation_gain, self.imitation_noise)))
 
     @property
     def default_models(self) -> tuple[str, ...]:
@@ -224,15 +239,18 @@ def run_self_recognition(config: SelfRecognitionConfig = SelfRecognitionConfig()
     scores = score_episodes(perception, episodes, visual, config.progress)
     wall = time.perf_counter() - start
     per_frame = scores.per_frame(config.score)                           # (N, T)
-    rows, curves, over_time = roc_table(episodes.kind, per_frame, scores.failed, config.sources, episodes.period)
-    per_episode = [{"episode": i, "kind": k, "failed": bool(f), "reason": r, "score_visual": v, "score_total": s}
-                   for i, (k, f, r, v, s) in enumerate(zip(episodes.kind, scores.failed, scores.reason,
-                                                           scores.score("visual"), scores.score("total")))]
+    rows, curves, over_time = roc_table(episodes.kind, episodes.condition, episodes.delay, per_frame,
+                                        scores.failed, episodes.period)
+    per_episode = [{"episode": i, "kind": k, "condition": c, "failed": bool(f), "reason": r, "score_visual": v,
+                    "score_total": s}
+                   for i, (k, c, f, r, v, s) in enumerate(zip(episodes.kind, episodes.condition, scores.failed,
+                                                              scores.reason, scores.score("visual"),
+                                                              scores.score("total")))]
     lines = summary_notes(config, robot.name, visual, episodes.period, rows, scores, wall)
     out = new_run(config)
-    paths = write_report(out, per_episode, rows, curves, over_time, lines, episodes.kind,
+    paths = write_report(out, per_episode, rows, curves, over_time, lines, episodes.condition,
                          scores.failed, per_frame, episodes.period, config.plots)
-    keep = ("comparison", "auc", "threshold", "tpr", "fpr", "fpr_at_pooled", "t_auc99_s", "failed")
+    keep = ("comparison", "auc", "threshold", "tpr", "fpr", "t95_s", "t_auc95_s", "failed")
     metrics = table_metrics([{k: r[k] for k in keep} for r in rows], "comparison")
     publish(config, out, "self_recognition", {**metrics, "wall_s": wall}, paths, models)
     return paths

@@ -1,5 +1,6 @@
-"""Self-recognition benchmark: rank AUC and ROC, the streams of each source, failures per episode, determinism,
-and a short benchmark end to end where the robot tells its own body from a second arm."""
+"""Self-recognition benchmark: AUC and ROC (scikit-learn) on a hand-checked case, the streams of each source, the
+AUC falling as the imitator's delay shrinks to 0, failures per episode, bad input, determinism, and a short
+benchmark end to end where the robot tells its own body from a second arm and from a late imitator."""
 
 from __future__ import annotations
 
@@ -12,12 +13,14 @@ import torch
 
 from bodyschema.evaluation.self_recognition.benchmark import (NoisySensor, SelfRecognitionConfig, prepare,
                                                              run_self_recognition, score_episodes)
-from bodyschema.evaluation.self_recognition.report import auc, average_ranks, best_threshold, roc_curve
-from bodyschema.evaluation.self_recognition.streams import episode_kinds, make_episodes, mirror
+from bodyschema.evaluation.self_recognition.report import (auc, balanced_accuracy, best_threshold, roc_curve,
+                                                          roc_table, time_to)
+from bodyschema.evaluation.self_recognition.streams import episode_conditions, imitate, make_episodes, mirror
 from bodyschema.evaluation.core.sensing import sense
 from bodyschema.models.analytic import AnalyticModel
 
-SHORT = SelfRecognitionConfig(trials=24, steps=4, mlflow=False, progress=False, plots=False)
+SHORT = SelfRecognitionConfig(trials=8, steps=4, delays=(0.0, 0.1), sources=("imitator", "second_arm", "mirrored"),
+                              mlflow=False, progress=False, plots=False)
 
 
 @pytest.fixture(scope="module")
@@ -51,13 +54,24 @@ def test_auc_equals_the_pairwise_count_with_ties(seed):
     assert auc(o, s) == pytest.approx(1.0 - auc(s, o), abs=1e-12)
 
 
-def test_average_ranks_share_ties_and_sum_to_the_triangle_number():
-    values = np.random.default_rng(0).integers(0, 5, size=50)
-    ranks = average_ranks(values)
-    assert ranks.sum() == pytest.approx(50 * 51 / 2)
-    for v in np.unique(values):
-        assert np.ptp(ranks[values == v]) == 0                        # ties share one rank
-        assert ranks[values == v][0] == pytest.approx((values < v).sum() + ((values == v).sum() + 1) / 2)
+def test_auc_roc_and_youden_threshold_on_a_hand_checked_case():
+    # self F = 1, 2, 3; other F = 2, 4. Pairs (self, other) with other > self: (1,2) (1,4) (2,4) (3,4), one tie
+    # (2,2), one below (3,2): AUC = (4 + ½) / 6. "me" = F ≤ th: th = 1 → TPR ⅓ FPR 0; 2 → ⅔, ½; 3 → 1, ½; 4 → 1, 1.
+    s, o = np.array([1.0, 2.0, 3.0]), np.array([2.0, 4.0])
+    assert auc(s, o) == pytest.approx(0.75)
+    roc = roc_curve(s, o)
+    np.testing.assert_allclose(roc["threshold"], [-np.inf, 1, 2, 3, 4])
+    np.testing.assert_allclose(roc["tpr"], [0, 1 / 3, 2 / 3, 1, 1])
+    np.testing.assert_allclose(roc["fpr"], [0, 0, 0.5, 0.5, 1])
+    assert best_threshold(roc) == {"threshold": 3.0, "tpr": 1.0, "fpr": 0.5}          # J = ½ beats ⅓
+    assert balanced_accuracy(s, o) == pytest.approx(0.75)
+    assert np.isnan(auc(s, [])) and np.isnan(best_threshold(roc_curve([], o))["threshold"])
+
+
+def test_time_to_a_level_is_the_viewing_time_from_which_the_curve_stays_above_it():
+    assert time_to(np.array([0.5, 0.96, 0.9, 0.97, 0.99]), 0.1) == pytest.approx(0.4)   # frame 4 of 5: 0.4 s
+    assert time_to(np.array([0.96, 0.97]), 0.1) == pytest.approx(0.1)
+    assert np.isnan(time_to(np.array([0.99, 0.9]), 0.1))
 
 
 def test_roc_runs_from_origin_to_one_and_its_area_is_the_auc():
@@ -92,11 +106,24 @@ def test_sensor_noise_adds_to_a_learned_models_variance_and_sets_an_exact_models
 
 
 # ---- the streams ----------------------------------------------------------------------------------------
-def test_episodes_are_half_self_and_the_others_split_over_the_sources():
-    kinds = episode_kinds(201, ("second_arm", "delayed", "mirrored"))
-    assert (kinds == "self").sum() == 100
-    counts = [(kinds == k).sum() for k in ("second_arm", "delayed", "mirrored")]
-    assert sum(counts) == 101 and max(counts) - min(counts) <= 1
+def test_every_condition_gets_the_trials_and_self_episodes_come_first():
+    kinds, names, lags = episode_conditions(5, ("imitator", "second_arm"), [0, 2, 6], 0.05)
+    assert kinds[:5].tolist() == ["self"] * 5 and len(kinds) == 5 * (1 + 3 + 1)
+    assert list(dict.fromkeys(names)) == ["self", "imitator_0.00s", "imitator_0.10s", "imitator_0.30s", "second_arm"]
+    assert lags[kinds == "imitator"].tolist() == [0] * 5 + [2] * 5 + [6] * 5 and not lags[kinds != "imitator"].any()
+
+
+def test_the_imitator_scales_about_the_centre_adds_motor_noise_and_stays_in_the_box(setup):
+    robot = setup[0]
+    low, high = robot.sampling_ranges.T
+    late = np.random.default_rng(0).uniform(low, high, size=(400, robot.dq))
+    centre = (low + high) / 2
+    exact = imitate(late, replace(SHORT, imitation_gain=0.5, imitation_noise=0.0), robot, np.random.default_rng(1))
+    np.testing.assert_allclose(exact - centre, 0.5 * (late - centre))
+    noisy = imitate(late, replace(SHORT, imitation_gain=1.0, imitation_noise=0.01), robot, np.random.default_rng(1))
+    inside = ((late > low + 0.05) & (late < high - 0.05)).all(axis=1)            # away from the clipping
+    assert np.std(noisy[inside] - late[inside]) == pytest.approx(0.01, rel=0.1)
+    assert ((noisy >= low) & (noisy <= high)).all()
 
 
 def test_mirrored_views_are_reflections_that_agree_between_3d_and_pixels(setup):
@@ -110,27 +137,47 @@ def test_mirrored_views_are_reflections_that_agree_between_3d_and_pixels(setup):
                                mirror(robot, "ee_pixel", sense(robot, "ee_pixel", q)), atol=1e-9)
 
 
-def test_streams_show_own_body_late_body_or_another_arm(setup):
+def test_streams_show_own_body_an_exact_late_copy_or_another_arm(setup):
     robot, _, visual = setup
-    config = replace(SHORT, steps=8, proprio_noise=0.0, visual_noise=())
+    config = replace(SHORT, steps=8, proprio_noise=0.0, visual_noise=(), imitation_gain=1.0, imitation_noise=0.0)
     episodes = make_episodes(config, robot, visual)
-    lag = round(config.delay / episodes.period)
     seen = episodes.visual["ee_pixel"]                                # (N, T, 2) px, noise-free
     mine = sense(robot, "ee_pixel", episodes.q.reshape(-1, robot.dq)).reshape(seen.shape)
-    kind = episodes.kind
+    kind, name = episodes.kind, episodes.condition
     np.testing.assert_allclose(seen[kind == "self"], mine[kind == "self"], atol=1e-4)
-    np.testing.assert_allclose(seen[kind == "delayed"][:, lag:], mine[kind == "delayed"][:, :-lag], atol=1e-4)
+    np.testing.assert_allclose(seen[name == "imitator_0.00s"], mine[name == "imitator_0.00s"], atol=1e-4)
+    lag = round(0.1 / episodes.period)
+    late = name == "imitator_0.10s"
+    np.testing.assert_allclose(seen[late][:, lag:], mine[late][:, :-lag], atol=1e-4)
+    np.testing.assert_allclose(episodes.delay[late], 0.1) and np.isnan(episodes.delay[kind == "self"]).all()
     assert not np.allclose(seen[kind == "second_arm"], mine[kind == "second_arm"], atol=1.0)
     np.testing.assert_array_equal(episodes.proprio, episodes.q)
     low, high = robot.sampling_ranges.T
     assert ((episodes.q >= low) & (episodes.q <= high)).all()
 
 
+@pytest.mark.parametrize("seed", [0, 1])
+def test_auc_falls_as_the_imitators_delay_shrinks_to_zero(pixel_model, seed):
+    # An exact copy (gain 1, no motor noise) seen through noisy vision over a short window: at delay 0 its stream is
+    # distributed as my own (AUC ≈ ½); every frame of delay makes it less contingent on my joints.
+    config = replace(SHORT, trials=40, steps=10, sources=("imitator",), delays=(0.0, 0.05, 0.2, 0.4), seed=seed,
+                     imitation_gain=1.0, imitation_noise=0.0, visual_noise=(("ee_pixel", 8.0),))
+    robot, perception, visual = prepare(config, [pixel_model])
+    episodes = make_episodes(config, robot, visual)
+    scores = score_episodes(perception, episodes, visual, progress=False)
+    rows, _, _ = roc_table(episodes.kind, episodes.condition, episodes.delay, scores.visual, scores.failed,
+                           episodes.period)
+    aucs = [r["auc"] for r in rows[1:]]                              # by increasing delay
+    assert [r["delay_s"] for r in rows[1:]] == pytest.approx([0.0, 0.05, 0.2, 0.4])
+    assert abs(aucs[0] - 0.5) < 0.15
+    assert all(a < b for a, b in zip(aucs, aucs[1:])), aucs
+
+
 def test_image_streams_are_rendered_frames_scaled_as_training_data_and_flipped_in_the_mirror():
     from bodyschema.datagen.robot import Robot
     from bodyschema.models.scaling import IMAGE_SCALE
     robot = Robot.load("nao_arm", image_size=(14, 20))
-    config = replace(SHORT, trials=6, steps=2, visual_noise=(), sources=("mirrored",))
+    config = replace(SHORT, trials=3, steps=2, visual_noise=(), sources=("mirrored",))
     episodes = make_episodes(config, robot, ["image"])
     frames = robot.render(episodes.q.reshape(-1, robot.dq)).reshape(6, 2, 14, 20) / IMAGE_SCALE
     mirrored = episodes.kind == "mirrored"
@@ -148,9 +195,9 @@ def test_an_image_model_runs_the_benchmark_on_frames_from_its_own_camera(tmp_pat
     decoder = PixelDecoder(pixel_model.body, "image", (14, 20), fc_hidden=8, channels=(4,), epochs=2, batch_size=32)
     decoder.fit(q, robot.render(q) / 255.0, progress=False)
     robot.close()
-    paths = run_self_recognition(replace(SHORT, trials=6, steps=2, out=tmp_path), models=[decoder])
+    paths = run_self_recognition(replace(SHORT, trials=2, steps=3, out=tmp_path), models=[decoder])
     episodes = list(csv.DictReader(paths["episodes_csv"].open()))
-    assert len(episodes) == 6 and not any(e["failed"] == "True" for e in episodes)
+    assert len(episodes) == 2 * 5 and not any(e["failed"] == "True" for e in episodes)
     assert all(np.isfinite(float(e["score_visual"])) for e in episodes)
 
 
@@ -168,18 +215,28 @@ def test_a_nan_in_one_episode_fails_only_that_episode(setup, short_run):
     np.testing.assert_allclose(scores.score()[others], clean.score()[others], rtol=1e-9)
 
 
-def test_a_model_of_another_robot_raises_the_house_error(tmp_path):
+def test_a_model_of_another_robot_or_without_a_visual_modality_raises_the_house_error_before_any_work(tmp_path):
     with pytest.raises(ValueError, match="model body must be robot 'nao_arm'.*Got 'planar2'"):
         run_self_recognition(replace(SHORT, out=tmp_path), models=[AnalyticModel("planar2", "ee_pixel")])
-    with pytest.raises(ValueError, match="model modalities must be"):
-        prepare(SHORT, [AnalyticModel("nao_arm", "joints")])
+    with pytest.raises(ValueError, match="model modalities must be .*Got \\['joints'\\]"):
+        run_self_recognition(replace(SHORT, out=tmp_path), models=[AnalyticModel("nao_arm", "joints")])
+    assert not any(tmp_path.iterdir()), "no run folder before the inputs are checked"
 
 
-@pytest.mark.parametrize("bad", [dict(trials=4), dict(sources=("twin",)), dict(score="mean"),
-                                 dict(delay=0.01), dict(visual_noise=(("ee_pixel", -1.0),))])
-def test_bad_config_raises_the_house_error(bad):
-    with pytest.raises(ValueError, match="must be"):
+@pytest.mark.parametrize("bad, field", [
+    (dict(trials=1), "trials"), (dict(sources=("twin",)), "sources"), (dict(score="mean"), "score"),
+    (dict(visual_noise=(("ee_pixel", -1.0),)), "visual_noise"),
+    (dict(delays=(0.0, 0.2)), "delays"),                             # SHORT's episode: 4 × 0.05 s = 0.2 s
+    (dict(steps=20, delays=(0.0, 1.0)), "delays"), (dict(delays=(-0.05,)), "delays"), (dict(delays=()), "delays"),
+    (dict(delays=(0.1, 0.11)), "delays"),                            # one frame twice
+    (dict(imitation_gain=0.0), "imitation_gain"), (dict(imitation_noise=float("nan")), "imitation_noise")])
+def test_bad_config_raises_the_house_error(bad, field):
+    with pytest.raises(ValueError, match=f"{field}.* must be .*Got"):
         replace(SHORT, **bad)
+
+
+def test_delays_are_free_when_no_imitator_is_shown():
+    assert replace(SHORT, sources=("second_arm",), delays=(9.0,)).delays == (9.0,)
 
 
 def test_the_same_seed_reproduces_the_scores_exactly(setup, short_run):
@@ -193,22 +250,25 @@ def test_the_same_seed_reproduces_the_scores_exactly(setup, short_run):
 
 
 # ---- end to end -----------------------------------------------------------------------------------------
-def test_short_benchmark_tells_self_from_a_second_arm_and_logs_one_mlflow_run(tmp_path, monkeypatch, pixel_model):
+def test_short_benchmark_tells_self_from_a_second_arm_and_a_late_imitator(tmp_path, monkeypatch, pixel_model):
     torch.set_num_threads(1)
     monkeypatch.chdir(tmp_path)
-    config = replace(SHORT, trials=40, steps=5, out=tmp_path / "out", mlflow=True, plots=True,
+    config = replace(SHORT, trials=20, steps=10, delays=(0.0, 0.4), out=tmp_path / "out", mlflow=True, plots=True,
                      tracking_uri=f"sqlite:///{tmp_path / 'mlflow.db'}")
     paths = run_self_recognition(config, models=[pixel_model])
-    for name in ("summary_md", "summary_csv", "episodes_csv", "roc", "auc_over_time", "scores", "free_energy"):
+    for name in ("summary_md", "summary_csv", "episodes_csv", "roc", "viewing_time", "delay", "scores",
+                 "free_energy"):
         assert paths[name].is_file() and paths[name].stat().st_size > 0
     rows = {r["comparison"]: r for r in csv.DictReader(paths["summary_csv"].open())}
-    assert list(rows) == ["pooled", "second_arm", "delayed", "mirrored"]
-    assert float(rows["second_arm"]["auc"]) > 0.9                    # self episodes score lower than the other arm
+    assert list(rows) == ["pooled", "imitator_0.00s", "imitator_0.40s", "second_arm", "mirrored"]
+    assert float(rows["second_arm"]["auc"]) > 0.9 and float(rows["imitator_0.40s"]["auc"]) > 0.9
+    assert float(rows["imitator_0.40s"]["auc"]) > float(rows["imitator_0.00s"]["auc"])
+    assert float(rows["imitator_0.40s"]["t95_s"]) <= 10 * 0.05
     episodes = list(csv.DictReader(paths["episodes_csv"].open()))
     self_scores = [float(e["score_visual"]) for e in episodes if e["kind"] == "self"]
     arm_scores = [float(e["score_visual"]) for e in episodes if e["kind"] == "second_arm"]
     assert np.median(self_scores) < np.median(arm_scores)
-    assert "| pooled |" in paths["summary_md"].read_text()
+    assert "| imitator_0.40s |" in paths["summary_md"].read_text()
     import mlflow
     runs = mlflow.search_runs(experiment_names=[config.experiment], output_format="list")
     assert len(runs) == 1
