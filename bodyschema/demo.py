@@ -26,7 +26,7 @@ class DemoConfig:
     trials: int = 100                  # per level and run (the full benchmark uses 500 × 5 runs)
     runs: int = 1
     reach_targets: int = 20            # closed-loop reaching episodes (the benchmark default is 100)
-    episodes: int = 200                # self-recognition episodes, half of them the robot's own
+    episodes: int = 40                 # self-recognition episodes per condition (self, 6 imitator delays, 2nd arm)
     seed: int = 0
     tracking_uri: str | None = None    # None: $MLFLOW_TRACKING_URI, else sqlite:///<cwd>/mlflow.db
 
@@ -113,7 +113,8 @@ def _act(config: DemoConfig, gpr_uri: str) -> None:
                               trials=config.reach_targets, seed=config.seed, out=results / "reaching",
                               tracking_uri=config.tracking_uri)
     print(run_reaching(reaching)["summary_md"].read_text())
-    print(f"\n== self-recognition: {config.episodes} babbling episodes, is the ee stream mine? ({gpr_uri})")
+    print(f"\n== self-recognition: {config.episodes} babbling episodes per condition, is the ee stream mine or an "
+          f"imitator's? ({gpr_uri})")
     recognition = SelfRecognitionConfig(robot="nao_arm", models=(gpr_uri,), trials=config.episodes,
                                         seed=config.seed, out=results / "self_recognition",
                                         tracking_uri=config.tracking_uri)
