@@ -13,10 +13,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from bodyschema.evaluation.adaptation import JupiterConfig, MarkerShiftConfig, run_jupiter, run_marker_shift
+from bodyschema.evaluation.agency import AgencyConfig, run_agency
 from bodyschema.evaluation.levels import LevelsConfig, run_levels
 from bodyschema.evaluation.reaching import ReachingConfig, run_reaching
 from bodyschema.evaluation.robustness import (LoopRobustnessConfig, RobustnessConfig, run_loop_robustness,
                                               run_robustness)
+from bodyschema.evaluation.rubber_hand import RubberHandConfig, run_rubber_hand
 from bodyschema.evaluation.self_recognition import SelfRecognitionConfig, run_self_recognition
 
 
@@ -56,4 +58,11 @@ BENCHMARKS = (
               "Is this me? AUC of the free energy vs an imitator's delay and viewing time: own body vs others.",
               lambda out: SelfRecognitionConfig(trials=3, steps=3, delays=(0.0, 0.1), plots=False, out=out,
                                                 **QUIET)),
+    Benchmark(("rubber-hand",), RubberHandConfig, run_rubber_hand,
+              "Rubber-hand drift: the felt hand drifts towards a displaced seen hand (sync vs async stroking).",
+              lambda out: RubberHandConfig(trials=2, displacements=(0.1,), visual_sigmas=(0.01,), duration=6.0,
+                                           plots=False, out=out, **QUIET)),
+    Benchmark(("agency",), AgencyConfig, run_agency,
+              "Did I do it? AUC of the free energy of predicted consequences: own vs imposed movements.",
+              lambda out: AgencyConfig(trials=4, steps=4, delays=(0.0, 0.05), plots=False, out=out, **QUIET)),
 )
