@@ -167,20 +167,28 @@ def plot_over_viewing_time(over_time: Mapping[str, Mapping[str, np.ndarray]], pe
     return save_figure(fig, path, dpi=120)
 
 
-def plot_vs_delay(rows: Sequence[Mapping], path: Path) -> Path:
-    """AUC and time to a 95 % decision vs the imitator's delay; the other sources as horizontal lines."""
+def plot_vs_delay(rows: Sequence[Mapping], over_time: Mapping[str, Mapping[str, np.ndarray]], period: float,
+                  path: Path) -> Path:
+    """AUC (after a quarter, half and all of the viewing window) and time to a 95 % decision vs the imitator's
+    delay; the other sources as horizontal lines."""
     from bodyschema.evaluation.core.plots import plt, save_figure
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.6))
     imitator = [r for r in rows if np.isfinite(r["delay_s"])]
     others = [r for r in rows if not np.isfinite(r["delay_s"]) and r["comparison"] != "pooled"]
-    for ax, key, label in zip(axes, ("auc", "t95_s"), ("AUC (whole window)", "time to a 95 % decision (s)")):
-        ax.plot([r["delay_s"] for r in imitator], [r[key] for r in imitator], "o-", color="C0", label="imitator")
+    delays = [r["delay_s"] for r in imitator]
+    frames = next(iter(over_time.values()))["auc"].size
+    for k, frame in enumerate(dict.fromkeys((max(frames // 4, 1), max(frames // 2, 1), frames))):
+        axes[0].plot(delays, [over_time[r["comparison"]]["auc"][frame - 1] for r in imitator], "o-", color="C0",
+                     alpha=(k + 1) / 3, label=f"imitator, {frame * period:g} s viewed")
+    axes[1].plot(delays, [r["t95_s"] for r in imitator], "o-", color="C0", label="imitator")
+    for ax, key in zip(axes, ("auc", "t95_s")):
         for c, r in enumerate(others, start=1):
-            ax.axhline(r[key], color=f"C{c}", ls="--", lw=1, label=r["comparison"])
+            ax.axhline(r[key], color=f"C{c}", ls="--", lw=1, label=f"{r['comparison']} ({key})")
         ax.set_xlabel("imitator delay (s)")
-        ax.set_ylabel(label)
+    axes[0].set_ylabel("AUC")
+    axes[1].set_ylabel("time to a 95 % decision (s)")
     axes[0].axhline(0.5, color="grey", ls=":", lw=0.8)
-    axes[0].legend(fontsize=8)
+    axes[0].legend(fontsize=7)
     return save_figure(fig, path, dpi=120)
 
 
@@ -233,7 +241,7 @@ def write_report(out: Path, episodes_rows: Sequence[Mapping], rows: Sequence[Map
         paths["roc"] = plot_roc(curves, rows, out / "roc.png")
         paths["viewing_time"] = plot_over_viewing_time(over_time, period, out / "viewing_time.png")
         if any(np.isfinite(r["delay_s"]) for r in rows):
-            paths["delay"] = plot_vs_delay(rows, out / "delay.png")
+            paths["delay"] = plot_vs_delay(rows, over_time, period, out / "delay.png")
         scores = np.where(failed, np.nan, per_frame.mean(axis=1))
         paths["scores"] = plot_histogram(conditions, scores, failed, out / "scores.png")
         paths["free_energy"] = plot_over_time(conditions, per_frame, period, out / "free_energy.png")
