@@ -48,8 +48,7 @@ class AgencyConfig(TrialsConfig):
     steps: int = 30                    # frames per episode
     period: float = 0.05               # s between frames (control period; whole physics steps)
     delays: tuple[float, ...] = (0.0, 0.1, 0.2)   # s, sensory delays compared (0: none)
-    known_delay: bool = True           # also score each delay > 0 with a forward model that knows it (its
-                                       # prediction shifted by the delay), beside the one that predicts for now
+    known_delay: bool = True           # also score each delay > 0 with a forward model that knows the delay
     hold_s: tuple[float, float] = (0.2, 0.8)      # s, how long each commanded target is held
     proprio_noise: float = math.radians(1.0)      # rad, σ of the joint readings (1°)
     visual_noise: tuple[tuple[str, float], ...] = (   # σ per visual modality: px, m, intensity in [0, 1]

@@ -42,7 +42,7 @@ class RubberHandConfig(TrialsConfig):
 
     out: Path = Path("results/rubber_hand")          # runs go to <out>/<run-id>/, <out>/latest
     experiment: str = "bodyschema-rubber-hand"        # the MLflow experiment
-    robot: str = "planar2"             # its top-down camera keeps a hand moved 30 cm in view (nao_arm's: ≤ 10 cm)
+    robot: str = "planar2"             # the resting arm; planar2's camera keeps a hand moved 30 cm in view
     models: models_field("analytic:<robot>:ee_xyz") = ()
     trials: int = 10                   # episodes per condition (displacement × visual σ × mode)
     displacements: tuple[float, ...] = (0.05, 0.10, 0.20, 0.30)   # m, seen hand − real hand (people: 15–30 cm)
@@ -55,13 +55,11 @@ class RubberHandConfig(TrialsConfig):
     stroke_rate_hz: float = 1.0        # brush strokes per s (about the pace of people's experiments)
     stroke_jitter_s: float = 0.1       # s, ± uniform jitter of each interval between strokes
     async_lag_s: float = 0.5           # s, seen strokes behind the felt ones when asynchronous (half a stroke)
-    binding_sigma_s: float = 0.2       # s, σ of seen − felt stroke time for a hand that is mine (people's
-                                       # visuo-tactile binding survives delays up to ~0.3 s)
+    binding_sigma_s: float = 0.2       # s, σ of seen − felt stroke time for a hand that is mine (people: ≲ 0.3 s)
     spatial_sigma: float = 0.15        # m, σ of seen − felt hand position for a hand that is mine
     spatial_range: float = 0.6         # m, where a hand that is not mine may lie (uniform)
-    prior_own: float = 0.05            # q(own) before any stroke and any look at the seen hand: a fake hand is
-                                       # a priori not mine, so ownership needs a few strokes (people: ~10 s)
-    final_window_s: float = 5.0        # s; the final drift is the mean over the last window (the noise averages)
+    prior_own: float = 0.05            # q(own) before any stroke: a fake hand is a priori not mine (onset ~10 s)
+    final_window_s: float = 5.0        # s; the final drift is the mean drift over this last window
     perception: PerceptionConfig = PerceptionConfig(max_steps=20, tol=1e-6)   # updates per frame
     plots: bool = True                 # write the PNG plots beside the tables
 
