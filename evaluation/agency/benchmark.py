@@ -30,7 +30,7 @@ from bodyschema.evaluation.core.config import TrialsConfig
 from bodyschema.evaluation.core.mlflow_log import table_metrics
 from bodyschema.evaluation.core.publish import publish
 from bodyschema.evaluation.core.runs import new_run
-from bodyschema.evaluation.core.specs import load_robot, models_field, resolve_models
+from bodyschema.evaluation.core.specs import load_robot, models_field, resolve_models, trained_workspace
 
 VISUAL = ("ee_pixel", "ee_xyz", "image")
 
@@ -102,6 +102,7 @@ def prepare(config: AgencyConfig, models: Sequence):
                                  [m.modality for m in models]))
     robot = load_robot(models, actuators="position")
     proprio = next((m for m in models if m.modality == "joints"), None) or AnalyticModel(robot.name, "joints")
+    robot.sampling_ranges = trained_workspace([proprio, *visual], robot)   # the added joints model's box too
     return robot, [proprio, *visual]
 
 

@@ -28,7 +28,7 @@ from bodyschema.evaluation.core.mlflow_log import table_metrics
 from bodyschema.evaluation.core.publish import publish
 from bodyschema.evaluation.core.runs import new_run
 from bodyschema.evaluation.core.sensing import sense
-from bodyschema.evaluation.core.specs import load_robot, models_field, resolve_models
+from bodyschema.evaluation.core.specs import load_robot, models_field, resolve_models, trained_workspace
 from bodyschema.evaluation.rubber_hand.report import condition_table, write_report
 from bodyschema.evaluation.rubber_hand.scene import camera_frame, episode_rng, rest_poses
 from bodyschema.evaluation.rubber_hand.stroking import MODES, felt_strokes, ownership, seen_strokes
@@ -130,6 +130,7 @@ def prepare(config: RubberHandConfig, models: Sequence):
                                  "fake hand."))
     robot = load_robot(models)
     proprio = next((m for m in models if m.modality == "joints"), None) or AnalyticModel(robot.name, "joints")
+    robot.sampling_ranges = trained_workspace([proprio, *visual], robot)   # the added joints model's box too
     return robot, [proprio, *visual], [m.modality for m in visual]
 
 

@@ -46,8 +46,9 @@ def final_drift(drift: np.ndarray, times: np.ndarray, window_s: float) -> np.nda
 
 
 def _time_to_half(mean: np.ndarray, times: np.ndarray) -> float:
-    """s until the mean drift first reaches half its final value (NaN when it never moves)."""
-    if not np.isfinite(mean[-1]) or mean[-1] <= 0:
+    """s until the mean drift first reaches half its final value (NaN when it does not build up: the final value
+    is not above twice the first frame's, as with asynchronous stroking)."""
+    if not np.isfinite(mean[-1]) or mean[-1] <= 2 * abs(mean[0]):
         return float("nan")
     return float(times[np.argmax(mean >= 0.5 * mean[-1])])
 
