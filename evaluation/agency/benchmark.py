@@ -5,7 +5,7 @@ Every episode a movement happens (streams.py): commanded by the robot itself, im
 own command (efference copy) into the predicted pose q̂(t), and every SensoryModel turns q̂ into the predicted
 sensation g_m(q̂). The free energy of the action's predicted consequences at a frame is
 
-    F(t) = Σ_m ½ (x_m(t) − g_m(q̂(t)))ᵀ Π_m (x_m(t) − g_m(q̂(t))),   Π_m = 1 / (1/Π_model(q̂) + σ_m²)
+    F(t) = Σ_m ½ (x_m(t) − g_m(q̂(t)))ᵀ Π_m (x_m(t) − g_m(q̂(t))),   Π_m = 1 / (1/Π_model(q̂) + σ_m²)  (1/σ_m² exact)
 (the Laplace free energy of the observations at the belief the action predicts, constants dropped; σ_m the sensor
 noise). The agency score is −F averaged over the episode: "I did it" = score ≥ threshold. ROC and AUC
 (scikit-learn) of self against each source and pooled, per sensory delay (predicted for now, or by a forward model
@@ -117,11 +117,20 @@ def predicted_free_energy(models: Sequence, predicted: np.ndarray, observed: dic
             for k in range(t):                                                  # one frame at a time: images
                 z = torch.from_numpy(predicted[:, k])                           # (N, Dq) rad
                 g = m.predict(z).to(torch.float64)                              # (N, *out)
-                pi = 1.0 / (1.0 / m.precision(z).to(torch.float64) + noise.get(m.modality, 0.0) ** 2)
+                pi = _precision(m, z, noise.get(m.modality, 0.0))                  # (N, *out)
                 err = torch.from_numpy(np.asarray(observed[m.modality][:, k], dtype=np.float64)) - g
                 f[:, k] = (0.5 * pi * err ** 2).reshape(n, -1).sum(dim=1).numpy()
             out[m.modality] = f
     return out
+
+
+def _precision(model, z: torch.Tensor, sigma: float) -> torch.Tensor:
+    """Π of the observations (N, *out): an exact (analytic) model's only error is the sensor noise, 1/σ²; a learned
+    model's own error adds to it, 1/(1/Π_model(z) + σ²). Noise-free and exact: the model's fixed precision."""
+    own = model.precision(z).to(torch.float64)
+    if getattr(model, "kind", None) == "analytic" and sigma > 0:
+        return torch.full_like(own, 1.0 / sigma ** 2)
+    return 1.0 / (1.0 / own + sigma ** 2)
 
 
 def run_agency(config: AgencyConfig = AgencyConfig(), models: Sequence | None = None) -> dict[str, Path]:
