@@ -27,7 +27,8 @@ from bodyschema.errors import must_be
 from bodyschema.evaluation.core.runs import MODELS_CSV, is_benchmark_folder, latest_run
 from bodyschema.evaluation.report.markdown_html import LINK, embedded_image, html_page, markdown_to_html, slug
 
-KNOWN_ORDER = ("levels", "reaching", "adaptation", "self_recognition", "robustness")   # then others, A→Z
+KNOWN_ORDER = ("levels", "reaching", "adaptation", "self_recognition", "rubber_hand", "agency",
+               "robustness")                                                         # then others, A→Z
 MAX_DEPTH = 2                  # results/<benchmark>/<run> or results/<group>/<benchmark>/<run>
 NO_RESULTS_HINT = "Run `bodyschema evaluate levels` first."
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
