@@ -89,8 +89,9 @@ def _plots(out: Path, config, rows, over_time) -> dict[str, Path]:
         if row["displacement_cm"] != disp * 100:
             continue
         series = [r for r in over_time if r["condition"] == row["condition"]]
-        ax.plot([r["t_s"] for r in series], [r["drift_cm"] for r in series],
-                "-" if row["mode"] == "synchronous" else "--", label=f"σ={row['visual_sigma_cm']:g}cm {row['mode']}")
+        color = f"C{np.abs(np.array(config.visual_sigmas) * 100 - row['visual_sigma_cm']).argmin() % 10}"  # per σ
+        ax.plot([r["t_s"] for r in series], [r["drift_cm"] for r in series], "-" if row["mode"] == "synchronous"
+                else "--", color=color, label=f"σ={row['visual_sigma_cm']:g}cm {row['mode']}")
     ax.set(xlabel="stroking time (s)", ylabel="drift towards the seen hand (cm)",
            title=f"Drift over time, seen hand {disp * 100:g} cm away")
     ax.legend(fontsize=7)
@@ -100,7 +101,8 @@ def _plots(out: Path, config, rows, over_time) -> dict[str, Path]:
         for mode in config.modes:
             sel = [r for r in rows if r["displacement_cm"] == d * 100 and r["mode"] == mode]
             ax.plot([r["visual_sigma_cm"] for r in sel], [r["drift_fraction"] for r in sel],
-                    "o-" if mode == "synchronous" else "x--", label=f"{d * 100:g} cm {mode}")
+                    "o-" if mode == "synchronous" else "x--", color=f"C{config.displacements.index(d) % 10}",
+                    label=f"{d * 100:g} cm {mode}")
     ax.set(xscale="log", xlabel="visual σ (cm): lower = more precise", ylabel="final drift / displacement",
            title="Drift vs visual precision")
     ax.legend(fontsize=7)
