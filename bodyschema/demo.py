@@ -37,6 +37,7 @@ def run_demo(config: DemoConfig) -> None:
     _evaluate(config, champions["gpr"], "gpr")
     _evaluate(config, champions["pixel"], "pixel")
     _act(config, champions["gpr"])
+    _body_and_agency(config, champions["gpr"])
     from bodyschema.evaluation.report import ReportConfig, write_report
     from bodyschema.training.registry import list_models
 
@@ -119,3 +120,21 @@ def _act(config: DemoConfig, gpr_uri: str) -> None:
                                         seed=config.seed, out=results / "self_recognition",
                                         tracking_uri=config.tracking_uri)
     print(run_self_recognition(recognition)["summary_md"].read_text())
+
+
+def _body_and_agency(config: DemoConfig, gpr_uri: str) -> None:
+    """Seconds-long runs of the rubber-hand and agency benchmarks with the registered GPR (nao_arm's camera keeps a
+    hand moved ≤ 10 cm in view)."""
+    from bodyschema.evaluation.agency import AgencyConfig, run_agency
+    from bodyschema.evaluation.rubber_hand import RubberHandConfig, run_rubber_hand
+
+    results = config.out / "results"
+    print(f"\n== rubber hand: a seen hand 5–10 cm away, stroked in and out of sync; drift of the belief ({gpr_uri})")
+    rubber = RubberHandConfig(robot="nao_arm", models=(gpr_uri,), trials=4, displacements=(0.05, 0.10),
+                              visual_sigmas=(0.005, 0.01, 0.02), duration=20.0, seed=config.seed,
+                              out=results / "rubber_hand", tracking_uri=config.tracking_uri)
+    print(run_rubber_hand(rubber)["summary"].read_text())
+    print(f"\n== did I do it? own movements vs the same movements pushed or seen in a moved scene ({gpr_uri})")
+    agency = AgencyConfig(robot="nao_arm", models=(gpr_uri,), trials=100, seed=config.seed, out=results / "agency",
+                          tracking_uri=config.tracking_uri)
+    print(run_agency(agency)["summary"].read_text())
