@@ -5,8 +5,12 @@
 For a velocity command q̇ = a held for one control period Δt, ∂x_m/∂a ≈ Δt J_m(μ) (∂q/∂a = Δt I for the
 joint encoder), so the law needs only the Jacobians (or, for images, the VJPs Δt·vjp(μ, Πε)) the perception
 already uses. The goal enters the belief, not the action: perception runs with the attractor prior
-f(μ) = J_gᵀ Π_goal (x_d − g(μ)) with Π_goal = β · the goal model's mean precision (aif/priors.py), so μ is
-pulled toward the goal as hard as that sensor is trusted, and action pulls the body after μ.
+f(μ) = J_gᵀ Π_goal (x_d − g(μ)) with Π_goal = β · the goal model's mean precision (aif/priors.py). The controller
+perceives at order 0, where the attractor enters F as its potential ½ (x_d − g)ᵀ Π_goal (x_d − g) (−∂F/∂μ = f, β
+linear), so each perception step is the damped Gauss–Newton step of F = proprioception + goal: the belief moves
+along the goal's error (the body's least-squares solution), held back by Π_joints, and action pulls the body after
+μ. β ≫ Π_joints / (Π_g |J|²) lets the belief lead by most of the way (toy planar arm, 6 episodes, 3 s: final error
+8 %, 0.9 %, 0.01 % of the start's at β = 1, 10, 100).
 
 Per control tick (`VelocityController.act`): rows whose observations hold NaN/inf are marked failed (zero
 command from then on); the others take `perception_steps` updates of `Perception.infer` warm-started at the
@@ -61,7 +65,7 @@ class ActionConfig:
     max_velocity: float = 2.0             # rad/s; NAO's joints reach ~5–7 rad/s, half of that is a safe servo
     drive: tuple[str, ...] = ("joints",)  # modalities whose prediction errors drive action (proprioceptive)
     perception_steps: int = 2             # perception updates per control tick (warm-started at the belief)
-    attractor_gain: float = 1.0           # β of the goal attractor f(μ) = β Jᵀ (x_d − g(μ))
+    attractor_gain: float = 100.0         # β: the goal's precision in units of its model's own (see docstring)
 
     def __post_init__(self):
         for name in ("k_a", "max_velocity", "attractor_gain"):

@@ -28,9 +28,10 @@ import torch
 
 from bodyschema.aif import descent
 from bodyschema.aif.descent import record_step
-from bodyschema.aif.free_energy import check_models, check_observations, model_input, sensory_terms
+from bodyschema.aif.free_energy import (JACOBIAN_MAX_OUTPUTS, check_models, check_observations, model_input,
+                                         sensory_terms)
 from bodyschema.aif.generalized import implicit_step, local_linear_step, shift, shift_matrix
-from bodyschema.aif.priors import PRIORS, attractor_flow, prior_terms
+from bodyschema.aif.priors import PRIORS, attractor, prior_terms
 from bodyschema.errors import must_be
 from bodyschema.models.contract import as_input
 
@@ -394,21 +395,24 @@ class Perception:
         obs = {name: x[rows] for name, x in sensors.observations.items()}
         pis = {m.modality: sensors.fixed[m.modality][rows] if m.modality in sensors.fixed else None
                for m in self.models}
+        offset = _fuse_image_goal(sensors, rows, mu, obs, pis, cfg.attractor_gain * cfg.prior_precision) \
+            if k == 1 else None
         s = sensory_terms(self.models, obs, pis, mu, need_h, need_grad=need_grad)
-        free = s.free_energy
+        free = s.free_energy if offset is None else s.free_energy + offset
         grad = torch.zeros_like(u)
         grad[:, 0] = s.grad
         hess = None
         if need_h:
             hess = torch.zeros(b, k * dz, k * dz, dtype=u.dtype)
             hess[:, :dz, :dz] = s.hessian
-        f0 = a = None
-        if sensors.goal is not None:
-            model, x_d = sensors.goal
-            z = model_input(model, mu)
-            f0, a = attractor_flow(model.predict(z).to(mu.dtype), model.jacobian(z).to(mu.dtype), x_d[rows],
-                                   cfg.attractor_gain)
-        prior = prior_terms(u, cfg.prior, cfg.prior_precision, f0, a)
+        f0 = a = potential = None
+        prior = None
+        if sensors.goal is not None and offset is None:                    # an image goal fused above: no prior
+            model, x_d = sensors.goal                                      # Π_goal = β I (priors.attractor)
+            pull = attractor(model, mu, x_d[rows], cfg.attractor_gain, torch.ones_like(x_d[rows]))
+            f0, a, potential = pull.flow, pull.jacobian, pull.potential
+        if offset is None:
+            prior = prior_terms(u, cfg.prior, cfg.prior_precision, f0, a, potential)
         if prior is not None:
             free = free + prior.free_energy
             grad = grad + prior.grad
@@ -418,3 +422,26 @@ class Perception:
         if prior is not None:
             weighted["prior"] = 0.5 * cfg.prior_precision * prior.error.pow(2).sum(dim=(1, 2))
         return free, grad, hess, weighted
+
+
+def _fuse_image_goal(sensors: _Sensors, rows, mu: torch.Tensor, obs: dict, pis: dict, weight: float):
+    """Order 0, an image goal whose model is also observed: the attractor's Π_z V = ½ β |x_d − g|² (β = weight =
+    Π_z · gain, Π_goal = gain I) and the sensory ½ |x − g|²_Π are one Gaussian term ½ |x̄ − g|²_(Π+β),
+    x̄ = (Π x + β x_d)/(Π + β), up to a constant in μ. Fused, the goal costs no model call: its gradient and Gauss–Newton curvature come with the
+    sensor's (priors.py: image goals never build their own Jacobian). Rewrites obs/pis in place; → the constant
+    (b,) to add to F, or None when the goal is not an observed image with a fixed-in-μ precision."""
+    if sensors.goal is None:
+        return None
+    model, x_d = sensors.goal
+    name = model.modality
+    if x_d[0].numel() <= JACOBIAN_MAX_OUTPUTS or name not in obs or getattr(model, "precision_varies", False):
+        return None
+    b = len(rows)
+    pi = pis[name] if pis[name] is not None else model.precision(model_input(model, mu)).to(mu.dtype)  # (b, *out)
+    beta = torch.as_tensor(weight, dtype=mu.dtype)
+    x, goal = obs[name].to(mu.dtype), x_d[rows].to(mu.dtype)
+    total = pi + beta
+    obs[name], pis[name] = (pi * x + beta * goal) / total, total
+    constant = 0.5 * (pi * beta / total * (x - goal).pow(2)).reshape(b, -1).sum(-1)
+    logdet = 0.5 * (torch.log(total) - torch.where(pi > 0, pi.clamp_min(1e-300).log(), 0.0)).reshape(b, -1).sum(-1)
+    return constant + logdet                                               # F_x(Π) + Π_z V = F_fused + this
