@@ -10,6 +10,12 @@
     bodyschema report
     bodyschema demo
     bodyschema --debug ...    (or BODYSCHEMA_DEBUG=1): show the traceback behind an error message
+    bodyschema --quiet ... | --verbose ...   (before or after the subcommand): warnings only, no progress bars |
+                              debug lines and MLflow's own logging (bodyschema/log.py)
+
+Start-up stays fast (bench/startup.py): this module imports only the light config dataclasses; a stage's code
+(torch, MuJoCo, MLflow) is imported when its command runs, and a benchmark's config only when the command line
+names it (other benchmarks stand in as empty placeholders carrying their name and help, see `commands`).
 
 One error boundary (`main`): an expected failure (bad input, a bad file, MLflow, rendering, a non-finite
 computation; the list is `bodyschema.errors.expected_types`) prints one house line on stderr and exits 2; a bug
@@ -20,22 +26,26 @@ from __future__ import annotations
 
 import os
 
-# Headless rendering by default. mujoco reads MUJOCO_GL once, when first imported, and the imports below reach
-# it (evaluation.jupiter imports mujoco), so this must come first; a value the user set wins.
+# Headless rendering by default. mujoco reads MUJOCO_GL once, when first imported (by a stage, later), so this
+# must come before any stage runs; a value the user set wins.
 _GL = os.environ.setdefault("MUJOCO_GL", "egl")
 if _GL in ("egl", "osmesa"):
     os.environ.setdefault("PYOPENGL_PLATFORM", _GL)
 # (every import below comes after it on purpose)
 
 import dataclasses
+import logging
+import re
 import sys
 import traceback
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Union
 
 import tyro
 
+from bodyschema import log
 from bodyschema.datagen.config import DatagenConfig
 from bodyschema.demo import DemoConfig
 from bodyschema.evaluation import registry
@@ -43,6 +53,8 @@ from bodyschema.evaluation.report import ReportConfig, write_report
 from bodyschema.errors import expected_types, explain, must_be
 from bodyschema.export_commands import RUNNERS as EXPORT_RUNNERS, ExportDatasetArgs, ExportOnnxArgs, ShowArgs
 from bodyschema.training.config import TrainConfig, train_commands
+
+logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -82,22 +94,51 @@ def _group(name: str, description: str, *members):
     return _command(name, Union[built], description)  # noqa: UP007 (tyro: Union)
 
 
-# Benchmarks (evaluation/registry.py) and the report: Config → runner returning the paths it wrote (levels: a
-# summary holding them).
-BENCHMARKS = {**{b.config: b.run for b in registry.BENCHMARKS}, ReportConfig: write_report}
+class _Runners(Mapping):
+    """Benchmarks (evaluation/registry.py) and the report: Config → runner returning the paths it wrote (levels: a
+    summary holding them). Looks a config up without importing the other benchmarks' packages."""
+
+    def _pairs(self):
+        loaded = [b for b in registry.BENCHMARKS if b.module in sys.modules]   # a parsed config's package is
+        return [(ReportConfig, write_report), *((b.config, b.run) for b in loaded)]
+
+    def __getitem__(self, config_class):
+        found = [run for cls, run in self._pairs() if cls is config_class]
+        if not found:
+            raise KeyError(config_class)
+        return found[0]
+
+    def __iter__(self):
+        return iter([ReportConfig, *(b.config for b in registry.BENCHMARKS)])   # iterating imports them all
+
+    def __len__(self) -> int:
+        return 1 + len(registry.BENCHMARKS)
 
 
-def _evaluate_members() -> list:
-    """The `evaluate` subcommands, in registry order; two-word benchmarks gathered into their group."""
+BENCHMARKS = _Runners()
+
+
+def _placeholder(words: tuple[str, ...], help: str) -> type:
+    """An empty stand-in for a benchmark the command line does not name: the `--help` of the groups above it shows
+    only its name and help, and its real config would import its package (torch, MuJoCo) for nothing."""
+    cls = dataclasses.make_dataclass("Benchmark_" + "_".join(words).replace("-", "_"), [], frozen=True)
+    cls.__doc__ = help
+    return cls
+
+
+def _evaluate_members(named: tuple[str, ...] | None) -> list:
+    """The `evaluate` subcommands, in registry order; two-word benchmarks gathered into their group. `named`: the
+    words after `evaluate` on the command line (only a benchmark they name is imported); None imports all."""
     members, groups = [], {}
     for b in registry.BENCHMARKS:
+        config = b.config if named is None or named[:len(b.words)] == b.words else _placeholder(b.words, b.help)
         if len(b.words) == 1:
-            members.append((b.words[0], b.config, b.help))
+            members.append((b.words[0], config, b.help))
         else:
             if b.words[0] not in groups:
                 groups[b.words[0]] = []
                 members.append(b.words[0])                               # the group's place: its first member
-            groups[b.words[0]].append((b.words[1], b.config, b.help))
+            groups[b.words[0]].append((b.words[1], config, b.help))
     return [m if isinstance(m, tuple) else _group(m, registry.GROUPS[m], *groups[m]) for m in members]
 
 
@@ -131,24 +172,37 @@ def check_renamed_flags(argv: list[str]) -> None:
                                      f"Use `bodyschema {' '.join(words)} {new} ...`."))
 
 
-COMMANDS = Union[(  # noqa: UP007
-    _command("datagen", DatagenConfig, "Generate a motor-babbling dataset (Zarr v3)."),
-    _command("validate", ValidateArgs, "Check a dataset store; exit 0 when valid, else list every problem."),
-    _command("show", ShowArgs, "Summarize a dataset store and draw a contact sheet of its images (PNG)."),
-    _group("train", "Fit one sensory model on a dataset, log it to MLflow and register it. "
-                    "`bodyschema train KIND --help` lists KIND's hyper-parameters with their defaults.",
-           *train_commands()),
-    _group("registry", "Inspect and manage the MLflow model registry.",
-           ("list", RegistryList, "List registered model versions, metrics and aliases."),
-           ("promote", RegistryPromote, "Move the `champion` alias to NAME's VERSION.")),
-    _group("export", "Export a dataset (HDF5, LeRobot) or a model (ONNX) for other tools.",
-           ("dataset", ExportDatasetArgs, "A dataset store as HDF5 or in LeRobot's v3.0 layout."),
-           ("onnx", ExportOnnxArgs, "A fitted model as ONNX: rad in, prediction out, checked with onnxruntime.")),
-    _group("evaluate", "Run an evaluation benchmark; each run writes results/<name>/<run-id>/ and links latest.",
-           *_evaluate_members()),
-    _command("report", ReportConfig, "Gather every benchmark's latest run into results/report.md and .html."),
-    _command("demo", DemoConfig, "The end-to-end demo: babble, fit, register, perceive, reach, recognise, report."),
-)]
+def commands(words: list[str] | None = None):
+    """The tyro type of the whole CLI. `words`: the command words given (`_command_words`); a benchmark's config is
+    imported only when they name it. None: every benchmark's real config (tests, `COMMANDS`)."""
+    named = None if words is None else tuple(words[1:]) if words[:1] == ["evaluate"] else ()
+    return Union[(  # noqa: UP007
+        _command("datagen", DatagenConfig, "Generate a motor-babbling dataset (Zarr v3)."),
+        _command("validate", ValidateArgs, "Check a dataset store; exit 0 when valid, else list every problem."),
+        _command("show", ShowArgs, "Summarize a dataset store and draw a contact sheet of its images (PNG)."),
+        _group("train", "Fit one sensory model on a dataset, log it to MLflow and register it. "
+                        "`bodyschema train KIND --help` lists KIND's hyper-parameters with their defaults.",
+               *train_commands()),
+        _group("registry", "Inspect and manage the MLflow model registry.",
+               ("list", RegistryList, "List registered model versions, metrics and aliases."),
+               ("promote", RegistryPromote, "Move the `champion` alias to NAME's VERSION.")),
+        _group("export", "Export a dataset (HDF5, LeRobot) or a model (ONNX) for other tools.",
+               ("dataset", ExportDatasetArgs, "A dataset store as HDF5 or in LeRobot's v3.0 layout."),
+               ("onnx", ExportOnnxArgs, "A fitted model as ONNX: rad in, prediction out, checked with onnxruntime.")),
+        _group("evaluate", "Run an evaluation benchmark; each run writes results/<name>/<run-id>/ and links latest.",
+               *_evaluate_members(named)),
+        _command("report", ReportConfig, "Gather every benchmark's latest run into results/report.md and .html."),
+        _command("demo", DemoConfig, "The end-to-end demo: babble, fit, register, perceive, reach, recognise, report."),
+    )]
+
+
+commands([])        # fills COMMAND_WORDS (every benchmark a placeholder: nothing heavy is imported)
+
+
+def __getattr__(name: str):
+    if name == "COMMANDS":                     # the full CLI type, every benchmark's config imported (tests)
+        return commands(None)
+    raise AttributeError(f"module 'bodyschema.cli' has no attribute {name!r}")
 
 
 def run(config) -> int:
@@ -269,7 +323,7 @@ def check_tracking_first(config) -> None:
     from bodyschema.training.registry import check_tracking, tracking_uri
 
     uri = tracking_uri(explicit)
-    print(f"tracking: {uri}", file=sys.stderr)
+    log.tracking_line(uri)
     check_tracking(uri, timeout_s=5)
 
 
@@ -280,12 +334,13 @@ def main(argv: list[str] | None = None) -> int:
     argv = [a for a in argv if a != "--debug"]
     command = "bodyschema " + " ".join(_command_words(argv))
     try:
+        verbosity, argv = log.split_flags(argv)
+        log.configure(verbosity)
         check_train_flags(argv)
         check_renamed_flags(argv)
-        config = tyro.cli(COMMANDS, prog="bodyschema", args=argv,  # a parsing error: tyro's message box, exit 2
-                          description="A robot learns its body by motor babbling and perceives it by active "
-                                      "inference. --debug (or BODYSCHEMA_DEBUG=1) shows the traceback behind an error.")
-        return run(config)
+        config = tyro.cli(commands(_command_words(argv)), prog="bodyschema", args=argv,  # a parsing error: tyro's
+                          description=DESCRIPTION)                                       # message box, exit 2
+        return run(quiet_progress(config) if verbosity == log.QUIET else config)
     except KeyboardInterrupt:
         print(f"\n{command}: interrupted. Run the same command again to resume.", file=sys.stderr)
         return 130
@@ -295,10 +350,32 @@ def main(argv: list[str] | None = None) -> int:
             return _bug(command, error)
         if debug:
             traceback.print_exc()
-        print(f"{command}: error: {line}", file=sys.stderr)
+        print(f"{command}: error: {strip_tyro_names(line)}", file=sys.stderr)
         return 2
     except Exception as error:
         return _bug(command, error)
+
+
+DESCRIPTION = ("A robot learns its body by motor babbling and perceives it by active inference. --debug (or "
+               "BODYSCHEMA_DEBUG=1) shows the traceback behind an error; --quiet: warnings only, no progress bars; "
+               "--verbose: debug lines and MLflow's own logging (each before or after the subcommand).")
+# tyro names a nested subcommand's inner dataclass `__tyro-dummy-inner__` (and its flags `__tyro_dummy_inner__.x`);
+# a value error raised while it builds the config can carry that name, which means nothing to a user.
+TYRO_DUMMY = re.compile(r"_{1,2}tyro[-_]dummy[-_]inner_{1,2}[.\-_]?")
+
+
+def strip_tyro_names(line: str) -> str:
+    """An error line without tyro's internal names."""
+    return TYRO_DUMMY.sub("", line)
+
+
+def quiet_progress(config):
+    """`config` with every `progress` flag in its tree off (--quiet)."""
+    changes = {f.name: quiet_progress(getattr(config, f.name)) for f in dataclasses.fields(config)
+               if dataclasses.is_dataclass(getattr(config, f.name)) and not isinstance(getattr(config, f.name), type)}
+    if getattr(config, "progress", None) is True:
+        changes["progress"] = False
+    return dataclasses.replace(config, **changes) if changes else config
 
 
 def _bug(command: str, error: BaseException) -> int:

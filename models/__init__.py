@@ -8,14 +8,15 @@ from __future__ import annotations
 
 import importlib
 
-from bodyschema.models.contract import BaseSensoryModel, SensoryModel, load_model, register_kind
-from bodyschema.models.scaling import BodySpec
-
+# Every name is lazy, the contract's too: `bodyschema.models.configs` and `kinds` (the CLI's `train` flags) must
+# import without torch, and importing them runs this file first.
 _KIND_CLASSES = {"GPRModel": "gpr", "SklearnGPRModel": "sklearn_gpr", "MDNModel": "mdn", "PixelDecoder": "pixel",
                  "MultimodalModel": "multimodal", "MultimodalMember": "multimodal", "ImageEncoder": "encoder",
-                 "AnalyticModel": "analytic", "export_onnx": "onnx_export"}
+                 "AnalyticModel": "analytic", "export_onnx": "onnx_export", "BaseSensoryModel": "contract",
+                 "SensoryModel": "contract", "load_model": "contract", "register_kind": "contract",
+                 "BodySpec": "scaling"}
 
-__all__ = sorted(["BaseSensoryModel", "BodySpec", "SensoryModel", "load_model", "register_kind", *_KIND_CLASSES])
+__all__ = sorted(_KIND_CLASSES)
 
 
 def __getattr__(name: str):

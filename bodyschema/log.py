@@ -1,0 +1,81 @@
+"""Verbosity of the CLI: one `bodyschema` logger, configured once by `bodyschema.cli.main`.
+
+A module logs progress and information with `logging.getLogger(__name__)` (a child of `bodyschema`) and keeps
+`print` for a command's actual output, the lines a script parses (`registry list` rows, paths written). The CLI
+calls `configure(verbosity)` once:
+
+    quiet   (-1): warnings and errors only, no progress bars (the tracking-URI line stays: see `tracking_line`)
+    normal   (0): our INFO lines on stderr; MLflow's own INFO chatter, run URLs and download bars silenced
+    verbose  (1): DEBUG lines, and MLflow's logging and bars as MLflow configures them
+
+MLflow reads its logging level and bar switch from the environment when it is first imported (it is imported
+lazily, after this runs), so they are set here as environment defaults; a value the user set wins. Its loggers
+are also set directly in case it was imported already (tests, the demo).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import sys
+
+LOGGER = "bodyschema"
+QUIET, NORMAL, VERBOSE = -1, 0, 1
+FLAGS = {"--quiet": QUIET, "-q": QUIET, "--verbose": VERBOSE, "-v": VERBOSE}
+# MLflow's environment switches while it is not verbose (mlflow/environment_variables.py, MLflow 3)
+MLFLOW_QUIET_ENV = {"MLFLOW_LOGGING_LEVEL": "WARNING", "MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR": "false",
+                    "MLFLOW_SUPPRESS_PRINTING_URL_TO_STDOUT": "true"}
+MLFLOW_LOGGERS = ("mlflow", "alembic", "huey")
+_handler: logging.Handler | None = None
+
+
+def split_flags(argv: list[str]) -> tuple[int, list[str]]:
+    """(verbosity, argv without the global flags); the flags may stand before or after the subcommand."""
+    given = [FLAGS[a] for a in argv if a in FLAGS]
+    if QUIET in given and VERBOSE in given:
+        from bodyschema.errors import must_be
+
+        raise ValueError(must_be("--quiet and --verbose", "given one at a time", " ".join(a for a in argv if a in FLAGS),
+                                 "Drop one of them."))
+    return (given[0] if given else NORMAL), [a for a in argv if a not in FLAGS]
+
+
+def configure(verbosity: int = NORMAL) -> logging.Logger:
+    """Set up the `bodyschema` logger (one stderr handler, plain lines) and MLflow's for `verbosity`."""
+    global _handler
+    logger = logging.getLogger(LOGGER)
+    if _handler is None or _handler not in logger.handlers:
+        _handler = _StderrHandler()
+        _handler.setFormatter(logging.Formatter("%(message)s"))
+        logger.addHandler(_handler)
+    logger.setLevel({QUIET: logging.WARNING, NORMAL: logging.INFO, VERBOSE: logging.DEBUG}[verbosity])
+    logger.propagate = False          # our lines are printed once, whatever the root logger does
+    if verbosity < VERBOSE:
+        for name, value in MLFLOW_QUIET_ENV.items():
+            os.environ.setdefault(name, value)
+        for name in MLFLOW_LOGGERS:
+            logging.getLogger(name).setLevel(logging.WARNING)
+    if verbosity == QUIET:
+        os.environ.setdefault("TQDM_DISABLE", "1")    # bars a config has no `progress` flag for (tqdm ≥ 4.66)
+    return logger
+
+
+def tracking_line(uri: str) -> None:
+    """The tracking URI a command uses, on stderr even with --quiet: an empty registry read from the wrong
+    folder's mlflow.db is otherwise silent (issue 15). It is one line and never on stdout, which scripts parse."""
+    print(f"tracking: {uri}", file=sys.stderr)
+
+
+class _StderrHandler(logging.StreamHandler):
+    """A stream handler that writes to the *current* sys.stderr (pytest's capsys swaps it after configure)."""
+
+    def __init__(self) -> None:
+        super().__init__(sys.stderr)
+
+    @property
+    def stream(self):
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value) -> None:   # logging.StreamHandler.__init__ assigns it; the property always wins
+        pass
