@@ -155,8 +155,13 @@ def run_agency(config: AgencyConfig = AgencyConfig(), models: Sequence | None = 
     out = new_run(config)
     paths = write_report(out, config, robot.name, [m.modality for m in sensors], episodes, energies, rows, curves,
                          wall)
-    keep = ("comparison", "auc", "fpr_at_tpr95", "failed")
-    metrics = table_metrics([{k: r[k] for k in keep} for r in rows], "comparison")
+    keep = ("auc", "fpr_at_tpr95", "failed")
+    metrics = table_metrics([{"name": _metric_label(r), **{k: r[k] for k in keep}} for r in rows], "name")
     publish(config, out, "agency", {**metrics, "wall_s": wall}, paths, models)
     return paths
 
+
+def _metric_label(row: dict) -> str:
+    """An MLflow-safe name of a ROC row: delay<ms>ms[_known]_<source>_<senses>."""
+    known = "_known" if row["known_delay"] else ""
+    return f"delay{row['delay_s'] * 1000:g}ms{known}_{row['source']}_{row['senses'].replace(' ', '_')}"

@@ -200,7 +200,12 @@ def run_rubber_hand(config: RubberHandConfig = RubberHandConfig(), models: Seque
     rows, over_time = condition_table(config, episodes, drift, failed)
     out = new_run(config)
     paths = write_report(out, config, robot.name, visual, episodes, drift, failed, rows, over_time, wall)
-    keep = ("condition", "drift_cm", "drift_fraction", "own", "failed")
-    metrics = table_metrics([{k: r[k] for k in keep} for r in rows], "condition")
+    keep = ("drift_cm", "drift_fraction", "own", "failed")
+    metrics = table_metrics([{"name": _metric_label(r), **{k: r[k] for k in keep}} for r in rows], "name")
     publish(config, out, "rubber_hand", {**metrics, "wall_s": wall}, paths, models)
     return paths
+
+
+def _metric_label(row: dict) -> str:
+    """An MLflow-safe name of a condition row: d<cm>cm_sigma<cm>cm_<mode>."""
+    return f"d{row['displacement_cm']:g}cm_sigma{row['visual_sigma_cm']:g}cm_{row['mode']}"

@@ -88,9 +88,16 @@ def test_bad_input_is_refused_before_any_work(tmp_path):
     assert not (tmp_path / "a").exists(), "no run folder before the input is checked"
 
 
-def test_a_short_run_writes_roc_tables_and_plots(tmp_path):
-    config = replace(EXACT, trials=6, steps=6, delays=(0.0, 0.1), plots=True, out=tmp_path)
+def test_a_short_run_writes_roc_tables_plots_and_its_mlflow_run(tmp_path):
+    import mlflow
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    config = replace(EXACT, trials=6, steps=6, delays=(0.0, 0.1), plots=True, out=tmp_path / "runs", mlflow=True,
+                     tracking_uri=uri)
     paths = run_agency(config)
     assert {"roc_csv", "episodes_csv", "summary", "roc_png", "auc_vs_delay_png", "free_energy_png",
             "models_csv"} <= set(paths)
     assert "delay=100ms known pooled" in paths["summary"].read_text()
+    mlflow.set_tracking_uri(uri)
+    run = mlflow.search_runs(experiment_names=[config.experiment]).iloc[0]
+    assert run["metrics.delay0ms_pooled_all_senses.auc"] == 1.0
+    assert run["params.delays"] == "(0.0, 0.1)"
