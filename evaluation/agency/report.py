@@ -63,7 +63,8 @@ def write_report(out: Path, config, robot: str, senses, episodes, energies, rows
              f"movements, half the same movements imposed from outside ({', '.join(config.sources)}); score = −F of "
              "the observations against the consequences the robot's own command predicts (forward model), averaged "
              "over the episode; AUC of own vs imposed; fpr_at_tpr95 = imposed movements claimed as own once 95 % "
-             "of the own ones are. Sensory delay: every stream arrives that late; the forward model predicts for now, or "
+             "of the own ones are. Sensory delay: every stream arrives that late; the forward model predicts for now, "
+             "or "
              "(known) knows the delay and predicts what arrives then.", "",
              markdown_table(main, ("auc", "fpr_at_tpr95", "self", "others", "failed"), "comparison"), "",
              "Per sense (pooled sources): which sense carries the evidence.", "",

@@ -5,8 +5,8 @@ sees a hand displaced by d m towards the image centre (ee_xyz or ee_pixel models
 (felt) and the seen one, synchronously or with a lag (stroking.py); the posterior q(own) that the seen hand is
 mine weights the visual precision. All episodes of every condition (displacement × visual σ × stroking mode) run
 as one batch through time: at every frame `aif.Perception` over [joints model, visual models] takes a few updates
-warm-started from the previous belief, with Π_joints = 1/σ_p² and Π_visual = q(own, t)/σ_v². The drift at a frame is
-the belief's hand, fk(μ), moved towards the seen hand: (fk(μ) − fk(q*)) · d̂, m. Tables and plots: report.py.
+warm-started from the previous belief, with Π_joints = 1/σ_p² and Π_visual = q(own, t)/σ_v². The drift at a frame
+is the belief's hand, fk(μ), moved towards the seen hand: (fk(μ) − fk(q*)) · d̂, m. Tables and plots: report.py.
 """
 
 from __future__ import annotations
@@ -82,8 +82,8 @@ class RubberHandConfig(TrialsConfig):
             raise ValueError(must_be("async_lag_s", f"a lag in s within the episode: 0 ≤ lag < {self.duration}",
                                      self.async_lag_s, "A lag beyond the episode leaves no stroke to compare."))
         if not 0 <= self.stroke_jitter_s < 0.5 / self.stroke_rate_hz:
-            raise ValueError(must_be("stroke_jitter_s", f"≥ 0 and below half a stroke ({0.5 / self.stroke_rate_hz} s)",
-                                     self.stroke_jitter_s))
+            raise ValueError(must_be("stroke_jitter_s", f"≥ 0 and below half a stroke "
+                                     f"({0.5 / self.stroke_rate_hz} s)", self.stroke_jitter_s))
         if not 0 < self.prior_own < 1 or not self.proprio_noise > 0:
             raise ValueError(must_be("prior_own and proprio_noise", "0 < prior_own < 1 and σ > 0 rad",
                                      (self.prior_own, self.proprio_noise)))

@@ -70,7 +70,8 @@ def write_report(out: Path, config, robot: str, visual, episodes, drift, failed,
              f"{config.trials} episodes per condition, {config.duration:g} s of stroking at "
              f"{config.stroke_rate_hz:g} Hz (asynchronous: {config.async_lag_s:g} s late), proprioception σ "
              f"{np.degrees(config.proprio_noise):.3g}°, frames every {config.period:g} s; drift = the belief's hand "
-             f"moved towards the seen hand over the last {config.final_window_s:g} s (cm, ± std over episodes), as a fraction of the displacement; "
+             f"moved towards the seen hand over the last {config.final_window_s:g} s (cm, ± std over episodes), "
+             "as a fraction of the displacement; "
              "own = q(the seen hand is mine); t_half_s = time to half the final mean drift.", "",
              markdown_table(rows, columns, "condition", digits=3), HUMAN_REFERENCE, "",
              f"Wall time {wall:.1f} s."]
