@@ -7,9 +7,9 @@ sensation g_m(q̂). The free energy of the action's predicted consequences at a 
 
     F(t) = Σ_m ½ (x_m(t) − g_m(q̂(t)))ᵀ Π_m (x_m(t) − g_m(q̂(t))),   Π_m = 1 / (1/Π_model(q̂) + σ_m²)
 (Π_m = 1/σ_m² for an exact model; the Laplace free energy of the observations at the belief the action predicts,
-constants dropped; σ_m the sensor noise). The agency score is −F averaged over the episode: "I did it" = score ≥ threshold. ROC and AUC
-(scikit-learn) of self against each source and pooled, per sensory delay (predicted for now, or by a forward model
-that knows the delay), on all senses and per sense: report.py.
+constants dropped; σ_m the sensor noise). The agency score is −F averaged over the episode: "I did it" = score ≥
+threshold. ROC and AUC (scikit-learn) of self against each source and pooled, per sensory delay (predicted for now,
+or by a forward model that knows the delay), on all senses and per sense: report.py.
 """
 
 from __future__ import annotations
