@@ -34,12 +34,17 @@ def seen_strokes(felt: np.ndarray, mode: str, lag_s: float) -> np.ndarray:
     return felt if mode == "synchronous" else felt + lag_s
 
 
+def nearest_seen(felt: np.ndarray, seen: np.ndarray) -> np.ndarray:
+    """(K,) s: for every felt stroke the seen stroke closest in time (+inf when none was seen)."""
+    if seen.size == 0:
+        return np.full(felt.shape, np.inf)
+    return seen[np.abs(seen[None, :] - felt[:, None]).argmin(axis=1)]
+
+
 def temporal_log_lr(felt: np.ndarray, seen: np.ndarray, sigma_s: float, interval_s: float) -> np.ndarray:
     """Per felt stroke (K,): log N(Δ; 0, σ²) − log U(interval) with Δ = the nearest seen stroke − the felt one.
     Under "not mine" Δ is uniform over one stroke interval (the nearest of a periodic train lies within ±½)."""
-    if seen.size == 0:
-        return np.full(felt.shape, -np.inf)
-    delta = seen[np.abs(seen[None, :] - felt[:, None]).argmin(axis=1)] - felt          # (K,) s
+    delta = nearest_seen(felt, seen) - felt                                       # (K,) s
     return -0.5 * (delta / sigma_s) ** 2 - np.log(sigma_s * np.sqrt(2 * np.pi)) + np.log(interval_s)
 
 
@@ -56,9 +61,8 @@ def ownership(felt: list[np.ndarray], seen: list[np.ndarray], distance_m: np.nda
         np.asarray(distance_m), config.spatial_sigma, config.spatial_range)          # (N,)
     out = np.empty((len(felt), len(frame_times)))
     for i, (f, s) in enumerate(zip(felt, seen)):
-        # a stroke counts once the seen one has come too (or the binding window has passed without it)
-        known = np.maximum(f, np.minimum(s[np.abs(s[None, :] - f[:, None]).argmin(axis=1)] if s.size else f,
-                                         f + 3 * config.binding_sigma_s))       # (K,) s
+        # a felt stroke counts once its seen partner has come too, or once the binding window (3σ) has passed
+        known = np.clip(nearest_seen(f, s), f, f + 3 * config.binding_sigma_s)       # (K,) s
         evidence = temporal_log_lr(f, s, config.binding_sigma_s, 1.0 / config.stroke_rate_hz)   # (K,)
         counted = known[None, :] <= frame_times[:, None]                        # (T, K)
         out[i] = base[i] + (counted * evidence[None, :]).sum(axis=1)
