@@ -33,6 +33,7 @@ if _GL in ("egl", "osmesa"):
     os.environ.setdefault("PYOPENGL_PLATFORM", _GL)
 # (every import below comes after it on purpose)
 
+import contextlib
 import dataclasses
 import logging
 import re
@@ -332,14 +333,14 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv or os.environ.get("BODYSCHEMA_DEBUG", "") not in ("", "0")
     argv = [a for a in argv if a != "--debug"]
-    command = "bodyschema " + " ".join(_command_words(argv))
+    command = "bodyschema " + " ".join(_command_words([a for a in argv if a not in log.FLAGS]))
     try:
         verbosity, argv = log.split_flags(argv)
         log.configure(verbosity)
         check_train_flags(argv)
         check_renamed_flags(argv)
-        config = tyro.cli(commands(_command_words(argv)), prog="bodyschema", args=argv,  # a parsing error: tyro's
-                          description=DESCRIPTION)                                       # message box, exit 2
+        with _config_errors_as_ours():            # a parsing error: tyro's message box, exit 2
+            config = tyro.cli(commands(_command_words(argv)), prog="bodyschema", args=argv, description=DESCRIPTION)
         return run(quiet_progress(config) if verbosity == log.QUIET else config)
     except KeyboardInterrupt:
         print(f"\n{command}: interrupted. Run the same command again to resume.", file=sys.stderr)
@@ -367,6 +368,31 @@ TYRO_DUMMY = re.compile(r"_{1,2}tyro[-_]dummy[-_]inner_{1,2}[.\-_]?")
 def strip_tyro_names(line: str) -> str:
     """An error line without tyro's internal names."""
     return TYRO_DUMMY.sub("", line)
+
+
+class ConfigRejected(ValueError):
+    """A config's own check (`__post_init__`) refused the parsed values: shown as the house error line."""
+
+
+@contextlib.contextmanager
+def _config_errors_as_ours():
+    """Route a config's `__post_init__` ValueError, which tyro would box as "Error parsing __tyro-dummy-inner__...:
+    <message>", to our error boundary (one house line, exit 2). Uses tyro's parse-error hook (tyro._errors, private:
+    absent in other tyro versions, where tyro's own box remains); an error tied to one flag keeps tyro's box, which
+    shows that flag's help."""
+    try:
+        from tyro import _errors as tyro_errors
+        hook, failure = tyro_errors.on_parse_error, tyro_errors.InstantiationFailure
+    except (ImportError, AttributeError):
+        yield
+        return
+
+    def reject(event) -> None:
+        if isinstance(event, failure) and event.argument is None:
+            raise ConfigRejected(strip_tyro_names(event.message))
+
+    with hook(reject):
+        yield
 
 
 def quiet_progress(config):

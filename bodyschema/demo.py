@@ -10,8 +10,11 @@ last, one report page (Markdown + HTML) of every table and plot.
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, replace
 from pathlib import Path
+
+logger = logging.getLogger(__name__)   # the section headers (info); tables and paths written are printed
 
 
 @dataclass(frozen=True)
@@ -41,11 +44,11 @@ def run_demo(config: DemoConfig) -> None:
     from bodyschema.evaluation.report import ReportConfig, write_report
     from bodyschema.training.registry import list_models
 
-    print("\n== registry")
+    logger.info("== registry")
     for row in list_models(tracking=config.tracking_uri):
         print(f"  {row}")
     report = write_report(ReportConfig(results=config.out / "results"))
-    print(f"\n== report: {report['html']} (and {report['markdown'].name})")
+    print(f"report: {report['html']} (and {report['markdown'].name})")
     print(f"Everything else is under {config.out.resolve()}")
 
 
@@ -60,7 +63,7 @@ def _datagen(config: DemoConfig) -> dict[str, Path]:
             "panda": DatagenConfig(robot="panda", n=config.n_small, sampler="babble", shard_size=200)}
     stores = {}
     for robot, job in jobs.items():
-        print(f"\n== datagen {robot}: {job.n} samples, sampler {job.sampler}")
+        logger.info(f"== datagen {robot}: {job.n} samples, sampler {job.sampler}")
         job = replace(job, workers=config.workers, seed=config.seed, overwrite=True,
                       out=config.out / "data" / f"{robot}.zarr")
         stores[robot] = generate(job)
@@ -83,7 +86,7 @@ def _train(config: DemoConfig, nao_store: Path) -> dict[str, str]:
             "pixel": TrainConfig(model=PixelConfig(epochs=config.pixel_epochs), data=nao_store, modality="image")}
     uris = {}
     for kind, job in jobs.items():
-        print(f"\n== train {kind} on nao_arm {job.modality}")
+        logger.info(f"== train {kind} on nao_arm {job.modality}")
         result = train(replace(job, seed=config.seed, run_root=config.out / "runs",
                                tracking_uri=config.tracking_uri))
         shown = ", ".join(f"{k}={v:.4g}" for k, v in result.metrics.items() if k.startswith("val_"))
@@ -96,7 +99,7 @@ def _train(config: DemoConfig, nao_store: Path) -> dict[str, str]:
 def _evaluate(config: DemoConfig, uri: str, kind: str) -> None:
     from bodyschema.evaluation.levels import LevelsConfig, run_levels
 
-    print(f"\n== AIF perception, levels 1–3, with {uri} loaded from the registry")
+    logger.info(f"== AIF perception, levels 1–3, with {uri} loaded from the registry")
     levels = LevelsConfig(models=(uri,), trials=config.trials, runs=config.runs, seed=config.seed,
                           out=config.out / "results" / f"levels_{kind}", tracking_uri=config.tracking_uri)
     summary = run_levels(levels)
@@ -109,13 +112,14 @@ def _act(config: DemoConfig, gpr_uri: str) -> None:
     from bodyschema.evaluation.self_recognition import SelfRecognitionConfig, run_self_recognition
 
     results = config.out / "results"
-    print(f"\n== closed-loop reaching on nao_arm: {config.reach_targets} ee_xyz goals, {gpr_uri} + joint encoder")
+    logger.info(f"== closed-loop reaching on nao_arm: {config.reach_targets} ee_xyz goals, {gpr_uri} + joint "
+                "encoder")
     reaching = ReachingConfig(robot="nao_arm", models=(gpr_uri, "analytic:nao_arm:joints"), goal="ee_xyz",
                               trials=config.reach_targets, seed=config.seed, out=results / "reaching",
                               tracking_uri=config.tracking_uri)
     print(run_reaching(reaching)["summary_md"].read_text())
-    print(f"\n== self-recognition: {config.episodes} babbling episodes per condition, is the ee stream mine or an "
-          f"imitator's? ({gpr_uri})")
+    logger.info(f"== self-recognition: {config.episodes} babbling episodes per condition, is the ee stream mine "
+                f"or an imitator's? ({gpr_uri})")
     recognition = SelfRecognitionConfig(robot="nao_arm", models=(gpr_uri,), trials=config.episodes,
                                         seed=config.seed, out=results / "self_recognition",
                                         tracking_uri=config.tracking_uri)
@@ -129,12 +133,14 @@ def _body_and_agency(config: DemoConfig, gpr_uri: str) -> None:
     from bodyschema.evaluation.rubber_hand import RubberHandConfig, run_rubber_hand
 
     results = config.out / "results"
-    print(f"\n== rubber hand: a seen hand 5–10 cm away, stroked in and out of sync; drift of the belief ({gpr_uri})")
+    logger.info(f"== rubber hand: a seen hand 5–10 cm away, stroked in and out of sync; drift of the belief "
+                f"({gpr_uri})")
     rubber = RubberHandConfig(robot="nao_arm", models=(gpr_uri,), trials=4, displacements=(0.05, 0.10),
                               visual_sigmas=(0.005, 0.01, 0.02), duration=20.0, seed=config.seed,
                               out=results / "rubber_hand", tracking_uri=config.tracking_uri)
     print(run_rubber_hand(rubber)["summary"].read_text())
-    print(f"\n== did I do it? own movements vs the same movements pushed or seen in a moved scene ({gpr_uri})")
+    logger.info(f"== did I do it? own movements vs the same movements pushed or seen in a moved scene "
+                f"({gpr_uri})")
     agency = AgencyConfig(robot="nao_arm", models=(gpr_uri,), trials=100, seed=config.seed, out=results / "agency",
                           tracking_uri=config.tracking_uri)
     print(run_agency(agency)["summary"].read_text())

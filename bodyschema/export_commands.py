@@ -8,7 +8,7 @@
 
 from __future__ import annotations
 
-import sys
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Literal
@@ -56,7 +56,7 @@ def run_show(args: ShowArgs) -> int:
     if shown.sheet is not None:
         print(f"contact sheet: {shown.sheet}")
     else:
-        print(shown.note, file=sys.stderr)
+        logging.getLogger(__name__).warning(shown.note)
     return 0
 
 
@@ -97,7 +97,9 @@ def _load(spec: str, tracking_uri: str | None):
         from bodyschema.training.registry import check_tracking, tracking_uri as resolve_uri
 
         uri = resolve_uri(tracking_uri)      # the registry or the digests of logged directories live there
-        print(f"tracking: {uri}", file=sys.stderr)
+        from bodyschema.log import tracking_line
+
+        tracking_line(uri)
         check_tracking(uri, timeout_s=5)
     return resolve_model(spec, tracking_uri)
 

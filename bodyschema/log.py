@@ -35,8 +35,8 @@ def split_flags(argv: list[str]) -> tuple[int, list[str]]:
     if QUIET in given and VERBOSE in given:
         from bodyschema.errors import must_be
 
-        raise ValueError(must_be("--quiet and --verbose", "given one at a time", " ".join(a for a in argv if a in FLAGS),
-                                 "Drop one of them."))
+        given_flags = " ".join(a for a in argv if a in FLAGS)
+        raise ValueError(must_be("--quiet and --verbose", "given one at a time", given_flags, "Drop one of them."))
     return (given[0] if given else NORMAL), [a for a in argv if a not in FLAGS]
 
 
@@ -49,7 +49,8 @@ def configure(verbosity: int = NORMAL) -> logging.Logger:
         _handler.setFormatter(logging.Formatter("%(message)s"))
         logger.addHandler(_handler)
     logger.setLevel({QUIET: logging.WARNING, NORMAL: logging.INFO, VERBOSE: logging.DEBUG}[verbosity])
-    logger.propagate = False          # our lines are printed once, whatever the root logger does
+    # propagate stays on: a host application's (or pytest's caplog) root handlers see our records too; the CLI
+    # leaves the root logger without handlers, so each line is printed once.
     if verbosity < VERBOSE:
         for name, value in MLFLOW_QUIET_ENV.items():
             os.environ.setdefault(name, value)

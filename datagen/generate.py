@@ -11,8 +11,8 @@ Before anything is built or written, `guards` checks the shard count, disk, memo
 
 from __future__ import annotations
 
+import logging
 import shutil
-import sys
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,6 +33,8 @@ from bodyschema.datagen.store import (SCHEMA_VERSION, StoreWriteError, create_st
                                       features, mark_complete, mark_shard_done, now, open_store, shards_done,
                                       versions, write_shard)
 from bodyschema.errors import must_be  # noqa: E402
+
+logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -206,8 +208,8 @@ def _repair(path: Path, root) -> None:
             drop_shard_marks(root, sorted(faults))
         except OSError as e:
             raise StoreWriteError.from_os_error(path, e) from e
-        print(f"datagen: rewriting {len(faults)} damaged shard(s) of {path}: "
-              + ", ".join(f"{i} ({why})" for i, why in sorted(faults.items())[:10]), file=sys.stderr)
+        logger.warning(f"datagen: rewriting {len(faults)} damaged shard(s) of {path}: "
+                       + ", ".join(f"{i} ({why})" for i, why in sorted(faults.items())[:10]))
 
 
 def generate(config: DatagenConfig, progress: bool = True) -> Path:
