@@ -107,3 +107,15 @@ def test_a_short_run_writes_its_tables_and_plots(tmp_path):
     assert {"conditions_csv", "over_time_csv", "episodes_csv", "summary", "drift_over_time_png",
             "drift_vs_precision_png", "models_csv"} <= set(paths)
     assert "Botvinick" in paths["summary"].read_text()
+
+
+def test_a_pixel_view_of_the_seen_hand_drifts_as_its_position_does():
+    """planar2's camera looks straight down at the arm's plane (constant depth): σ in m, converted to px at the seen
+    hand, weighs the pixel view as the position view."""
+    config = replace(SWEEP, displacements=(0.1,), visual_sigmas=(0.01,), modes=("synchronous",))
+    xyz = drifts(config)[0]
+    robot, sensors, visual = prepare(config, [AnalyticModel("planar2", "ee_pixel")])
+    episodes = make_episodes(config, robot, visual)
+    drift, failed = track_drift(config, robot, sensors, episodes)
+    pixel = final_drift(drift, episodes.times, config.final_window_s)
+    assert not failed.any() and np.allclose(pixel, xyz, rtol=0.02), (pixel, xyz)
