@@ -69,8 +69,8 @@ class AgencyConfig(TrialsConfig):
         duration = self.steps * self.period
         if not self.delays or not all(isinstance(d, (int, float)) and 0 <= d and round(d / self.period) < self.steps
                                       for d in self.delays):
-            raise ValueError(must_be("delays", f"delays in s within the episode (0 ≤ d < {duration:g} s = steps × "
-                                     "period)", self.delays, "A delay beyond the episode leaves nothing to see."))
+            raise ValueError(must_be("delays", f"within the episode: 0 ≤ d < {duration:g} s (steps × period)",
+                                     self.delays, "A delay beyond the episode leaves nothing to see."))
         if not 0 < self.hold_s[0] <= self.hold_s[1]:
             raise ValueError(must_be("hold_s", "(low, high) s with 0 < low ≤ high", self.hold_s))
         noise = dict(self.visual_noise)

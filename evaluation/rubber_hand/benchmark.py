@@ -79,7 +79,7 @@ class RubberHandConfig(TrialsConfig):
         if self.period > self.duration:
             raise ValueError(must_be("period", f"at most the duration ({self.duration} s)", self.period))
         if not 0 <= self.async_lag_s < self.duration:
-            raise ValueError(must_be("async_lag_s", f"a lag in s within the episode: 0 ≤ lag < {self.duration}",
+            raise ValueError(must_be("async_lag_s", f"within the episode: 0 ≤ lag < {self.duration:g} s",
                                      self.async_lag_s, "A lag beyond the episode leaves no stroke to compare."))
         if not 0 <= self.stroke_jitter_s < 0.5 / self.stroke_rate_hz:
             raise ValueError(must_be("stroke_jitter_s", f"≥ 0 and below half a stroke "
