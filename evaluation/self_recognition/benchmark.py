@@ -3,12 +3,15 @@
 Every episode the robot babbles, feels its joints (proprioception = q(t) + noise) and sees a visual stream
 (ee_pixel, ee_xyz or images) of its own body or of another source: an imitator copying its babbling with a delay,
 a gain and motor noise (one condition per delay), a second arm, or an unexplained mirror view (streams.py). All
-episodes run through time as one batch: at every frame `aif.Perception` over [joints model + visual models] takes
-a few updates warm-started from the previous belief, and the Laplace free energy at the new belief is recorded.
-The score of an episode is the time-averaged F of the visual modalities (½ εᵀΠε summed over them) or of all
-modalities (`score="total"`); "is this me?" = score ≤ threshold. ROC, AUC vs delay and vs viewing time, time to a
-95 % decision: report.py. An episode whose observations turn non-finite or whose perception diverges is marked
-failed with the reason and leaves the batch; the benchmark goes on.
+episodes run through time as one batch. At every frame two perceptions take a few updates warm-started from their
+previous beliefs: `aif.Perception` over [joints model + visual models] (one body behind both) and over the visual
+models alone (the stream has a body of its own; the joints are then explained by their own reading); the Laplace
+free energies of both hypotheses are recorded. The default score of an episode is the time-average of
+F(one body) − F(two bodies), a free-energy model comparison
+(Lanillos, Pages & Cheng 2020 score the mirror test by prediction error); `score="visual"` / `"total"` average the F
+of the visual / all modalities under one body. "Is this me?" = score ≤ threshold. ROC, AUC vs delay and vs viewing
+time, time to a 95 % decision: report.py. An episode whose observations turn non-finite or whose perception
+diverges is marked failed with the reason and leaves the batch; the benchmark goes on.
 """
 
 from __future__ import annotations
@@ -31,11 +34,12 @@ from bodyschema.evaluation.core.publish import publish
 from bodyschema.evaluation.core.runs import new_run
 from bodyschema.evaluation.core.specs import load_robot, models_field, resolve_models
 from bodyschema.evaluation.self_recognition.report import roc_table, summary_notes, write_report
+from bodyschema.evaluation.self_recognition.sensors import sensors_of, visual_only
 from bodyschema.evaluation.self_recognition.streams import IMITATOR, Episodes, frames_of, make_episodes
 
 SOURCES = (IMITATOR, "second_arm", "mirrored")
 VISUAL = ("ee_pixel", "ee_xyz", "image")
-SCORES = ("visual", "total")
+SCORES = ("contingency", "visual", "total")
 
 
 @dataclass(frozen=True)
@@ -57,7 +61,7 @@ class SelfRecognitionConfig(TrialsConfig):
     proprio_noise: float = math.radians(1.0)   # rad, σ of the joint readings (1°)
     visual_noise: tuple[tuple[str, float], ...] = (  # σ per visual modality: px, m, intensity in [0, 1]
         ("ee_pixel", 2.0), ("ee_xyz", 0.004), ("image", 0.02))   # 2 px: at 1 px an exact model's AUC is 1
-    score: str = "visual"              # "visual": F of the visual modalities; "total": F of all modalities
+    score: str = "contingency"         # F(one body) − F(two bodies); "visual"/"total": F of those modalities
     perception: PerceptionConfig = PerceptionConfig(max_steps=10, tol=1e-4, step_control="none")   # ≤ 10 per frame
     plots: bool = True                 # write the PNG plots beside the tables
 
@@ -107,14 +111,19 @@ class SelfRecognitionConfig(TrialsConfig):
 class Scores:
     visual: np.ndarray                 # (N, T) F of the visual modalities per frame; NaN from a failure on
     total: np.ndarray                  # (N, T) F of all modalities per frame
+    apart: np.ndarray                  # (N, T) F of two bodies: vision at its own belief, joints at their reading
     failed: np.ndarray                 # (N,) bool
     reason: list[str]                  # (N,) why an episode failed ("" otherwise)
 
-    def per_frame(self, which: str = "visual") -> np.ndarray:
-        return self.visual if which == "visual" else self.total        # (N, T)
+    def per_frame(self, which: str = "contingency") -> np.ndarray:
+        """(N, T) per frame: "contingency" = F(one body behind joints and vision) − F(a body apart), the free
+        energy bound on −log p(x | one body) + log p(x | a body apart): Bayesian model comparison by free energy
+        (Friston et al. 2007, the Laplace F as log evidence), which cancels what both hypotheses share (a decoder's
+        pose-dependent error floor)."""
+        return {"contingency": self.total - self.apart, "visual": self.visual, "total": self.total}[which]
 
-    def score(self, which: str = "visual") -> np.ndarray:
-        """(N,) time-averaged F per episode; NaN for failed episodes."""
+    def score(self, which: str = "contingency") -> np.ndarray:
+        """(N,) time-averaged per-frame score per episode; NaN for failed episodes."""
         return self.per_frame(which).mean(axis=1)
 
 
@@ -133,80 +142,49 @@ def prepare(config: SelfRecognitionConfig, models: Sequence):
                                  [m.modality for m in models]))
     robot = load_robot(models)                                     # checks joints; camera of the image model
     proprio = next((m for m in models if m.modality == "joints"), None) or AnalyticModel(robot.name, "joints")
-    sensors, precisions = _sensors(config, [proprio, *visual])
+    sensors, precisions = sensors_of(config, [proprio, *visual])
     perception = Perception(sensors, config.perception, precisions)
     return robot, perception, [m.modality for m in visual]
-
-
-def _sensors(config: SelfRecognitionConfig, models: Sequence) -> tuple[list, dict[str, float]]:
-    """The models as seen through the simulated sensors, and precision overrides. An exact (analytic) model's only
-    error is the sensor noise: Π = 1/σ². A learned model's precision covers its own error, the noise adds to it:
-    Π = 1/(1/Π_model(μ) + σ²). Modalities in config.perception.precisions keep the configured value."""
-    sigma = {**dict(config.visual_noise), "joints": config.proprio_noise}
-    fixed, seen = {}, []
-    for m in models:
-        s = sigma.get(m.modality, 0.0)
-        exact = getattr(m, "kind", None) == "analytic"
-        if s > 0 and exact and m.modality not in dict(config.perception.precisions):
-            fixed[m.modality] = 1.0 / s ** 2
-        seen.append(NoisySensor(m, s) if s > 0 and not exact else m)
-    return seen, fixed
-
-
-class NoisySensor:
-    """A SensoryModel observed through additive sensor noise σ: precision 1/(1/Π(μ) + σ²); the rest delegated."""
-
-    def __init__(self, model, sigma: float):
-        self.model, self.variance = model, float(sigma) ** 2
-        self.body, self.latent_dim, self.modality = model.body, model.latent_dim, model.modality
-        self.output_shape, self.kind = model.output_shape, getattr(model, "kind", type(model).__name__)
-        if hasattr(model, "compute_dtype"):                         # a network keeps its fast float32 path
-            self.compute_dtype = model.compute_dtype
-
-    def predict(self, z):
-        return self.model.predict(z)
-
-    def jacobian(self, z):
-        return self.model.jacobian(z)
-
-    def vjp(self, z, v):
-        return self.model.vjp(z, v)
-
-    def precision(self, z):                                         # (B, *out) output units⁻²
-        return 1.0 / (1.0 / self.model.precision(z) + self.variance)
-
-    def save(self, path):
-        self.model.save(path)
 
 
 # ---- perception through time ---------------------------------------------------------------------------
 def score_episodes(perception: Perception, episodes: Episodes, visual: Sequence[str],
                    progress: bool = True) -> Scores:
-    """Run perception frame by frame over all episodes at once (warm start: the previous belief); per frame, the
-    free energy at the new belief. Episodes with a non-finite observation or a diverged belief fail."""
+    """Run perception frame by frame over all episodes at once (warm start: the previous belief), once with one body
+    behind joints and vision and once on vision alone; per frame, the free energies of both hypotheses. Episodes
+    with a non-finite observation or a diverged belief fail."""
     from tqdm import tqdm
     n, t = episodes.proprio.shape[:2]
     streams = {"joints": episodes.proprio, **{m: episodes.visual[m] for m in visual}}
-    scores = Scores(np.full((n, t), np.nan), np.full((n, t), np.nan), np.zeros(n, bool), [""] * n)
+    scores = Scores(*(np.full((n, t), np.nan) for _ in range(3)), np.zeros(n, bool), [""] * n)
+    alone = visual_only(perception)
     belief = torch.zeros(n, perception.config.order + 1, perception.latent_dim, dtype=torch.float64)
+    belief[:, 0] = torch.from_numpy(np.nan_to_num(episodes.proprio[:, 0]))        # start at the joint readings
+    free = belief.clone()                                           # (N, order + 1, Dz), the vision-alone belief
     for frame in tqdm(range(t), desc="self-recognition", disable=not progress):
         _fail_non_finite(scores, streams, frame)
         rows = np.flatnonzero(~scores.failed)
         if rows.size == 0:
             break
         obs = {m: torch.from_numpy(np.asarray(x[rows, frame], dtype=np.float64)) for m, x in streams.items()}
-        if frame == 0:
-            belief[:, 0] = torch.from_numpy(np.nan_to_num(episodes.proprio[:, 0]))   # start at the joint readings
         result = perception.infer(obs, belief[rows])
-        for i in rows[result.diverged.numpy()]:
+        seen = {m: obs[m] for m in visual}
+        apart = alone.infer(seen, free[rows])
+        diverged = result.diverged.numpy() | apart.diverged.numpy()
+        for i in rows[diverged]:
             scores.failed[i], scores.reason[i] = True, f"perception diverged at frame {frame}"
-        ok = ~result.diverged.numpy()
-        belief[rows[ok]] = result.mu_tilde[ok]
-        total, per_modality = _free_energy(perception, {m: x[ok] for m, x in obs.items()}, result.mu[ok])
+        ok = ~diverged
+        belief[rows[ok]], free[rows[ok]] = result.mu_tilde[ok], apart.mu_tilde[ok]
+        total, per_modality = _free_energy(perception.models, perception.precisions,
+                                           {m: x[ok] for m, x in obs.items()}, result.mu[ok])
+        vision, _ = _free_energy(alone.models, alone.precisions, {m: x[ok] for m, x in seen.items()}, apart.mu[ok])
+        joints, _ = _free_energy(perception.models[:1], perception.precisions, {"joints": obs["joints"][ok]},
+                                 obs["joints"][ok])                 # its own body: the readings, ε = 0
         scores.total[rows[ok], frame] = total
         scores.visual[rows[ok], frame] = sum(per_modality[m] for m in visual)
-    scores.visual[scores.failed] = np.nan
-    scores.total[scores.failed] = np.nan
+        scores.apart[rows[ok], frame] = vision + joints
+    for f in (scores.visual, scores.total, scores.apart):
+        f[scores.failed] = np.nan
     return scores
 
 
@@ -217,13 +195,14 @@ def _fail_non_finite(scores: Scores, streams: dict[str, np.ndarray], frame: int)
             scores.failed[i], scores.reason[i] = True, f"non-finite {name} observation at frame {frame}"
 
 
-def _free_energy(perception: Perception, obs: dict[str, torch.Tensor], mu: torch.Tensor):
-    """Laplace F (B,) and ½ εᵀΠε per modality (B,) at the beliefs mu (B, Dz), with the perception's precisions."""
-    pis = {m.modality: (torch.as_tensor(perception.precisions[m.modality], dtype=torch.float64)
-                        .expand(mu.shape[0], *m.output_shape) if m.modality in perception.precisions else None)
-           for m in perception.models}
+def _free_energy(models: Sequence, precisions: dict, obs: dict[str, torch.Tensor], mu: torch.Tensor):
+    """Laplace F (B,) (½ εᵀΠε − ½ log|Π| summed over the models) and ½ εᵀΠε per modality (B,) at the beliefs mu
+    (B, Dz), with a perception's precision overrides."""
+    pis = {m.modality: (torch.as_tensor(precisions[m.modality], dtype=torch.float64)
+                        .expand(mu.shape[0], *m.output_shape) if m.modality in precisions else None)
+           for m in models}
     with torch.no_grad():
-        terms = sensory_terms(perception.models, obs, pis, mu, need_hessian=False, need_grad=False)
+        terms = sensory_terms(models, obs, pis, mu, need_hessian=False, need_grad=False)
     return terms.free_energy.numpy(), {m: e.numpy() for m, e in terms.weighted.items()}
 
 
@@ -241,11 +220,10 @@ def run_self_recognition(config: SelfRecognitionConfig = SelfRecognitionConfig()
     per_frame = scores.per_frame(config.score)                           # (N, T)
     rows, curves, over_time = roc_table(episodes.kind, episodes.condition, episodes.delay, per_frame,
                                         scores.failed, episodes.period)
-    per_episode = [{"episode": i, "kind": k, "condition": c, "failed": bool(f), "reason": r, "score_visual": v,
-                    "score_total": s}
-                   for i, (k, c, f, r, v, s) in enumerate(zip(episodes.kind, episodes.condition, scores.failed,
-                                                              scores.reason, scores.score("visual"),
-                                                              scores.score("total")))]
+    per_episode = [{"episode": i, "kind": k, "condition": c, "failed": bool(f), "reason": r,
+                    **{f"score_{name}": float(scores.score(name)[i]) for name in SCORES}}
+                   for i, (k, c, f, r) in enumerate(zip(episodes.kind, episodes.condition, scores.failed,
+                                                        scores.reason))]
     lines = summary_notes(config, robot.name, visual, episodes.period, rows, scores, wall)
     out = new_run(config)
     paths = write_report(out, per_episode, rows, curves, over_time, lines, episodes.condition,

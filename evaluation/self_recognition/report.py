@@ -21,6 +21,8 @@ from bodyschema.evaluation.self_recognition.streams import SELF
 
 TABLE_COLUMNS = ("delay_s", "others", "auc", "threshold", "tpr", "fpr", "t95_s", "t_auc95_s", "median_self",
                  "median_other", "failed")
+SCORE_NAMES = {"contingency": "F(one body) − F(vision alone)", "visual": "visual free energy",
+               "total": "free energy of all modalities"}
 DECISION = 0.95                        # balanced accuracy of a "95 % decision"; also the AUC level of t_auc95_s
 
 
@@ -127,7 +129,7 @@ def summary_notes(config, robot: str, visual: Sequence[str], period: float, rows
             f"{', '.join(config.sources)} (imitator: gain {config.imitation_gain:g}, motor noise "
             f"{config.imitation_noise:.4g} rad, delays {', '.join(f'{d:g}' for d in config.delays)} s); noise σ: "
             f"joints {config.proprio_noise:.4g} rad, visual {({m: s for m, s in config.visual_noise if m in visual})}.",
-            f"Score: time-averaged {config.score} free energy after ≤ {config.perception.max_steps} perception "
+            f"Score: time-averaged {SCORE_NAMES[config.score]} after ≤ {config.perception.max_steps} perception "
             f"updates per frame; 'is this me?' = score ≤ threshold (Youden's J per comparison; pooled: "
             f"{pooled['threshold']:.4g}, TPR {pooled['tpr']:.3f} at FPR {pooled['fpr']:.3f}, AUC {pooled['auc']:.4f}). "
             f"t95_s: viewing time from which the best balanced accuracy stays ≥ {DECISION:g} (a 95 % decision); "
@@ -193,18 +195,19 @@ def plot_vs_delay(rows: Sequence[Mapping], over_time: Mapping[str, Mapping[str, 
 
 
 def plot_histogram(conditions: np.ndarray, scores: np.ndarray, failed: np.ndarray, path: Path) -> Path:
-    """Score histograms per condition on a log axis (free energies span decades)."""
+    """Score histograms per condition on a symmetric log axis (scores span decades; a difference of free
+    energies may be negative)."""
     from bodyschema.evaluation.core.plots import plt, save_figure
     fig, ax = plt.subplots(figsize=(6.4, 3.8))
     ok = ~failed & np.isfinite(scores)
-    positive = np.maximum(scores[ok], 1e-12)
-    if positive.size:
-        bins = np.geomspace(positive.min(), max(positive.max(), positive.min() * 1.01), 40)
+    if ok.any():
+        low, high = np.arcsinh(scores[ok].min()), np.arcsinh(scores[ok].max())
+        bins = np.sinh(np.linspace(low, max(high, low + 1e-6), 40))             # even steps of asinh: log-like
         for name in dict.fromkeys(conditions):
-            values = np.maximum(scores[ok & (conditions == name)], 1e-12)
+            values = scores[ok & (conditions == name)]
             ax.hist(values, bins=bins, histtype="step", lw=2 if name == SELF else 1, label=f"{name} ({values.size})")
-        ax.set_xscale("log")
-    ax.set_xlabel("score: time-averaged free energy")
+        ax.set_xscale("symlog", linthresh=1.0)
+    ax.set_xlabel("score (time-averaged)")
     ax.set_ylabel("episodes")
     ax.legend(fontsize=7)
     return save_figure(fig, path, dpi=120)
@@ -218,11 +221,11 @@ def plot_over_time(conditions: np.ndarray, per_frame: np.ndarray, period: float,
     t = np.arange(per_frame.shape[1]) * period
     for c, name in enumerate(dict.fromkeys(conditions)):
         for j, i in enumerate(np.flatnonzero(conditions == name)[:per_condition]):
-            ax.plot(t, np.maximum(per_frame[i], 1e-12), color=f"C{c}", lw=1, alpha=0.8,
+            ax.plot(t, per_frame[i], color=f"C{c}", lw=1, alpha=0.8,
                     label=name if j == 0 else None)
-    ax.set_yscale("log")
+    ax.set_yscale("symlog", linthresh=1.0)
     ax.set_xlabel("time (s)")
-    ax.set_ylabel("free energy per frame")
+    ax.set_ylabel("score per frame")
     ax.legend(fontsize=7)
     return save_figure(fig, path, dpi=120)
 

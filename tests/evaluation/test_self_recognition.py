@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 import torch
 
-from bodyschema.evaluation.self_recognition.benchmark import (NoisySensor, SelfRecognitionConfig, prepare,
-                                                             run_self_recognition, score_episodes)
+from bodyschema.evaluation.self_recognition.benchmark import (SelfRecognitionConfig, prepare, run_self_recognition,
+                                                             score_episodes)
 from bodyschema.evaluation.self_recognition.report import (auc, balanced_accuracy, best_threshold, roc_curve,
                                                           roc_table, time_to)
+from bodyschema.evaluation.self_recognition.sensors import NoisySensor, visual_only
 from bodyschema.evaluation.self_recognition.streams import episode_conditions, imitate, make_episodes, mirror
 from bodyschema.evaluation.core.sensing import sense
 from bodyschema.models.analytic import AnalyticModel
@@ -105,6 +106,22 @@ def test_sensor_noise_adds_to_a_learned_models_variance_and_sets_an_exact_models
     assert exact.precisions == {"joints": pytest.approx(100.0), "ee_pixel": pytest.approx(4.0)}
 
 
+def test_the_vision_alone_hypothesis_keeps_the_visual_models_and_their_precisions(setup):
+    _, perception, _ = setup
+    alone = visual_only(perception)
+    assert [m.modality for m in alone.models] == ["ee_pixel"]
+    assert alone.precisions == {"ee_pixel": perception.precisions["ee_pixel"]}
+    torch.testing.assert_close((alone.low, alone.high), (perception.low, perception.high))
+
+
+def test_one_body_explains_my_own_stream_at_little_cost_and_another_arms_at_a_high_one(short_run):
+    episodes, scores = short_run
+    cost = scores.score("contingency")                                # F(one body) − F(two bodies)
+    mine, arm = cost[episodes.kind == "self"], cost[episodes.kind == "second_arm"]
+    assert np.median(mine) < 3.0 < np.median(arm)                     # ½ εᵀΠε of noisy readings vs another pose
+    np.testing.assert_allclose(scores.per_frame("contingency"), scores.total - scores.apart)
+
+
 # ---- the streams ----------------------------------------------------------------------------------------
 def test_every_condition_gets_the_trials_and_self_episodes_come_first():
     kinds, names, lags = episode_conditions(5, ("imitator", "second_arm"), [0, 2, 6], 0.05)
@@ -165,7 +182,7 @@ def test_auc_falls_as_the_imitators_delay_shrinks_to_zero(pixel_model, seed):
     robot, perception, visual = prepare(config, [pixel_model])
     episodes = make_episodes(config, robot, visual)
     scores = score_episodes(perception, episodes, visual, progress=False)
-    rows, _, _ = roc_table(episodes.kind, episodes.condition, episodes.delay, scores.visual, scores.failed,
+    rows, _, _ = roc_table(episodes.kind, episodes.condition, episodes.delay, scores.per_frame(), scores.failed,
                            episodes.period)
     aucs = [r["auc"] for r in rows[1:]]                              # by increasing delay
     assert [r["delay_s"] for r in rows[1:]] == pytest.approx([0.0, 0.05, 0.2, 0.4])
