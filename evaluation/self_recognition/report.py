@@ -21,7 +21,7 @@ from bodyschema.evaluation.self_recognition.streams import SELF
 
 TABLE_COLUMNS = ("delay_s", "others", "auc", "threshold", "tpr", "fpr", "t95_s", "t_auc95_s", "median_self",
                  "median_other", "failed")
-SCORE_NAMES = {"contingency": "F(one body) − F(vision alone)", "visual": "visual free energy",
+SCORE_NAMES = {"contingency": "F(one body) − F(two bodies)", "visual": "visual free energy",
                "total": "free energy of all modalities"}
 DECISION = 0.95                        # balanced accuracy of a "95 % decision"; also the AUC level of t_auc95_s
 
