@@ -88,10 +88,12 @@ def _plots(out: Path, config, rows, curves, episodes, energies) -> dict[str, Pat
     ax.legend(fontsize=8)
     paths["roc_png"] = save_figure(fig, out / "roc.png")
     fig, ax = plt.subplots(figsize=(6, 4))
-    for senses in sorted({r["senses"] for r in rows}):
-        for source in (*config.sources, "pooled"):
+    senses_all = [ALL, *sorted({r["senses"] for r in rows} - {ALL})]
+    for k, senses in enumerate(senses_all):                     # line style per senses, colour per source
+        for j, source in enumerate((*config.sources, "pooled")):
             sel = [r for r in rows if r["senses"] == senses and r["source"] == source and not r["known_delay"]]
-            ax.plot([r["delay_s"] * 1000 for r in sel], [r["auc"] for r in sel], "o-", label=f"{source} [{senses}]")
+            ax.plot([r["delay_s"] * 1000 for r in sel], [r["auc"] for r in sel], ("-", "--", ":", "-.")[k % 4],
+                    marker="o", color=f"C{j}", label=f"{source} [{senses}]")
     ax.set(xlabel="sensory delay (ms)", ylabel="AUC", title="Agency AUC vs sensory delay (predicted for now)")
     ax.legend(fontsize=6)
     paths["auc_vs_delay_png"] = save_figure(fig, out / "auc_vs_delay.png")
