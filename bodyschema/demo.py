@@ -1,11 +1,11 @@
 """The end-to-end demo on embedded defaults: babble → dataset → fit → registry → Jacobian → AIF levels → reaching →
-self-recognition → report.
+self-recognition → rubber hand → agency → report.
 
 Sized for 2 CPU cores in a few minutes: small datasets for every robot (validated, summarised, a contact sheet
 each), GPR + MDN on nao_arm ee_xyz and a pixel decoder on its 56×80 images, all registered in MLflow; then, with
 the registered GPR champion loaded back from the registry by URI: the estimation levels 1–3, closed-loop reaching
-to end-effector goals (fused with the joint encoder) against a PD baseline, and "is this me?" on its ee stream;
-last, one report page (Markdown + HTML) of every table and plot.
+to end-effector goals (fused with the joint encoder) against a PD baseline, "is this me?" on its ee stream, the
+rubber-hand drift and "did I do it?"; last, one report page (Markdown + HTML) of every table and plot.
 """
 
 from __future__ import annotations
