@@ -31,7 +31,7 @@ from bodyschema.evaluation.core.sensing import sense
 from bodyschema.evaluation.core.specs import load_robot, models_field, resolve_models, trained_workspace
 from bodyschema.evaluation.rubber_hand.report import condition_table, write_report
 from bodyschema.evaluation.rubber_hand.scene import camera_frame, episode_rng, rest_poses
-from bodyschema.evaluation.rubber_hand.stroking import MODES, felt_strokes, ownership, seen_strokes
+from bodyschema.evaluation.rubber_hand.stroking import MODES, felt_strokes, ownership, strokes
 
 VISUAL = ("ee_xyz", "ee_pixel")
 
@@ -47,7 +47,7 @@ class RubberHandConfig(TrialsConfig):
     trials: int = 10                   # episodes per condition (displacement × visual σ × mode)
     displacements: tuple[float, ...] = (0.05, 0.10, 0.20, 0.30)   # m, seen hand − real hand (people: 15–30 cm)
     visual_sigmas: tuple[float, ...] = (0.005, 0.01, 0.02, 0.05)  # m, σ of the seen hand's position: Π_v = 1/σ²
-    modes: tuple[str, ...] = MODES     # stroking: synchronous, asynchronous
+    modes: tuple[str, ...] = MODES[:2]  # stroking: synchronous, asynchronous (also: vision_only, no brush)
     duration: float = 30.0             # s of stroking per episode
     period: float = 0.25               # s between perception frames
     proprio_noise: float = math.radians(2.0)   # rad, σ of the joint readings: Π_joints = 1/σ²
@@ -158,9 +158,8 @@ def make_episodes(config: RubberHandConfig, robot, visual: Sequence[str]) -> Epi
         scale = 1.0 if m == "ee_xyz" else robot.intrinsics()[0, 0] / camera_frame(robot, seen)[:, 2]   # px/m
         precision[m] = 1.0 / (sigma * scale) ** 2                                   # (N,) m⁻² | px⁻²
     proprio = poses[trial][:, None, :] + config.proprio_noise * eps_p[trial]        # (N, T, Dq) rad
-    modes = [conditions[c][2] for c in cond]
-    seen_times = [seen_strokes(felt[i], mode, config.async_lag_s) for i, mode in zip(trial, modes)]
-    own = ownership([felt[i] for i in trial], seen_times, disp[:, 0], times, config)   # (N, T)
+    pairs = [strokes(felt[i], conditions[c][2], config.async_lag_s) for i, c in zip(trial, cond)]
+    own = ownership([f for f, _ in pairs], [s for _, s in pairs], disp[:, 0], times, config)   # (N, T)
     return Episodes(cond, real[trial], dirs[trial], proprio, out_visual, precision, own, times)
 
 

@@ -18,6 +18,9 @@ HUMAN_REFERENCE = (
     "can appear without touch (vision alone, Rohde 2011), the illusion weakening as the hands are set further apart.")
 
 
+STYLE = {"synchronous": "-", "asynchronous": "--", "vision_only": ":"}     # line style per stroking mode
+
+
 def condition_table(config, episodes, drift: np.ndarray, failed: np.ndarray) -> tuple[list[dict], list[dict]]:
     """One row per condition (final drift, its fraction of the displacement, q(own), time to half the final drift)
     and one per condition and frame (mean drift over time)."""
@@ -91,8 +94,8 @@ def _plots(out: Path, config, rows, over_time) -> dict[str, Path]:
             continue
         series = [r for r in over_time if r["condition"] == row["condition"]]
         color = f"C{np.abs(np.array(config.visual_sigmas) * 100 - row['visual_sigma_cm']).argmin() % 10}"  # per σ
-        ax.plot([r["t_s"] for r in series], [r["drift_cm"] for r in series], "-" if row["mode"] == "synchronous"
-                else "--", color=color, label=f"σ={row['visual_sigma_cm']:g}cm {row['mode']}")
+        ax.plot([r["t_s"] for r in series], [r["drift_cm"] for r in series], STYLE[row["mode"]], color=color,
+                label=f"σ={row['visual_sigma_cm']:g}cm {row['mode']}")
     ax.set(xlabel="stroking time (s)", ylabel="drift towards the seen hand (cm)",
            title=f"Drift over time, seen hand {disp * 100:g} cm away")
     ax.legend(fontsize=7)
@@ -102,7 +105,7 @@ def _plots(out: Path, config, rows, over_time) -> dict[str, Path]:
         for mode in config.modes:
             sel = [r for r in rows if r["displacement_cm"] == d * 100 and r["mode"] == mode]
             ax.plot([r["visual_sigma_cm"] for r in sel], [r["drift_fraction"] for r in sel],
-                    "o-" if mode == "synchronous" else "x--", color=f"C{config.displacements.index(d) % 10}",
+                    STYLE[mode], marker="o", color=f"C{config.displacements.index(d) % 10}",
                     label=f"{d * 100:g} cm {mode}")
     ax.set(xscale="log", xlabel="visual σ (cm): lower = more precise", ylabel="final drift / displacement",
            title="Drift vs visual precision")

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-MODES = ("synchronous", "asynchronous")
+MODES = ("synchronous", "asynchronous", "vision_only")   # vision_only: no brush at all (Rohde et al. 2011's control)
 
 
 def felt_strokes(rng: np.random.Generator, duration: float, rate_hz: float, jitter_s: float) -> np.ndarray:
@@ -29,9 +29,12 @@ def felt_strokes(rng: np.random.Generator, duration: float, rate_hz: float, jitt
     return times[times < duration]
 
 
-def seen_strokes(felt: np.ndarray, mode: str, lag_s: float) -> np.ndarray:
-    """The strokes on the seen hand (K,) s: the felt ones, later by lag_s when asynchronous."""
-    return felt if mode == "synchronous" else felt + lag_s
+def strokes(felt: np.ndarray, mode: str, lag_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """(felt, seen) stroke times (K,) s of a mode: seen = felt, later by lag_s when asynchronous; none at all
+    when vision_only."""
+    if mode == "vision_only":
+        return np.empty(0), np.empty(0)
+    return felt, (felt if mode == "synchronous" else felt + lag_s)
 
 
 def nearest_seen(felt: np.ndarray, seen: np.ndarray) -> np.ndarray:

@@ -12,7 +12,7 @@ import pytest
 from bodyschema.evaluation.rubber_hand.benchmark import (RubberHandConfig, make_episodes, prepare, run_rubber_hand,
                                                         track_drift)
 from bodyschema.evaluation.rubber_hand.report import final_drift
-from bodyschema.evaluation.rubber_hand.stroking import felt_strokes, ownership, seen_strokes, temporal_log_lr
+from bodyschema.evaluation.rubber_hand.stroking import felt_strokes, ownership, strokes, temporal_log_lr
 from bodyschema.models.analytic import AnalyticModel
 
 SWEEP = RubberHandConfig(trials=3, displacements=(0.1, 0.2), visual_sigmas=(0.005, 0.01, 0.02, 0.05),
@@ -74,14 +74,14 @@ def test_stroke_timing_is_evidence_of_ownership():
     rng = np.random.default_rng(0)
     felt = felt_strokes(rng, 10.0, 1.0, 0.1)
     assert 9 <= felt.size <= 11 and (np.diff(felt) > 0.7).all()
-    sync = temporal_log_lr(felt, seen_strokes(felt, "synchronous", 0.5), 0.2, 1.0)
-    late = temporal_log_lr(felt, seen_strokes(felt, "asynchronous", 0.5), 0.2, 1.0)
+    sync = temporal_log_lr(*strokes(felt, "synchronous", 0.5), 0.2, 1.0)
+    late = temporal_log_lr(*strokes(felt, "asynchronous", 0.5), 0.2, 1.0)
     assert (sync > 0).all() and (late < 0).all()
     times = np.arange(1, 41) * 0.25
-    own = ownership([felt, felt], [seen_strokes(felt, "synchronous", 0.5), seen_strokes(felt, "asynchronous", 0.5)],
-                    np.array([0.1, 0.1]), times, SWEEP)
-    assert (np.diff(own[0]) >= 0).all() and (np.diff(own[1]) <= 0).all()
-    assert own[0, -1] > 0.9 > SWEEP.prior_own > 0.01 > own[1, -1]
+    pairs = [strokes(felt, mode, 0.5) for mode in ("synchronous", "asynchronous", "vision_only")]
+    own = ownership([f for f, _ in pairs], [s for _, s in pairs], np.array([0.1, 0.1, 0.1]), times, SWEEP)
+    assert (np.diff(own[0]) >= 0).all() and (np.diff(own[1]) <= 0).all() and (np.diff(own[2]) == 0).all()
+    assert own[0, -1] > 0.9 > own[2, -1] > SWEEP.prior_own > 0.01 > own[1, -1], "d = 10 cm: the seen hand is near"
 
 
 def test_bad_input_is_refused_before_any_work(tmp_path):
@@ -119,3 +119,11 @@ def test_a_pixel_view_of_the_seen_hand_drifts_as_its_position_does():
     drift, failed = track_drift(config, robot, sensors, episodes)
     pixel = final_drift(drift, episodes.times, config.final_window_s)
     assert not failed.any() and np.allclose(pixel, xyz, rtol=0.02), (pixel, xyz)
+
+
+def test_vision_alone_drifts_less_than_synchronous_stroking_and_more_than_asynchronous():
+    config = replace(SWEEP, displacements=(0.1,), visual_sigmas=(0.01,), modes=("synchronous", "asynchronous",
+                                                                              "vision_only"))
+    final, _, episodes = drifts(config)
+    sync, late, vision = (final[episodes.condition == c] for c in range(3))
+    assert (late < vision).all() and (vision < sync).all(), (sync, late, vision)
