@@ -1,5 +1,5 @@
-"""`bodyschema report`: one Markdown and one HTML page of every benchmark's latest run (page.py), with a
-dependency-free Markdown → HTML converter (markdown_html.py)."""
+"""`bodyschema report`: one Markdown and one HTML page of every benchmark's latest run (page.py), with
+Markdown → HTML by markdown-it-py with GitHub's heading anchors and embedded images (markdown_html.py)."""
 
 from bodyschema.evaluation.report.page import ReportConfig, write_report
 

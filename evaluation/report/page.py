@@ -7,7 +7,7 @@ holding a `summary.md` is a section too. Under each section's summary the models
 spec, registered name, version, source run, weights digest). Files that cannot belong to the run are skipped and
 listed at the end: empty or truncated files, and plots/CSVs older than their summary.md by more than
 `stale_after_s`. The HTML embeds images as base64
-and needs no network; `markdown` is not a dependency, so `markdown_to_html` converts what summary.md files hold
+and needs no network; `markdown_to_html` (markdown-it-py, tables enabled) converts what summary.md files hold
 (headings, paragraphs, pipe tables, lists, code, links, images). Both pages are written to temporary files
 and renamed only once complete, so a failure never leaves a half-written report.
 """

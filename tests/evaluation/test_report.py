@@ -119,14 +119,27 @@ def test_a_pipe_table_becomes_an_html_table_with_header_cells_and_alignment():
     parser.feed(html)
     assert parser.rows == [["level", "joint_err_deg"], ["1", "0.5"], ["3+ms", "2 | 3"]]
     assert len(re.findall(r"<th[ >]", html)) == 2 and len(re.findall(r"<td[ >]", html)) == 4
-    assert 'style="text-align:right"' in html and "<p>Some text.</p>" in html and "<ul><li>one</li>" in html
+    assert 'style="text-align:right"' in html and "<p>Some text.</p>" in html
+    assert re.search(r"<ul>\s*<li>one</li>\s*<li>two</li>\s*</ul>", html)
 
 
 def test_headings_code_and_inline_markup_convert_and_escape():
     html = markdown_to_html("## A & B\n\nkeep `x<y` and **bold**, snake_case_name\n\n```python\na < b\n```\n")
     assert '<h2 id="a--b">A &amp; B</h2>' in html
     assert "<code>x&lt;y</code>" in html and "<strong>bold</strong>" in html and "snake_case_name" in html
-    assert '<pre><code class="language-python">a &lt; b</code></pre>' in html
+    assert re.search(r'<pre><code class="language-python">a &lt; b\s*</code></pre>', html)
+
+
+def test_raw_html_is_shown_as_text_and_a_missing_image_as_its_alt():
+    html = markdown_to_html("<script>alert(1)</script>\n\n![the plot](gone.png)\n", lambda src: None)
+    assert "<script" not in html and "&lt;script&gt;" in html
+    assert "<em>[missing image: the plot]</em>" in html and "<img" not in html
+
+
+def test_an_image_link_is_unquoted_before_it_is_mapped():
+    seen = []
+    html = markdown_to_html("![p](runs/a%20b/plot.png)", lambda src: seen.append(src) or "data:image/png;base64,AA")
+    assert seen == ["runs/a b/plot.png"] and '<img src="data:image/png;base64,AA" alt="p">' in html
 
 
 def test_stale_truncated_and_orphan_files_are_skipped_and_listed(results):
