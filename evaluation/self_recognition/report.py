@@ -1,11 +1,11 @@
 """ROC analysis and report of the self-recognition benchmark: AUC, ROC curve, best threshold, decision time, tables,
 plots.
 
-"Is this me?" is `score ≤ threshold` (a low free energy: the visual stream is explained by my own body), so the
-positives are the self episodes and scikit-learn's metrics see the score −F: TPR = P(self F ≤ th),
-FPR = P(other F ≤ th), AUC = P(other F > self F) + ½ P(tie) (the Mann–Whitney U over n_self · n_other; Hanley &
-McNeil 1982). The best threshold maximises Youden's J = TPR − FPR; its balanced accuracy is (1 + J)/2, and the
-time to a 95 % decision is the viewing time from which that accuracy stays ≥ 0.95.
+"Is this me?" is `score ≤ threshold` (a low free-energy score S: the visual stream is explained by my own body), so
+the positives are the self episodes and scikit-learn's metrics see −S: TPR = P(self S ≤ th), FPR = P(other S ≤ th),
+AUC = P(other S > self S) + ½ P(tie) (the Mann–Whitney U over n_self · n_other; Hanley & McNeil 1982). The best
+threshold maximises Youden's J = TPR − FPR; its balanced accuracy is (1 + J)/2, and the time to a 95 % decision is
+the viewing time from which that accuracy stays ≥ 0.95 (the threshold re-chosen at each viewing time).
 """
 
 from __future__ import annotations
@@ -14,7 +14,6 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
-from sklearn import metrics
 
 from bodyschema.evaluation.core.tables import markdown_table, write_csv
 from bodyschema.evaluation.self_recognition.streams import SELF
@@ -27,7 +26,7 @@ DECISION = 0.95                        # balanced accuracy of a "95 % decision";
 
 
 def _labelled(self_scores, other_scores) -> tuple[np.ndarray, np.ndarray]:
-    """(y, −F): self episodes are the positives, a lower free energy says "me"."""
+    """(y, −S): self episodes are the positives, a lower score says "me"."""
     s, o = np.asarray(self_scores, float), np.asarray(other_scores, float)
     return np.concatenate([np.ones(s.size), np.zeros(o.size)]), -np.concatenate([s, o])
 
@@ -37,7 +36,8 @@ def auc(self_scores: np.ndarray, other_scores: np.ndarray) -> float:
     side is empty."""
     if np.size(self_scores) == 0 or np.size(other_scores) == 0:
         return float("nan")
-    return float(metrics.roc_auc_score(*_labelled(self_scores, other_scores)))
+    from sklearn.metrics import roc_auc_score                   # seconds to import: only when scoring
+    return float(roc_auc_score(*_labelled(self_scores, other_scores)))
 
 
 def roc_curve(self_scores: np.ndarray, other_scores: np.ndarray) -> dict[str, np.ndarray]:
@@ -45,6 +45,7 @@ def roc_curve(self_scores: np.ndarray, other_scores: np.ndarray) -> dict[str, np
     if np.size(self_scores) == 0 or np.size(other_scores) == 0:
         nan = np.array([np.nan])
         return {"threshold": nan, "tpr": nan, "fpr": nan}
+    from sklearn import metrics
     fpr, tpr, minus = metrics.roc_curve(*_labelled(self_scores, other_scores), drop_intermediate=False)
     return {"threshold": -minus, "tpr": tpr, "fpr": fpr}       # −F ≥ th  ⇔  F ≤ −th
 
