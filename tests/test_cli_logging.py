@@ -132,3 +132,11 @@ def test_registry_list_names_its_store_and_mlflow_speaks_only_when_verbose(tmp_p
         assert f"tracking: sqlite:///{tmp_path / db}" in done.stderr
         chatter = [line for line in done.stderr.splitlines() if " INFO mlflow" in line]
         assert bool(chatter) is (flags == ("--verbose",)), done.stderr
+
+
+def test_the_tracking_line_stays_with_quiet_on_stderr_only(tmp_path, capsys):
+    uri = f"sqlite:///{tmp_path / 'mlflow.db'}"
+    assert cli.main(["--quiet", "registry", "list", "--tracking-uri", uri]) == 0
+    out, err = capsys.readouterr()
+    assert f"tracking: {uri}" in err.splitlines() and "tracking" not in out
+    assert out.strip() == "no registered bodyschema models"
