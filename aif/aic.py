@@ -30,7 +30,7 @@ import torch
 
 from bodyschema.aif.free_energy import check_models, model_input
 from bodyschema.aif.generalized import implicit_step, shift, shift_matrix
-from bodyschema.aif.priors import attractor_flow
+from bodyschema.aif.priors import GEOMETRIES, attractor_flow
 from bodyschema.errors import must_be
 
 INTEGRATORS = ("implicit", "euler")
@@ -58,6 +58,7 @@ class AICConfig:
     attractor_gain: float = 2.0  # β (1/s) for a joints goal
     # β per goal modality, 1/(s·unit²): for an ee_xyz goal, 2 / 10 / 40 left 60 / 3.5 / 7.9 mm after 4 s (4 episodes)
     goal_gains: tuple[tuple[str, float], ...] = (("ee_xyz", 10.0),)
+    goal_geometry: str = "gradient"   # a model goal's f: "gradient" β Jᵀ(x_d − g) | "gauss_newton" (priors.py)
     # Π of the extra models (per output), 0 = a broken sensor. Defaults give J_mᵀ Π_m J_m ≈ ½ Π_q on the panda's
     # shoulder joints (|J| ≈ 0.5 m/rad, ≈ 40 px/rad): of Π_ee_xyz ∈ {1, 2, 4} on 10 Jupiter episodes (seed 7), 4 left
     # one in a limit cycle. A modality not listed uses model.precision(μ) · model_precision_scale.
@@ -79,6 +80,8 @@ class AICConfig:
                 raise ValueError(must_be("goal_gains", "pairs (modality, β > 0)", self.goal_gains))
         if not (isinstance(self.perception_steps, int) and self.perception_steps >= 1):
             raise ValueError(must_be("perception_steps", "an integer ≥ 1", self.perception_steps))
+        if self.goal_geometry not in GEOMETRIES:
+            raise ValueError(must_be("goal_geometry", f"one of {GEOMETRIES}", self.goal_geometry))
         if self.integrator not in INTEGRATORS:
             raise ValueError(must_be("integrator", f"one of {INTEGRATORS}", self.integrator))
 
@@ -237,7 +240,8 @@ class AICController:
             return beta * (inputs.goal - mu), -beta * eye
         model = next(m for m in self.models if m.modality == self._goal_name)
         z = model_input(model, mu)
-        return attractor_flow(model.predict(z).to(mu.dtype), model.jacobian(z).to(mu.dtype), inputs.goal, beta)
+        return attractor_flow(model.predict(z).to(mu.dtype), model.jacobian(z).to(mu.dtype), inputs.goal, beta,
+                              self.config.goal_geometry)
 
     # ---- input checks -----------------------------------------------------------------------------------
     def _check_state(self, x, name: str, batch: int | None = None) -> torch.Tensor:

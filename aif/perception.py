@@ -420,7 +420,8 @@ class Perception:
                 hess = hess + prior.hessian
         weighted = dict(s.weighted)
         if prior is not None:
-            weighted["prior"] = 0.5 * cfg.prior_precision * prior.error.pow(2).sum(dim=(1, 2))
+            weighted["prior"] = prior.energy if prior.energy is not None else \
+                0.5 * cfg.prior_precision * prior.error.pow(2).sum(dim=(1, 2))
         return free, grad, hess, weighted
 
 

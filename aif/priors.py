@@ -10,10 +10,11 @@ Kinds:
               goal's precision: the goal model's own, or 1):
                 "gradient"      f(μ) = J_gᵀ Π (x_d − g(μ))                      (the issue's f(z, x_d));
                                 A ≈ −J_gᵀ Π J_g (Gauss–Newton: second derivatives of g dropped)
-                "gauss_newton"  f(μ) = (J_gᵀ Π J_g + λ I)⁻¹ J_gᵀ Π (x_d − g(μ))  (damped least squares, Wampler
-                                1986; λ = δ·tr(JᵀΠJ)/Dz); A ≈ −(JᵀΠJ + λI)⁻¹ JᵀΠJ. J f ≈ Π-weighted (x_d − g): the
-                                output moves straight along its error at rate β, whatever the arm's redundancy or
-                                the skew of Jᵀ (a 7-DOF arm crawls along Jᵀe's weak directions).
+                "gauss_newton"  f(μ) = β (J_gᵀ W J_g + λ I)⁻¹ J_gᵀ W (x_d − g(μ)), Π = β W with W's mean 1
+                                (damped least squares, Wampler 1986; λ = δ·tr(JᵀWJ)/Dz); A ≈ −β (JᵀWJ + λI)⁻¹ JᵀWJ.
+                                J f ≈ β (x_d − g): the output moves straight along its error at rate β (1/s),
+                                whatever the arm's redundancy or the skew of Jᵀ (a 7-DOF arm crawls along Jᵀe's
+                                weak directions).
 Its free-energy term at order n ≥ 1 is ½ Σ_i ε_z^(i)ᵀ Π_z ε_z^(i) − ½ K·Dz ln Π_z with gradient Lᵀ Π_z ε_z and
 Gauss–Newton Hessian Π_z Lᵀ L, L = ∂ε_z/∂vec(μ̃) = D ⊗ I − I_K ⊗ A.
 At order 0 (K = 1) Dμ̃ = 0, so ε_z = −f(μ) would make the attractor the penalty ½ Π_z |f|², with β entering squared
@@ -48,6 +49,7 @@ class PriorTerms:
     grad: torch.Tensor           # (B, K, Dz) ∂F_z/∂μ̃
     hessian: torch.Tensor        # (B, K·Dz, K·Dz) Gauss–Newton
     error: torch.Tensor          # (B, K, Dz) ε_z
+    energy: torch.Tensor | None = None   # (B,) the term without its log-determinant; None: ½ Π_z |ε_z|²
 
 
 @dataclass
@@ -70,12 +72,13 @@ def attractor_flow(pred: torch.Tensor, jac: torch.Tensor, goal: torch.Tensor, ga
         return pull, -curv
     if geometry != "gauss_newton":
         raise ValueError(must_be("geometry", f"one of {GEOMETRIES}", geometry))
+    rate = pi.mean(-1)[:, None, None]                                     # (B, 1, 1) β: Π = β W, mean W = 1
     dz = jac.shape[-1]
     eye = torch.eye(dz, dtype=pred.dtype)
     lam = damping * torch.diagonal(curv, dim1=1, dim2=2).mean(-1).clamp_min(1e-300)   # (B,)
-    damped = curv + lam[:, None, None] * eye                               # (B, Dz, Dz)
-    f0 = torch.linalg.solve(damped, pull)                                  # (B, Dz)
-    return f0, -torch.linalg.solve(damped, curv)
+    damped = curv + lam[:, None, None] * eye                               # (B, Dz, Dz) β (JᵀWJ + λ I)
+    f0 = rate[..., 0] * torch.linalg.solve(damped, pull)                   # (B, Dz) β (JᵀWJ + λ)⁻¹ JᵀW (x_d − g)
+    return f0, -rate * torch.linalg.solve(damped, curv)
 
 
 def attractor(model, mu: torch.Tensor, goal: torch.Tensor, gain: float, precision: torch.Tensor | None = None,
@@ -133,4 +136,4 @@ def _potential_terms(u, precision, f0, a, potential) -> PriorTerms:
                                  "Pass Attractor.potential: at order 0 the attractor enters F as Π_z V."))
     b, _, dz = u.shape
     hess = torch.zeros(b, dz, dz, dtype=u.dtype) if a is None else -precision * 0.5 * (a + a.transpose(1, 2))
-    return PriorTerms(precision * potential, -precision * f0[:, None], hess, -f0[:, None])
+    return PriorTerms(precision * potential, -precision * f0[:, None], hess, -f0[:, None], precision * potential)

@@ -40,16 +40,17 @@ from bodyschema.evaluation.core.sensing import Sensors, sense
 from bodyschema.evaluation.core.sim import control_substeps
 from bodyschema.evaluation.core.specs import load_robot, models_field, resolve_models
 from bodyschema.evaluation.reaching import report as reaching_report
-from bodyschema.evaluation.reaching.loop import ServoPolicy, TorquePolicy, VelocityPolicy, rollout
+from bodyschema.evaluation.reaching.loop import ImpedancePolicy, ServoPolicy, TorquePolicy, VelocityPolicy, rollout
 
 REACHING_STREAM = 0x4EAC_4100          # second entropy word: reaching targets are their own stream
 PURPOSE = {"targets": 0, "starts": 1, "noise": 2}
 ROBOTS = {   # default models, control rate (Hz), duration (s), what the actuators take
     "nao_arm": {"models": ("analytic:nao_arm:ee_pixel", "analytic:nao_arm:joints"), "hz": 50.0, "duration": 3.0,
                 "actuators": "position"},
-    "panda": {"models": ("analytic:panda:ee_xyz",), "hz": 500.0, "duration": 10.0,   # the Jᵀ attractor is slow
+    "panda": {"models": ("analytic:panda:ee_xyz", "analytic:panda:joints"), "hz": 500.0, "duration": 3.0,
               "actuators": "torque"},
 }
+PANDA_CONTROLLERS = ("velocity", "aic")
 GOAL_PREFERENCE = ("image", "ee_xyz", "ee_pixel", "joints")   # "auto": the first modality among the models
 
 
@@ -68,6 +69,9 @@ class ReachingRunConfig(TrialsConfig):
     action: ActionConfig = ActionConfig()  # position-servo robots: the velocity controller
     perception: PerceptionConfig = PerceptionConfig(step_control="none")   # servo robots: per tick (attractor prior)
     aic: AICConfig = AICConfig()           # torque robots: the AIC's gains and precisions
+    panda_controller: str = "velocity"     # torque robots: "velocity" (the velocity controller on the arm's joint
+                                           # impedance servo, like nao_arm's servos) | "aic" (torques, aif/aic.py)
+    panda_action: ActionConfig = ActionConfig(k_a=15.0)   # K = k_a·Δt·Π_joints ≈ 100 s⁻² at 500 Hz, λ = 20 ≈ 2√K
     success_mm: float = 10.0               # success: final simulator ee error below this
     pixel_tolerance: float = 1.0           # px; goal-space success of an ee_pixel goal
     image_mse_threshold: float = 7e-4      # image goal success; the median MSE (200 poses) of a 1 cm ee offset
@@ -79,6 +83,8 @@ class ReachingRunConfig(TrialsConfig):
             raise ValueError(must_be("robot", f"one of {tuple(ROBOTS)}", self.robot))
         if self.duration is not None and not self.duration > 0:
             raise ValueError(must_be("duration", "positive (s)", self.duration))
+        if self.panda_controller not in PANDA_CONTROLLERS:
+            raise ValueError(must_be("panda_controller", f"one of {PANDA_CONTROLLERS}", self.panda_controller))
         if self.goal not in ("auto", *GOAL_PREFERENCE):
             raise ValueError(must_be("goal", f"'auto' or one of {GOAL_PREFERENCE}", self.goal))
 
@@ -206,8 +212,11 @@ def aif_policy(config: ReachingConfig, models, robot):
     if robot.actuation == "position":
         return VelocityPolicy(VelocityController(models, config.perception, config.action, precisions))
     if "joints" in config.broken:
-        raise ValueError(must_be("broken", "extra sensors only on the panda (the AIC's joint sensor is built in)",
-                                 config.broken))
+        raise ValueError(must_be("broken", "extra sensors only on the panda (its joint sensor feeds the servo and "
+                                 "the AIC)", config.broken))
+    if config.panda_controller == "velocity":
+        controller = VelocityController(models, config.perception, config.panda_action, precisions)
+        return ImpedancePolicy(controller, PDController(robot.name), tuple(robot.joint_limits.T))
     aic = replace(config.aic, precisions=tuple((m, p) for m, p in config.aic.precisions if m not in precisions)
                   + tuple(precisions.items()))
     extra = [m for m in models if m.modality != "joints"]

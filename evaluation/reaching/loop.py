@@ -9,6 +9,9 @@ period. Policies wrap a controller into one interface: `reset(arm, goal)`, `comm
   ServoPolicy     baseline on position servos: ctrl = the target's joint pose (its true inverse kinematics)
   TorquePolicy    torques on motors from a controller with AICController's interface: the AIC (aif/aic.py) or,
                   as baseline, PD + gravity compensation on the target's joint pose (core/pd.py)  (panda)
+  ImpedancePolicy AIF velocity commands integrated into the setpoint of the arm's joint impedance servo (the
+                  same PD + gravity compensation as the baseline, which gets the target pose instead): the panda's
+                  counterpart of the nao_arm's position servos  (panda, `--panda-controller velocity`)
 """
 
 from __future__ import annotations
@@ -58,6 +61,29 @@ class TorquePolicy:
         extra = {k: x for k, x in observations.items() if k != "joints"}
         q = observations["joints"].numpy() if "joints" in observations else arm.q
         return self.controller.act(q, arm.qd, extra, dt)
+
+    failed = property(lambda self: self.controller.failed)
+    reasons = property(lambda self: self.controller.reasons)
+
+
+class ImpedancePolicy:
+    """AIF velocity commands (aif.action.VelocityController) integrated into the setpoint of a joint impedance
+    servo with AICController's interface (core.pd.PDController): ctrl ← clip(ctrl + a·Δt, joint range)."""
+
+    def __init__(self, controller, servo, limits: tuple[np.ndarray, np.ndarray]):
+        self.controller, self.servo = controller, servo
+        self.low, self.high = limits                                       # (Dq,) rad
+
+    def reset(self, arm: ArmBatch, goal: Mapping[str, torch.Tensor]) -> None:
+        self.ctrl = np.clip(arm.q, self.low, self.high)                    # (B, Dq) rad, the servo setpoint
+        self.controller.reset(arm.q, goal)
+
+    def command(self, arm: ArmBatch, observations, dt: float) -> np.ndarray:
+        velocity = self.controller.act(observations, dt)                   # (B, Dq) rad/s
+        self.ctrl = np.clip(self.ctrl + velocity * dt, self.low, self.high)
+        q = observations["joints"].numpy() if "joints" in observations else arm.q
+        self.servo.reset(q, arm.qd - velocity, {"joints": self.ctrl})      # K_p (ctrl − q) + K_d (a − q̇) + g(q):
+        return self.servo.act(q, arm.qd - velocity)                        # setpoint and velocity reference
 
     failed = property(lambda self: self.controller.failed)
     reasons = property(lambda self: self.controller.reasons)
