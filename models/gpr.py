@@ -94,7 +94,8 @@ class GPRModel(BaseSensoryModel):
 
         seed: the random subsets (max_points, hyper_points). val = (q_val, x_val): evaluated once after fitting.
         on_epoch(step, metrics): every marginal-likelihood evaluation {"train_neg_mll"} (−MLL per point, summed
-        over outputs), then {"val_mean_error", "val_rmse"} (Euclidean, output units) when val is given.
+        over outputs), then {"val_mean_error", "val_rmse"} (output units: mean per-sample Euclidean error, RMSE over all
+        output elements, as training.train.score) when val is given.
         """
         q, y = _gp_data.check_training_data(q, x, self.body, self.output_shape)        # (N, Dz), (N, O)
         if val is not None:
@@ -111,8 +112,9 @@ class GPRModel(BaseSensoryModel):
         self._condition_unit(u, ys)
         if val is not None and on_epoch is not None:
             pred = self._predict(val[0])                                              # (Nv, *out)
-            err = (pred.reshape(pred.shape[0], -1) - val[1]).norm(dim=-1)             # (Nv,)
-            on_epoch(step, {"val_mean_error": float(err.mean()), "val_rmse": float(err.pow(2).mean().sqrt())})
+            diff = pred.reshape(pred.shape[0], -1) - val[1]                           # (Nv, O)
+            on_epoch(step, {"val_mean_error": float(diff.norm(dim=-1).mean()),
+                            "val_rmse": float(diff.pow(2).mean().sqrt())})
         return self
 
     def condition(self, q, x, *, seed: int = 0) -> "GPRModel":

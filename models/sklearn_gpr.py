@@ -70,7 +70,8 @@ class SklearnGPRModel(BaseSensoryModel):
 
         seed: the random subsets. val = (q_val, x_val): evaluated once after fitting. on_epoch(step, metrics):
         every log-marginal-likelihood evaluation {"train_neg_lml"} (total, scikit-learn's objective), then
-        {"val_mean_error", "val_rmse"} (Euclidean, output units) when val is given.
+        {"val_mean_error", "val_rmse"} (output units: mean per-sample Euclidean error, RMSE over all
+        output elements, as training.train.score) when val is given.
         """
         q, y = _gp_data.check_training_data(q, x, self.body, self.output_shape)        # (N, Dz), (N, O)
         if val is not None:
@@ -111,8 +112,9 @@ class SklearnGPRModel(BaseSensoryModel):
         self.train_u_, self.train_y_ = u, y
         self._condition()
         if val is not None and on_epoch is not None:
-            err = (self._predict(val[0]).reshape(val[1].shape) - val[1]).norm(dim=-1)     # (Nv,)
-            on_epoch(step, {"val_mean_error": float(err.mean()), "val_rmse": float(err.pow(2).mean().sqrt())})
+            diff = self._predict(val[0]).reshape(val[1].shape) - val[1]                   # (Nv, O)
+            on_epoch(step, {"val_mean_error": float(diff.norm(dim=-1).mean()),
+                            "val_rmse": float(diff.pow(2).mean().sqrt())})
         return self
 
     def _condition(self) -> None:

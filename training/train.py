@@ -136,9 +136,11 @@ def _train_owned(config: TrainConfig, client, data: Dataset, model, members: dic
 
         def on_epoch(epoch: int, metrics: dict[str, float]) -> None:
             history.add(epoch, metrics)
-            # Final held-out scores use the plain names; an epoch metric of the same name becomes fit_<name>.
-            mlflow.log_metrics({(f"fit_{k}" if k in FINAL_METRICS else k): float(v) for k, v in metrics.items()},
-                               step=int(epoch), synchronous=False)
+            # One name, one meaning: val_rmse & co. are logged once, by `score` after the fit (the champion's
+            # criterion); a model's own report of them during the fit stays in history.jsonl (the loss curves).
+            during = {k: float(v) for k, v in metrics.items() if k.split("/")[-1] not in FINAL_METRICS}
+            if during:
+                mlflow.log_metrics(during, step=int(epoch), synchronous=False)
 
         train_x = data.train.xs if multi else data.train.x
         val = (data.val.q, data.val.xs if multi else data.val.x)

@@ -167,3 +167,26 @@ def test_a_kind_without_device_support_refuses_cuda_before_any_run(workdir, kin_
     with pytest.raises(ValueError, match=r"device must be 'cpu' for model kind 'tiny'. Got 'cuda'"):
         train(tiny_config(kin_store, device="cuda"))
     assert not (workdir / "runs").exists(), "refused before a run directory or MLflow run exists"
+
+
+def test_val_rmse_has_one_name_and_one_meaning(workdir, kin_store, tiny_kind):
+    """MLflow holds one `val_rmse` (the held-out score after the fit, no `fit_val_rmse` beside it), and a GP's own
+    report of it during the fit means the same: RMSE over all output elements, as `score` computes it."""
+    from bodyschema.models.gpr import GPRModel
+    from bodyschema.training.train import score
+
+    result = train(tiny_config(kin_store, epochs=5))                 # the tiny kind reports val_rmse every epoch
+    client = _client(workdir)
+    assert not [k for k in client.get_run(result.run_id).data.metrics if k.startswith("fit_val")]
+    (logged,) = client.get_metric_history(result.run_id, "val_rmse")
+    assert logged.value == pytest.approx(result.metrics["val_rmse"])
+
+    data = load_dataset(kin_store, "ee_xyz", max_train=200)
+    reports = []
+    gp = GPRModel(data.body, "ee_xyz", (3,), adam_steps=5, lbfgs_steps=0)
+    gp.fit(data.train.q, data.train.x, val=(data.val.q, data.val.x), on_epoch=lambda step, m: reports.append(m),
+           progress=False)
+    pred = gp.predict(torch.as_tensor(data.val.q)).numpy()
+    expected = score(pred, data.val.x, "val")
+    assert reports[-1]["val_rmse"] == pytest.approx(expected["val_rmse"], rel=1e-6)
+    assert reports[-1]["val_mean_error"] == pytest.approx(expected["val_mean_error"], rel=1e-6)
