@@ -114,6 +114,13 @@ def time_to(curve: np.ndarray, period: float, level: float = DECISION) -> float:
     return float((below[-1] + 2 if below.size else 1) * period)
 
 
+def viewing_rows(over_time: Mapping[str, Mapping[str, np.ndarray]], period: float) -> list[dict]:
+    """One row per comparison and viewing time (s): AUC and best balanced accuracy of the running mean."""
+    return [{"comparison": name, "viewing_s": round((j + 1) * period, 6), "auc": float(curve["auc"][j]),
+             "accuracy": float(curve["accuracy"][j])}
+            for name, curve in over_time.items() for j in range(curve["auc"].size)]
+
+
 def markdown(rows: Sequence[Mapping], notes: Sequence[str]) -> str:
     """The summary table (self vs each condition of other) and a few lines of what was measured."""
     return markdown_table(rows, TABLE_COLUMNS, "comparison") + "\n" + "\n".join(notes) + "\n"
@@ -234,10 +241,11 @@ def plot_over_time(conditions: np.ndarray, per_frame: np.ndarray, period: float,
 def write_report(out: Path, episodes_rows: Sequence[Mapping], rows: Sequence[Mapping], curves, over_time,
                  notes: Sequence[str], conditions: np.ndarray, failed: np.ndarray, per_frame: np.ndarray,
                  period: float, plots: bool = True) -> dict[str, Path]:
-    """summary.md, summary.csv, episodes.csv and (with `plots`) roc.png, viewing_time.png, delay.png, scores.png
+    """summary.md, summary.csv, viewing_time.csv, episodes.csv and (with `plots`) roc.png, viewing_time.png, delay.png, scores.png
     and free_energy.png in `out`."""
     out.mkdir(parents=True, exist_ok=True)
     paths = {"summary_csv": write_csv(rows, out / "summary.csv"),
+             "viewing_time_csv": write_csv(viewing_rows(over_time, period), out / "viewing_time.csv"),
              "episodes_csv": write_csv(episodes_rows, out / "episodes.csv"),
              "summary_md": out / "summary.md"}
     paths["summary_md"].write_text(markdown(rows, notes))
