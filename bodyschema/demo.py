@@ -29,7 +29,7 @@ class DemoConfig:
     trials: int = 100                  # per level and run (the full benchmark uses 500 × 5 runs)
     runs: int = 1
     reach_targets: int = 20            # closed-loop reaching episodes (the benchmark default is 100)
-    episodes: int = 40                 # self-recognition episodes per condition (self, 6 imitator delays, 2nd arm)
+    episodes: int = 25                 # self-recognition episodes per condition (self, 6 imitator delays, 2nd arm)
     seed: int = 0
     tracking_uri: str | None = None    # None: $MLFLOW_TRACKING_URI, else sqlite:///<cwd>/mlflow.db
 
