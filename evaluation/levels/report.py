@@ -67,20 +67,22 @@ def plot_curves(curves: Mapping[str, np.ndarray], path: Path) -> Path:
     return save_figure(fig, path, dpi=120)
 
 
-def plot_sweep(rows: Sequence[Mapping], x: str, path: Path, y: str = "joint_err_deg") -> Path:
-    """Error vs a swept quantity (noise σ), or a bar per case (broken sensor) when x is not numeric."""
+def plot_sweep(rows: Sequence[Mapping], x: str, path: Path, y: str = "joint_err_deg", xlabel: str | None = None,
+               ylabel: str | None = None) -> Path:
+    """Error vs a swept quantity (noise σ), or a bar per case (broken sensor) when x is not numeric. The labels
+    default to the column names; pass them with units (robustness does)."""
     from bodyschema.evaluation.core.plots import plt, save_figure   # matplotlib only when plotting
     fig, ax = plt.subplots(figsize=(5, 3.5))
     xs = [r[x] for r in rows]
     ys = np.maximum([r[y] for r in rows], 1e-9)                           # log axis: an exact 0 shows at 1e-9
     if all(isinstance(v, (int, float)) for v in xs):
         ax.plot(xs, ys, "o-")
-        ax.set_xlabel(f"{x} ({rows[0].get('modality', '')})")
+        ax.set_xlabel(xlabel or f"{x} ({rows[0].get('modality', '')})")
     else:
         ax.bar([str(v) for v in xs], ys)
-        ax.set_xlabel(x)
+        ax.set_xlabel(xlabel or x)
     ax.set_yscale("log")
-    ax.set_ylabel(y)
+    ax.set_ylabel(ylabel or y)
     return save_figure(fig, path, dpi=120)
 
 

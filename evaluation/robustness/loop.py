@@ -22,6 +22,7 @@ from bodyschema.evaluation.core.tables import markdown_table, write_csv
 from bodyschema.evaluation.reaching import report as reaching_report
 from bodyschema.evaluation.reaching.benchmark import (ROBOTS, ReachingConfig, ReachingRunConfig, builtin_sensors,
                                                       simulate)
+from bodyschema.evaluation.robustness.units import NOISE_UNITS, noise_label
 
 COLUMNS = ("success", "goal_success", "ee_err_mm", "ee_err_median_mm", "time_to_reach_s", "failed")
 
@@ -94,8 +95,9 @@ def _write(config: LoopRobustnessConfig, models, noise, broken) -> dict[str, Pat
 
 
 def _markdown(rows, config: LoopRobustnessConfig) -> str:
+    unit = NOISE_UNITS.get(config.modality, "its unit")
     text = (f"Closed-loop AIF reaching on {config.robot} ({config.trials} targets, {config.seconds:g} s at "
-            f"{config.rate:g} Hz, seed {config.seed}) with Gaussian noise σ on {config.modality} (its unit) and with "
+            f"{config.rate:g} Hz, seed {config.seed}) with Gaussian noise σ on {config.modality} ({unit}) and with "
             "each sensor broken: precision 0 (the controller ignores it) or its stream frozen at the first reading "
             f"(it trusts a stale value). `success`: final ee error < {config.success_mm:g} mm; `goal_success`: within the goal tolerance.")
     return markdown_table(rows, COLUMNS, "case") + "\n" + text + "\n"
@@ -107,7 +109,7 @@ def plot_noise(rows, path: Path) -> Path:
     sigma = [r["sigma"] for r in rows]
     ax.plot(sigma, [r["success"] for r in rows], "o-", label="success (ee)")
     ax.plot(sigma, [r["goal_success"] for r in rows], "s--", label="goal success")
-    ax.set(xlabel=f"observation noise σ on {rows[0]['modality']}", ylabel="success rate", ylim=(-0.05, 1.05))
+    ax.set(xlabel=noise_label(rows[0]["modality"]), ylabel="success rate (fraction of trials)", ylim=(-0.05, 1.05))
     if len(sigma) > 1 and min(s for s in sigma if s > 0) > 0 and sigma[0] == 0:
         ax.set_xscale("symlog", linthresh=min(s for s in sigma if s > 0))
     ax.legend(fontsize=8)

@@ -16,6 +16,7 @@ from bodyschema.evaluation.core.specs import resolve_models
 from bodyschema.evaluation.core.tables import write_csv
 from bodyschema.evaluation.levels.benchmark import DEFAULT_MODELS, PerceptionRunConfig, broken_sweep, noise_sweep
 from bodyschema.evaluation.levels.report import markdown, plot_sweep
+from bodyschema.evaluation.robustness.units import noise_label
 
 
 @dataclass(frozen=True)
@@ -44,8 +45,11 @@ def run_robustness(config: RobustnessConfig = RobustnessConfig(), models=None) -
     paths = {"summary_md": summary, "noise_csv": write_csv(noise, out / "noise_sweep.csv"),
              "broken_csv": write_csv(broken, out / "broken_sensor.csv")}
     if config.plots:
-        paths.update(noise_png=plot_sweep(noise, "sigma", out / "noise_sweep.png"),
-                     broken_png=plot_sweep(broken, "broken", out / "broken_sensor.png"))
+        error = "joint error after perception (deg, mean over joints and trials)"   # joint_err_deg
+        paths.update(noise_png=plot_sweep(noise, "sigma", out / "noise_sweep.png", xlabel=noise_label(config.modality),
+                                          ylabel=error),
+                     broken_png=plot_sweep(broken, "broken", out / "broken_sensor.png", xlabel="broken sensor",
+                                           ylabel=error))
     metrics = {**table_metrics(noise, lambda r: f"sigma {r['sigma']:g}"), **table_metrics(broken, "broken")}
     publish(config, out, "robustness", metrics, paths, models)
     return paths

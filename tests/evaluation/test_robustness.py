@@ -23,3 +23,26 @@ def test_robustness_writes_noise_and_broken_sensor_tables_and_plots(tmp_path):
     assert set(broken) == {"none", "ee_xyz", "joints"}
     summary = paths["summary_md"].read_text()                             # one row per σ and per broken sensor
     assert all(f"| {float(s)} |" in summary for s in config.sigmas) and all(f"| {b} |" in summary for b in broken)
+
+
+def test_the_noise_plots_name_the_unit_of_sigma(tmp_path, monkeypatch):
+    """noise_sweep.png (perception and closed loop): σ in the modality's unit on the x axis, the error's unit on y."""
+    import bodyschema.evaluation.core.plots as core_plots
+    from bodyschema.evaluation.robustness.loop import plot_noise
+
+    labels = {}
+    save = core_plots.save_figure
+
+    def recording(fig, path, **kw):
+        labels[path.name] = (fig.axes[0].get_xlabel(), fig.axes[0].get_ylabel())
+        return save(fig, path, **kw)
+    monkeypatch.setattr(core_plots, "save_figure", recording)
+
+    models = [AnalyticModel("planar2", "ee_pixel"), AnalyticModel("planar2", "joints")]
+    run_robustness(RobustnessConfig(trials=4, mlflow=False, progress=False, modality="ee_pixel", sigmas=(0.0, 1.0),
+                                    out=tmp_path / "open"), models=models)
+    assert labels["noise_sweep.png"] == ("observation noise σ on ee_pixel (px)",
+                                         "joint error after perception (deg, mean over joints and trials)")
+    rows = [{"modality": "joints", "sigma": s, "success": 1.0, "goal_success": 1.0} for s in (0.0, 0.01)]
+    plot_noise(rows, tmp_path / "loop" / "noise_sweep.png")
+    assert labels["noise_sweep.png"][0] == "observation noise σ on joints (rad)"

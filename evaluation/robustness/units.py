@@ -1,0 +1,12 @@
+"""Axis labels with units for the robustness plots: observation noise σ is added in the modality's own unit
+(evaluation/core/sensing.py: joint angles in rad, positions in m, pixels in px, image intensity in [0, 1])."""
+
+from __future__ import annotations
+
+NOISE_UNITS = {"joints": "rad", "ee_xyz": "m", "ee_pixel": "px", "image": "intensity in [0, 1]", "touch": "N"}
+
+
+def noise_label(modality: str) -> str:
+    """'observation noise σ on ee_xyz (m)'; a modality without a known unit is named without one."""
+    unit = NOISE_UNITS.get(modality)
+    return f"observation noise σ on {modality}" + (f" ({unit})" if unit else "")
