@@ -140,3 +140,12 @@ def test_the_tracking_line_stays_with_quiet_on_stderr_only(tmp_path, capsys):
     out, err = capsys.readouterr()
     assert f"tracking: {uri}" in err.splitlines() and "tracking" not in out
     assert out.strip() == "no registered bodyschema models"
+
+
+@pytest.mark.parametrize("flags, bar", [((), True), (("--quiet",), False)])
+def test_quiet_hides_the_datagen_progress_bar_and_keeps_its_output(flags, bar, tmp_path, capsys):
+    out = tmp_path / "p.zarr"
+    assert cli.main([*flags, "datagen", "--robot", "planar2", "--n", "16", "--workers", "1", "--out", str(out)]) == 0
+    stdout, stderr = capsys.readouterr()
+    assert ("shard/s" in stderr) is bar, stderr
+    assert "valid" in stdout, "the summary is the command's output, shown either way"
