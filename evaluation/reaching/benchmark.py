@@ -45,10 +45,14 @@ from bodyschema.evaluation.reaching.loop import ImpedancePolicy, ServoPolicy, To
 REACHING_STREAM = 0x4EAC_4100          # second entropy word: reaching targets are their own stream
 PURPOSE = {"targets": 0, "starts": 1, "noise": 2}
 ROBOTS = {   # default models, control rate (Hz), duration (s), what the actuators take
+    "planar2": {"models": ("analytic:planar2:ee_xyz", "analytic:planar2:joints"), "hz": 50.0, "duration": 3.0,
+                "actuators": "position",    # soft servos (kp 5, lag ≈ 0.1 s): K = k_a·Δt·Π_joints ≈ 16 s⁻², λ ≈ 2√K
+                "action": ActionConfig(k_a=0.25, leak=8.0)},
     "nao_arm": {"models": ("analytic:nao_arm:ee_pixel", "analytic:nao_arm:joints"), "hz": 50.0, "duration": 3.0,
                 "actuators": "position"},
     "panda": {"models": ("analytic:panda:ee_xyz", "analytic:panda:joints"), "hz": 500.0, "duration": 3.0,
-              "actuators": "torque"},
+              "actuators": "torque",        # K = k_a·Δt·Π_joints ≈ 100 s⁻² at 500 Hz, λ = 20 ≈ 2√K
+              "action": ActionConfig(k_a=15.0)},
 }
 PANDA_CONTROLLERS = ("velocity", "aic")
 GOAL_PREFERENCE = ("image", "ee_xyz", "ee_pixel", "joints")   # "auto": the first modality among the models
@@ -66,21 +70,24 @@ class ReachingRunConfig(TrialsConfig):
     trials: int = 100                      # random reachable targets (episodes per controller)
     duration: float | None = None          # s per episode; None: 3 (nao_arm), 10 (panda)
     control_hz: float | None = None        # must divide into whole MuJoCo steps; None: 50 (nao_arm), 500 (panda)
-    action: ActionConfig = ActionConfig()  # position-servo robots: the velocity controller
+    action: ActionConfig = ActionConfig()  # the velocity controller; left at its default: the robot's (ROBOTS)
     perception: PerceptionConfig = PerceptionConfig(step_control="none")   # servo robots: per tick (attractor prior)
     aic: AICConfig = AICConfig()           # torque robots: the AIC's gains and precisions
     panda_controller: str = "velocity"     # torque robots: "velocity" (the velocity controller on the arm's joint
                                            # impedance servo, like nao_arm's servos) | "aic" (torques, aif/aic.py)
-    panda_action: ActionConfig = ActionConfig(k_a=15.0)   # K = k_a·Δt·Π_joints ≈ 100 s⁻² at 500 Hz, λ = 20 ≈ 2√K
     success_mm: float = 10.0               # success: final simulator ee error below this
     pixel_tolerance: float = 1.0           # px; goal-space success of an ee_pixel goal
     image_mse_threshold: float = 7e-4      # image goal success; the median MSE (200 poses) of a 1 cm ee offset
     image_size: tuple[int, int] | None = None   # robot camera (H, W); default: the image model's, else the robot's
+    spread: float = 1.0                    # targets and starts uniform in the middle `spread` of each joint's
+                                           # sampling range: a goal across a joint limit stalls descent there
 
     def __post_init__(self):
         super().__post_init__()
         if self.robot not in ROBOTS:
             raise ValueError(must_be("robot", f"one of {tuple(ROBOTS)}", self.robot))
+        if not 0 < self.spread <= 1:
+            raise ValueError(must_be("spread", "in (0, 1] (a fraction of each joint's sampling range)", self.spread))
         if self.duration is not None and not self.duration > 0:
             raise ValueError(must_be("duration", "positive (s)", self.duration))
         if self.panda_controller not in PANDA_CONTROLLERS:
@@ -91,6 +98,11 @@ class ReachingRunConfig(TrialsConfig):
     @property
     def default_models(self) -> tuple[str, ...]:
         return ROBOTS[self.robot]["models"]
+
+    @property
+    def action_config(self) -> ActionConfig:
+        """config.action, or the robot's tuned one when config.action is left at the default."""
+        return ROBOTS[self.robot].get("action", self.action) if self.action == ActionConfig() else self.action
 
     @property
     def rate(self) -> float:
@@ -189,18 +201,26 @@ def _reach(robot) -> tuple[np.ndarray, float]:
     return base, float(np.linalg.norm(robot.fk(q) - base, axis=1).max()) * 1.01
 
 
-def in_view_targets(rng: np.random.Generator, robot, n: int) -> np.ndarray:
-    """n uniform poses of the sampling ranges whose ee the camera sees (a goal pixel must be in the image;
-    nao_arm's camera workspace keeps it in view for ~90 % of its poses); the first n draws when all are seen.
+def spread_ranges(robot, spread: float) -> np.ndarray:
+    """The middle `spread` of each joint's sampling range. # (Dq, 2) rad"""
+    ranges = np.asarray(robot.sampling_ranges, dtype=np.float64)
+    mid, half = ranges.mean(1), 0.5 * (ranges[:, 1] - ranges[:, 0])
+    return np.stack([mid - spread * half, mid + spread * half], axis=1)
+
+
+def in_view_targets(rng: np.random.Generator, robot, n: int, ranges=None) -> np.ndarray:
+    """n uniform poses of the sampling ranges (or `ranges`) whose ee the camera sees (a goal pixel must be in the
+    image; nao_arm's camera workspace keeps it in view for ~90 % of its poses); the first n draws when all are seen.
     Too few seen: the first n, and check_goal names a pose the camera cannot see. # (n, Dq) rad"""
-    q = uniform(rng, robot.sampling_ranges, 20 * n)                         # (20n, Dq)
+    q = uniform(rng, robot.sampling_ranges if ranges is None else ranges, 20 * n)   # (20n, Dq)
     seen = q[robot.in_view(q)]
     return seen[:n] if len(seen) >= n else q[:n]
 
 
 def make_episodes(config: ReachingConfig, robot, modality: str, output_shape) -> Episodes:
-    q_target = in_view_targets(reaching_rng(config.seed, "targets"), robot, config.trials)
-    q_start = uniform(reaching_rng(config.seed, "starts"), robot.sampling_ranges, config.trials)
+    ranges = robot.sampling_ranges if config.spread == 1 else spread_ranges(robot, config.spread)
+    q_target = in_view_targets(reaching_rng(config.seed, "targets"), robot, config.trials, ranges)
+    q_start = uniform(reaching_rng(config.seed, "starts"), ranges, config.trials)
     goal = make_goal(robot, modality, q_target)
     check_goal(robot, modality, goal, output_shape)
     return Episodes(q_target, q_start, {modality: goal}, robot.fk(q_target))
@@ -210,12 +230,12 @@ def make_episodes(config: ReachingConfig, robot, modality: str, output_shape) ->
 def aif_policy(config: ReachingConfig, models, robot):
     precisions = {m: 0.0 for m in config.broken}
     if robot.actuation == "position":
-        return VelocityPolicy(VelocityController(models, config.perception, config.action, precisions))
+        return VelocityPolicy(VelocityController(models, config.perception, config.action_config, precisions))
     if "joints" in config.broken:
         raise ValueError(must_be("broken", "extra sensors only on the panda (its joint sensor feeds the servo and "
                                  "the AIC)", config.broken))
     if config.panda_controller == "velocity":
-        controller = VelocityController(models, config.perception, config.panda_action, precisions)
+        controller = VelocityController(models, config.perception, config.action_config, precisions)
         return ImpedancePolicy(controller, PDController(robot.name), tuple(robot.joint_limits.T))
     aic = replace(config.aic, precisions=tuple((m, p) for m, p in config.aic.precisions if m not in precisions)
                   + tuple(precisions.items()))
