@@ -206,15 +206,14 @@ def __getattr__(name: str):
     raise AttributeError(f"module 'bodyschema.cli' has no attribute {name!r}")
 
 
-def run(config, progress: bool = True) -> int:
-    """Run the stage a parsed config stands for; returns the process exit code. progress=False (--quiet): no bars
-    where the config has no `progress` flag of its own (datagen)."""
+def run(config) -> int:
+    """Run the stage a parsed config stands for; returns the process exit code."""
     check_tracking_first(config)
     if isinstance(config, DatagenConfig):
         from bodyschema.datagen.generate import generate
         from bodyschema.datagen.validate import summarize_store
 
-        print(summarize_store(generate(config, progress=progress)))
+        print(summarize_store(generate(config, progress=log.progress_bars())))   # no progress flag of its own
     elif isinstance(config, ValidateArgs):
         from bodyschema.datagen.validate import validate_store
 
@@ -342,8 +341,7 @@ def main(argv: list[str] | None = None) -> int:
         check_renamed_flags(argv)
         with _config_errors_as_ours():            # a parsing error: tyro's message box, exit 2
             config = tyro.cli(commands(_command_words(argv)), prog="bodyschema", args=argv, description=DESCRIPTION)
-        quiet = verbosity == log.QUIET
-        return run(quiet_progress(config) if quiet else config, progress=not quiet)
+        return run(quiet_progress(config) if verbosity == log.QUIET else config)
     except KeyboardInterrupt:
         print(f"\n{command}: interrupted. Run the same command again to resume.", file=sys.stderr)
         return 130

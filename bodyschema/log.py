@@ -27,6 +27,7 @@ MLFLOW_QUIET_ENV = {"MLFLOW_LOGGING_LEVEL": "WARNING", "MLFLOW_ENABLE_ARTIFACTS_
                     "MLFLOW_SUPPRESS_PRINTING_URL_TO_STDOUT": "true"}
 MLFLOW_LOGGERS = ("mlflow", "alembic", "huey")
 _handler: logging.Handler | None = None
+_verbosity = NORMAL                  # the last configure()'s
 
 
 def split_flags(argv: list[str]) -> tuple[int, list[str]]:
@@ -42,7 +43,8 @@ def split_flags(argv: list[str]) -> tuple[int, list[str]]:
 
 def configure(verbosity: int = NORMAL) -> logging.Logger:
     """Set up the `bodyschema` logger (one stderr handler, plain lines) and MLflow's for `verbosity`."""
-    global _handler
+    global _handler, _verbosity
+    _verbosity = verbosity
     logger = logging.getLogger(LOGGER)
     if _handler is None or _handler not in logger.handlers:
         _handler = _StderrHandler()
@@ -59,6 +61,11 @@ def configure(verbosity: int = NORMAL) -> logging.Logger:
     if verbosity == QUIET:
         os.environ.setdefault("TQDM_DISABLE", "1")    # bars a config has no `progress` flag for (tqdm ≥ 4.66)
     return logger
+
+
+def progress_bars() -> bool:
+    """Whether to show progress bars where a config has no `progress` flag of its own (off with --quiet)."""
+    return _verbosity != QUIET
 
 
 def tracking_line(uri: str) -> None:

@@ -24,6 +24,7 @@ def restore_logging_and_env():
     os.environ.clear()
     os.environ.update(env)
     logging.getLogger(log.LOGGER).setLevel(logging.NOTSET)
+    log._verbosity = log.NORMAL
 
 
 @pytest.mark.parametrize("argv, verbosity", [
