@@ -100,7 +100,8 @@ class _Runners(Mapping):
     summary holding them). Looks a config up without importing the other benchmarks' packages."""
 
     def _pairs(self):
-        loaded = [b for b in registry.BENCHMARKS if b.module in sys.modules]   # a parsed config's package is
+        # a parsed config's package was imported to build it; the others need not be, to be told apart
+        loaded = [b for b in registry.BENCHMARKS if b.module in sys.modules]
         return [(ReportConfig, write_report), *((b.config, b.run) for b in loaded)]
 
     def __getitem__(self, config_class):
