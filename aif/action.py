@@ -114,15 +114,18 @@ class VelocityController:
         """(B, Dq) rad, the current belief about the joints."""
         return self._mu[:, 0].numpy().copy()
 
-    def reset(self, belief: np.ndarray, goal: Mapping[str, torch.Tensor]) -> None:
-        """Start B episodes at `belief` (B, Dq) rad with `goal` = {one modality: (B, *out) desired outcome}."""
+    def reset(self, belief: np.ndarray, goal: Mapping[str, torch.Tensor],
+              goal_precisions: Mapping[str, float] | None = None) -> None:
+        """Start B episodes at `belief` (B, Dq) rad with `goal` = {modality: (B, *out) desired outcome}, one or more
+        modalities (e.g. an ee pixel and a joint-space depth cue); goal_precisions: Π_goal per modality in its units
+        (default β · the model's mean precision)."""
         dq = self.perception.latent_dim
         mu = np.asarray(belief, dtype=np.float64)
         if mu.ndim != 2 or mu.shape[1] != dq or not np.isfinite(mu).all():
             raise ValueError(must_be("belief", f"a finite array of shape (B, {dq}) in rad", getattr(mu, "shape", mu)))
         b = mu.shape[0]
         self._goal = self._check_goal(goal, b)
-        self.perception = self._goal_perception(torch.from_numpy(mu))
+        self.perception = self._goal_perception(torch.from_numpy(mu), dict(goal_precisions or {}))
         self._mu = torch.zeros(b, self.perception.config.order + 1, dq, dtype=torch.float64)
         self._mu[:, 0] = torch.from_numpy(mu)
         self.velocity = np.zeros((b, dq))
@@ -153,21 +156,24 @@ class VelocityController:
         return self.velocity.copy()
 
     # ---- internals --------------------------------------------------------------------------------------
-    def _goal_perception(self, mu: torch.Tensor) -> Perception:
+    def _goal_perception(self, mu: torch.Tensor, given: dict[str, float]) -> Perception:
         """The perception with the attractor f = Jᵀ Π_goal (x_d − g) of the issue, Π_goal = β · the goal model's
         own mean precision at the start belief: the goal pulls as hard as its model is trusted, so one β serves
         goals in px, m, rad or image intensity; a sensor override (even 0, a broken camera) leaves the pull as
         it is, since the goal is imagined through the model, not sensed."""
-        (name,) = self._goal
-        model = next(m for m in self.models if m.modality == name)
-        pi = model.precision(mu).mean().item()
-        cfg = replace(self._perception_config, attractor_gain=self.config.attractor_gain * pi)
+        pis = {}
+        for name in self._goal:
+            if name in given:
+                pis[name] = float(given[name])
+                continue
+            model = next(m for m in self.models if m.modality == name)
+            pis[name] = self.config.attractor_gain * model.precision(model_input(model, mu)).mean().item()
+        cfg = replace(self._perception_config, goal_precisions=tuple(pis.items()))
         return Perception(self.models, cfg, self._precision_overrides)
 
     def _perceive(self, obs: dict[str, torch.Tensor], rows: torch.Tensor) -> None:
-        (name, x_d), = self._goal.items()
         result = self.perception.infer({k: x[rows] for k, x in obs.items()}, self._mu[rows],
-                                       goal={name: x_d[rows]})
+                                       goal={name: x_d[rows] for name, x_d in self._goal.items()})
         ok = ~result.diverged
         self._mu[rows[ok]] = result.mu_tilde[ok]
         for i in rows[~ok].tolist():
@@ -225,14 +231,16 @@ class VelocityController:
 
     def _check_goal(self, goal, b: int) -> dict[str, torch.Tensor]:
         models = {m.modality: m for m in self.models}
-        if not isinstance(goal, Mapping) or len(goal) != 1:
-            raise ValueError(must_be("goal", "a dict with one modality → (B, *out) desired outcome",
+        if not isinstance(goal, Mapping) or len(goal) < 1:
+            raise ValueError(must_be("goal", "a dict modality → (B, *out) desired outcome",
                                      type(goal).__name__ if not isinstance(goal, Mapping) else sorted(goal)))
-        (name, x_d), = goal.items()
-        if name not in models:
-            raise ValueError(must_be("goal modality", f"one of the models' modalities {sorted(models)}", name))
-        want = (b, *models[name].output_shape)
-        if not isinstance(x_d, torch.Tensor) or tuple(x_d.shape) != want or not torch.isfinite(x_d).all():
-            got = tuple(x_d.shape) if isinstance(x_d, torch.Tensor) else type(x_d).__name__
-            raise ValueError(must_be(f"goal[{name!r}]", f"a finite tensor of shape {want}", got))
-        return {name: x_d.to(torch.float64)}
+        out = {}
+        for name, x_d in goal.items():
+            if name not in models:
+                raise ValueError(must_be("goal modality", f"one of the models' modalities {sorted(models)}", name))
+            want = (b, *models[name].output_shape)
+            if not isinstance(x_d, torch.Tensor) or tuple(x_d.shape) != want or not torch.isfinite(x_d).all():
+                got = tuple(x_d.shape) if isinstance(x_d, torch.Tensor) else type(x_d).__name__
+                raise ValueError(must_be(f"goal[{name!r}]", f"a finite tensor of shape {want}", got))
+            out[name] = x_d.to(torch.float64)
+        return out

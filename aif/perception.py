@@ -53,7 +53,10 @@ class PerceptionConfig:
                                    # decoders jitter near 1e-6 rad, so a tighter tol never stops them
     prior: str = "none"            # "none" | "damping" | "attractor" (priors.py)
     prior_precision: float = 1.0   # Π_z, same for every joint and order
-    attractor_gain: float = 1.0    # β in f(μ) = β Jᵀ (x_d − g(μ))
+    attractor_gain: float = 1.0    # β in f(μ) = β Jᵀ (x_d − g(μ)): Π_goal = β I
+    goal_precisions: tuple[tuple[str, float], ...] = ()   # Π_goal per goal modality instead of β, for goals of
+                                                          # several modalities in their own units (e.g. a pixel goal
+                                                          # with a joint-space depth cue): f = Σ_goals Jᵀ Π (x_d − g)
     integrator: str = "local_linear"
     max_step: float | None = 0.2   # rad; trust region on one step of the joints (None: off)
     divergence_step: float = 1e3   # rad; an Euler step larger than this marks the trial diverged
@@ -167,7 +170,7 @@ class _Cache:
 class _Sensors:                    # what one run needs about its observations, resolved once
     observations: dict[str, torch.Tensor]
     fixed: dict[str, torch.Tensor]            # modality → (B, *out) precision held fixed
-    goal: tuple[object, torch.Tensor] | None = None
+    goal: list[tuple[object, torch.Tensor, float]] | None = None   # (model, x_d (B, *out), Π_goal) per modality
 
 
 class Perception:
@@ -208,7 +211,8 @@ class Perception:
               goal: Mapping[str, torch.Tensor] | None = None) -> PerceptionResult:
         """Run inference for B trials. observations: modality → (B, *out); mu0: (B, Dz) or (B, K, Dz) rad.
 
-        goal: for prior "attractor", one modality → (B, *out) target x_d in that model's output space.
+        goal: for prior "attractor", modality → (B, *out) target x_d in that model's output space (one or more:
+            their attractors add up, each with Π_goal from config.goal_precisions, else attractor_gain).
         Inference is deterministic: no generator is needed. numpy arrays are accepted for every input.
         """
         observations, mu0, goal = as_inputs(observations), as_input(mu0), as_inputs(goal)
@@ -377,15 +381,18 @@ class Perception:
         return sensors
 
     def _check_goal(self, goal, b):
-        if not isinstance(goal, Mapping) or len(goal) != 1:
-            raise ValueError(must_be("goal", "a dict with one modality → (B, *out) target", goal,
+        if not isinstance(goal, Mapping) or len(goal) < 1:
+            raise ValueError(must_be("goal", "a dict modality → (B, *out) target", goal,
                                      "The attractor prior needs a goal x_d."))
-        (name, x_d), = goal.items()
-        model = next((m for m in self.models if m.modality == name), None)
-        if model is None or not isinstance(x_d, torch.Tensor) or tuple(x_d.shape) != (b, *model.output_shape):
-            raise ValueError(must_be("goal", "one of the models' modalities with a (B, *out) tensor",
-                                     {name: tuple(getattr(x_d, "shape", ()))}))
-        return model, x_d.to(torch.float64)
+        gains = dict(self.config.goal_precisions)
+        out = []
+        for name, x_d in goal.items():
+            model = next((m for m in self.models if m.modality == name), None)
+            if model is None or not isinstance(x_d, torch.Tensor) or tuple(x_d.shape) != (b, *model.output_shape):
+                raise ValueError(must_be("goal", "one of the models' modalities with a (B, *out) tensor",
+                                         {name: tuple(getattr(x_d, "shape", ()))}))
+            out.append((model, x_d.to(torch.float64), float(gains.get(name, self.config.attractor_gain))))
+        return out
 
     def _terms(self, sensors: _Sensors, u: torch.Tensor, rows: torch.Tensor, need_h: bool, need_grad: bool = True):
         """F (b,), ∂F/∂μ̃ (b, K, Dz), Gauss–Newton H (b, K·Dz, K·Dz) or None, prediction errors, at beliefs u."""
@@ -395,10 +402,10 @@ class Perception:
         obs = {name: x[rows] for name, x in sensors.observations.items()}
         pis = {m.modality: sensors.fixed[m.modality][rows] if m.modality in sensors.fixed else None
                for m in self.models}
-        offset = _fuse_image_goal(sensors, rows, mu, obs, pis, cfg.attractor_gain * cfg.prior_precision) \
-            if k == 1 else None
+        goals, offset = _fuse_image_goal(sensors.goal, rows, mu, obs, pis, cfg.prior_precision) if k == 1 \
+            else (sensors.goal, torch.zeros(b, dtype=u.dtype))
         s = sensory_terms(self.models, obs, pis, mu, need_h, need_grad=need_grad)
-        free = s.free_energy if offset is None else s.free_energy + offset
+        free = s.free_energy + offset
         grad = torch.zeros_like(u)
         grad[:, 0] = s.grad
         hess = None
@@ -406,12 +413,17 @@ class Perception:
             hess = torch.zeros(b, k * dz, k * dz, dtype=u.dtype)
             hess[:, :dz, :dz] = s.hessian
         f0 = a = potential = None
-        prior = None
-        if sensors.goal is not None and offset is None:                    # an image goal fused above: no prior
-            model, x_d = sensors.goal                                      # Π_goal = β I (priors.attractor)
-            pull = attractor(model, mu, x_d[rows], cfg.attractor_gain, torch.ones_like(x_d[rows]))
-            f0, a, potential = pull.flow, pull.jacobian, pull.potential
-        if offset is None:
+        prior, missing = None, False
+        for model, x_d, gain in goals or ():                              # attractors add: f, A, V summed
+            pull = attractor(model, mu, x_d[rows], gain, torch.ones_like(x_d[rows]))   # Π_goal = gain I
+            f0 = pull.flow if f0 is None else f0 + pull.flow
+            potential = pull.potential if potential is None else potential + pull.potential
+            a_i = pull.jacobian if pull.jacobian is not None else torch.zeros(b, dz, dz, dtype=u.dtype)
+            a = a_i if a is None else a + a_i
+            missing = missing or pull.jacobian is None                     # an image goal has no A
+        if missing and k > 1:
+            a = None                                                       # prior_terms refuses it above order 0
+        if goals or sensors.goal is None:                                  # every goal fused above: no prior left
             prior = prior_terms(u, cfg.prior, cfg.prior_precision, f0, a, potential)
         if prior is not None:
             free = free + prior.free_energy
@@ -425,24 +437,28 @@ class Perception:
         return free, grad, hess, weighted
 
 
-def _fuse_image_goal(sensors: _Sensors, rows, mu: torch.Tensor, obs: dict, pis: dict, weight: float):
-    """Order 0, an image goal whose model is also observed: the attractor's Π_z V = ½ β |x_d − g|² (β = weight =
-    Π_z · gain, Π_goal = gain I) and the sensory ½ |x − g|²_Π are one Gaussian term ½ |x̄ − g|²_(Π+β),
-    x̄ = (Π x + β x_d)/(Π + β), up to a constant in μ. Fused, the goal costs no model call: its gradient and Gauss–Newton curvature come with the
-    sensor's (priors.py: image goals never build their own Jacobian). Rewrites obs/pis in place; → the constant
-    (b,) to add to F, or None when the goal is not an observed image with a fixed-in-μ precision."""
-    if sensors.goal is None:
-        return None
-    model, x_d = sensors.goal
-    name = model.modality
-    if x_d[0].numel() <= JACOBIAN_MAX_OUTPUTS or name not in obs or getattr(model, "precision_varies", False):
-        return None
-    b = len(rows)
-    pi = pis[name] if pis[name] is not None else model.precision(model_input(model, mu)).to(mu.dtype)  # (b, *out)
-    beta = torch.as_tensor(weight, dtype=mu.dtype)
-    x, goal = obs[name].to(mu.dtype), x_d[rows].to(mu.dtype)
-    total = pi + beta
-    obs[name], pis[name] = (pi * x + beta * goal) / total, total
-    constant = 0.5 * (pi * beta / total * (x - goal).pow(2)).reshape(b, -1).sum(-1)
-    logdet = 0.5 * (torch.log(total) - torch.where(pi > 0, pi.clamp_min(1e-300).log(), 0.0)).reshape(b, -1).sum(-1)
-    return constant + logdet                                               # F_x(Π) + Π_z V = F_fused + this
+def _fuse_image_goal(goals, rows, mu: torch.Tensor, obs: dict, pis: dict, prior_precision: float):
+    """Order 0, an image goal whose model is also observed: the attractor's Π_z V = ½ β |x_d − g|² (β = Π_z · its
+    Π_goal) and the sensory ½ |x − g|²_Π are one Gaussian term ½ |x̄ − g|²_(Π+β), x̄ = (Π x + β x_d)/(Π + β), up
+    to a constant in μ. Fused, the goal costs no model call: its gradient and Gauss–Newton curvature come with the
+    sensor's (priors.py: image goals never build their own Jacobian). Rewrites obs/pis in place.
+    → the goals left to the prior (None if there were none) and the constant (b,) to add to F."""
+    offset = torch.zeros(len(rows), dtype=mu.dtype)
+    if goals is None:
+        return None, offset
+    left = []
+    for model, x_d, gain in goals:
+        name = model.modality
+        if x_d[0].numel() <= JACOBIAN_MAX_OUTPUTS or name not in obs or getattr(model, "precision_varies", False):
+            left.append((model, x_d, gain))
+            continue
+        b = len(rows)
+        pi = pis[name] if pis[name] is not None else model.precision(model_input(model, mu)).to(mu.dtype)  # (b, *out)
+        beta = torch.as_tensor(gain * prior_precision, dtype=mu.dtype)
+        x, goal = obs[name].to(mu.dtype), x_d[rows].to(mu.dtype)
+        total = pi + beta
+        obs[name], pis[name] = (pi * x + beta * goal) / total, total
+        constant = 0.5 * (pi * beta / total * (x - goal).pow(2)).reshape(b, -1).sum(-1)
+        logdet = 0.5 * (torch.log(total) - torch.where(pi > 0, pi.clamp_min(1e-300).log(), 0.0)).reshape(b, -1).sum(-1)
+        offset = offset + constant + logdet                                # F_x(Π) + Π_z V = F_fused + this
+    return left, offset

@@ -43,7 +43,7 @@ from bodyschema.evaluation.reaching import report as reaching_report
 from bodyschema.evaluation.reaching.loop import ImpedancePolicy, ServoPolicy, TorquePolicy, VelocityPolicy, rollout
 
 REACHING_STREAM = 0x4EAC_4100          # second entropy word: reaching targets are their own stream
-PURPOSE = {"targets": 0, "starts": 1, "noise": 2}
+PURPOSE = {"targets": 0, "starts": 1, "noise": 2, "cue": 3}
 ROBOTS = {   # default models, control rate (Hz), duration (s), what the actuators take
     "planar2": {"models": ("analytic:planar2:ee_xyz", "analytic:planar2:joints"), "hz": 50.0, "duration": 3.0,
                 "actuators": "position",    # soft servos (kp 5, lag ≈ 0.1 s): K = k_a·Δt·Π_joints ≈ 16 s⁻², λ ≈ 2√K
@@ -64,7 +64,7 @@ class ReachingRunConfig(TrialsConfig):
 
     out: Path = Path("results/reaching")             # runs go to <out>/<run-id>/, <out>/latest
     experiment: str = "bodyschema-reaching"          # the MLflow experiment
-    robot: str = "nao_arm"                 # "nao_arm" (velocity AIF on servos) | "panda" (AIC torques)
+    robot: str = "nao_arm"                 # "nao_arm" | "planar2" (servos) | "panda" (torques): ROBOTS
     models: models_field("the robot's analytic defaults (nao_arm: ee_pixel + joints; panda: ee_xyz)") = ()
     goal: str = "auto"                     # goal modality; auto: image > ee_xyz > ee_pixel > joints among the models
     trials: int = 100                      # random reachable targets (episodes per controller)
@@ -79,6 +79,8 @@ class ReachingRunConfig(TrialsConfig):
     pixel_tolerance: float = 1.0           # px; goal-space success of an ee_pixel goal
     image_mse_threshold: float = 7e-4      # image goal success; the median MSE (200 poses) of a 1 cm ee offset
     image_size: tuple[int, int] | None = None   # robot camera (H, W); default: the image model's, else the robot's
+    depth_cue_deg: float = 0.0             # > 0: a second goal, the target's joint pose seen through σ° of noise
+                                           # (Π = 1/σ²), the depth an ee_pixel goal leaves open; needs a joints model
     spread: float = 1.0                    # targets and starts uniform in the middle `spread` of each joint's
                                            # sampling range: a goal across a joint limit stalls descent there
 
@@ -86,6 +88,8 @@ class ReachingRunConfig(TrialsConfig):
         super().__post_init__()
         if self.robot not in ROBOTS:
             raise ValueError(must_be("robot", f"one of {tuple(ROBOTS)}", self.robot))
+        if not (np.isfinite(self.depth_cue_deg) and self.depth_cue_deg >= 0):
+            raise ValueError(must_be("depth_cue_deg", "a finite σ ≥ 0 in degrees (0: no cue)", self.depth_cue_deg))
         if not 0 < self.spread <= 1:
             raise ValueError(must_be("spread", "in (0, 1] (a fraction of each joint's sampling range)", self.spread))
         if self.duration is not None and not self.duration > 0:
@@ -223,20 +227,28 @@ def make_episodes(config: ReachingConfig, robot, modality: str, output_shape) ->
     q_start = uniform(reaching_rng(config.seed, "starts"), ranges, config.trials)
     goal = make_goal(robot, modality, q_target)
     check_goal(robot, modality, goal, output_shape)
-    return Episodes(q_target, q_start, {modality: goal}, robot.fk(q_target))
+    episodes = Episodes(q_target, q_start, {modality: goal}, robot.fk(q_target))
+    if config.depth_cue_deg > 0:
+        sigma = np.deg2rad(config.depth_cue_deg)
+        cue = q_target + sigma * reaching_rng(config.seed, "cue").standard_normal(q_target.shape)   # (N, Dq) rad
+        episodes.goal["joints"] = torch.from_numpy(np.clip(cue, *robot.joint_limits.T))
+        episodes.extra["goal_precisions"] = {"joints": 1.0 / sigma ** 2}
+    return episodes
 
 
 # ---- controllers ------------------------------------------------------------------------------------------
-def aif_policy(config: ReachingConfig, models, robot):
+def aif_policy(config: ReachingConfig, models, robot, goal_precisions: dict[str, float] | None = None):
+    """goal_precisions: Π_goal per goal modality for the velocity controller (a depth cue's)."""
     precisions = {m: 0.0 for m in config.broken}
     if robot.actuation == "position":
-        return VelocityPolicy(VelocityController(models, config.perception, config.action_config, precisions))
+        return VelocityPolicy(VelocityController(models, config.perception, config.action_config, precisions),
+                              goal_precisions)
     if "joints" in config.broken:
         raise ValueError(must_be("broken", "extra sensors only on the panda (its joint sensor feeds the servo and "
                                  "the AIC)", config.broken))
     if config.panda_controller == "velocity":
         controller = VelocityController(models, config.perception, config.action_config, precisions)
-        return ImpedancePolicy(controller, PDController(robot.name), tuple(robot.joint_limits.T))
+        return ImpedancePolicy(controller, PDController(robot.name), tuple(robot.joint_limits.T), goal_precisions)
     aic = replace(config.aic, precisions=tuple((m, p) for m, p in config.aic.precisions if m not in precisions)
                   + tuple(precisions.items()))
     extra = [m for m in models if m.modality != "joints"]
@@ -263,7 +275,7 @@ def simulate(config: ReachingConfig, models=None):
     robot, models, modality, episodes, sensed = prepare(config, models)
     substeps = control_substeps(config.rate, robot.model.opt.timestep)
     ticks = int(round(config.seconds * config.rate))
-    policies = {"aif": aif_policy(config, models, robot)}
+    policies = {"aif": aif_policy(config, models, robot, episodes.extra.get("goal_precisions"))}
     if config.baseline:
         policies["pd"] = baseline_policy(config, robot, episodes)
     results, walls = {}, {}
@@ -293,6 +305,10 @@ def prepare(config: ReachingConfig, models=None):
         if unknown:
             raise ValueError(must_be(what, f"modalities of the models {names}", unknown))
     modality = goal_modality(config, models, robot)
+    if config.depth_cue_deg > 0 and (modality == "joints" or "joints" not in names or robot.actuation != "position"
+                                     and config.panda_controller != "velocity"):
+        raise ValueError(must_be("depth_cue_deg", "0 unless the goal is not joints and a joints model is fused "
+                                 "(velocity controller)", config.depth_cue_deg, "Add analytic:<robot>:joints."))
     shape = (robot.dq,) if modality == "joints" else next(m.output_shape for m in models if m.modality == modality)
     episodes = make_episodes(config, robot, modality, shape)
     sensed = tuple(dict.fromkeys(names + builtin_sensors(robot)))

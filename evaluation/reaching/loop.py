@@ -30,13 +30,13 @@ from bodyschema.evaluation.core.sim import ArmBatch
 class VelocityPolicy:
     """AIF velocity commands (aif.action.VelocityController) integrated into the position servos' targets."""
 
-    def __init__(self, controller):
-        self.controller = controller
+    def __init__(self, controller, goal_precisions: Mapping[str, float] | None = None):
+        self.controller, self.goal_precisions = controller, goal_precisions
 
     def reset(self, arm: ArmBatch, goal: Mapping[str, torch.Tensor]) -> None:
         self.low, self.high = arm.model.actuator_ctrlrange.T
         self.ctrl = np.clip(arm.q, self.low, self.high)
-        self.controller.reset(arm.q, goal)
+        self.controller.reset(arm.q, goal, self.goal_precisions)
 
     def command(self, arm: ArmBatch, observations, dt: float) -> np.ndarray:
         velocity = self.controller.act(observations, dt)                   # (B, Dq) rad/s
@@ -70,13 +70,14 @@ class ImpedancePolicy:
     """AIF velocity commands (aif.action.VelocityController) integrated into the setpoint of a joint impedance
     servo with AICController's interface (core.pd.PDController): ctrl ← clip(ctrl + a·Δt, joint range)."""
 
-    def __init__(self, controller, servo, limits: tuple[np.ndarray, np.ndarray]):
-        self.controller, self.servo = controller, servo
+    def __init__(self, controller, servo, limits: tuple[np.ndarray, np.ndarray],
+                 goal_precisions: Mapping[str, float] | None = None):
+        self.controller, self.servo, self.goal_precisions = controller, servo, goal_precisions
         self.low, self.high = limits                                       # (Dq,) rad
 
     def reset(self, arm: ArmBatch, goal: Mapping[str, torch.Tensor]) -> None:
         self.ctrl = np.clip(arm.q, self.low, self.high)                    # (B, Dq) rad, the servo setpoint
-        self.controller.reset(arm.q, goal)
+        self.controller.reset(arm.q, goal, self.goal_precisions)
 
     def command(self, arm: ArmBatch, observations, dt: float) -> np.ndarray:
         velocity = self.controller.act(observations, dt)                   # (B, Dq) rad/s
