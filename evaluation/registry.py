@@ -24,6 +24,13 @@ class Benchmark:
     help: str
     tiny_args: Callable[[Path], dict]  # out → keywords of a config that runs in seconds (determinism test)
 
+    def __post_init__(self) -> None:
+        names = self.names if isinstance(self.names, tuple) else ()
+        if not (isinstance(self.package, str) and len(names) == 2 and all(isinstance(n, str) for n in names)):
+            raise TypeError(f"Benchmark {self.words} must name its package and (config class, runner) as strings, "
+                            f'e.g. Benchmark(("levels",), "levels", ("LevelsConfig", "run_levels"), help, tiny). '
+                            f"Got {self.package!r}, {self.names!r}.")
+
     @property
     def module(self) -> str:
         return f"bodyschema.evaluation.{self.package}"
