@@ -2,6 +2,7 @@
 bad input raises the house error, a seed reproduces the metrics."""
 
 import csv
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -158,3 +159,25 @@ def test_planar2_with_the_analytic_model_reaches_every_target():
 def test_spread_out_of_range_raises():
     with pytest.raises(ValueError, match="spread"):
         ReachingConfig(spread=0.0)
+
+
+def test_a_joint_space_depth_cue_lets_pixel_goals_reach_in_3d():
+    """An ee_pixel goal leaves the depth open; fused with the target's joint pose seen through 4° of noise, every
+    episode ends within 1 cm, better than the pixel alone and than the cue alone."""
+    config = ReachingConfig(trials=10, baseline=False, mlflow=False, progress=False)
+    final = {}
+    for sigma in (0.0, 4.0):
+        robot, _, _, episodes, results, _ = simulate(replace(config, depth_cue_deg=sigma))
+        final[sigma] = results["aif"].ee_err[-1]                                       # (B,) m
+    cue_alone = np.linalg.norm(robot.fk(episodes.goal["joints"].numpy()) - episodes.target_xyz, axis=1)
+    assert (final[4.0] < 0.01).all(), np.round(1e3 * final[4.0], 1)
+    assert np.mean(final[0.0] < 0.01) < 1.0 and np.mean(cue_alone < 0.01) < 1.0
+
+
+def test_depth_cue_needs_a_joints_model_and_a_non_joint_goal():
+    with pytest.raises(ValueError, match="depth_cue_deg"):
+        prepare(ReachingConfig(goal="joints", depth_cue_deg=4.0, **SHORT))
+    with pytest.raises(ValueError, match="depth_cue_deg"):
+        prepare(ReachingConfig(models=("analytic:nao_arm:ee_pixel",), depth_cue_deg=4.0, **SHORT))
+    with pytest.raises(ValueError, match="depth_cue_deg"):
+        ReachingConfig(depth_cue_deg=-1.0)
