@@ -118,6 +118,11 @@ def _act(config: DemoConfig, gpr_uri: str) -> None:
                               trials=config.reach_targets, seed=config.seed, out=results / "reaching",
                               tracking_uri=config.tracking_uri)
     print(run_reaching(reaching)["summary_md"].read_text())
+    logger.info("== reaching on the 7-DOF torque panda: 10 ee_xyz goals in 3 s, the velocity controller on the joint "
+                "impedance servo vs PD on the true inverse kinematics (analytic models)")
+    panda = ReachingConfig(robot="panda", trials=10, seed=config.seed, out=results / "reaching_panda",
+                           tracking_uri=config.tracking_uri)
+    print(run_reaching(panda)["summary_md"].read_text())
     logger.info(f"== self-recognition: {config.episodes} babbling episodes per condition, is the ee stream mine "
                 f"or an imitator's? ({gpr_uri})")
     recognition = SelfRecognitionConfig(robot="nao_arm", models=(gpr_uri,), trials=config.episodes,
