@@ -157,10 +157,10 @@ class VelocityController:
 
     # ---- internals --------------------------------------------------------------------------------------
     def _goal_perception(self, mu: torch.Tensor, given: dict[str, float]) -> Perception:
-        """The perception with the attractor f = Jᵀ Π_goal (x_d − g) of the issue, Π_goal = β · the goal model's
-        own mean precision at the start belief: the goal pulls as hard as its model is trusted, so one β serves
-        goals in px, m, rad or image intensity; a sensor override (even 0, a broken camera) leaves the pull as
-        it is, since the goal is imagined through the model, not sensed."""
+        """The perception with the attractor f = Σ_goals Jᵀ Π_goal (x_d − g) of the issue, Π_goal = `given`, else
+        β · the goal model's own mean precision at the start belief: the goal pulls as hard as its model is trusted,
+        so one β serves goals in px, m, rad or image intensity; a sensor override (even 0, a broken camera) leaves
+        the pull as it is, since the goal is imagined through the model, not sensed."""
         pis = {}
         for name in self._goal:
             if name in given:

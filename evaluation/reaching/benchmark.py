@@ -6,15 +6,19 @@ is reachable by construction): an image (nao_arm with an image model, rendered a
 as training images), an ee pixel, an ee position (panda) or joint angles. Every episode starts at rest at
 another random pose, with the belief at that pose.
 The controllers follow what the robot's actuators take (`robot.actuation`, set per robot in ROBOTS):
-  position (nao_arm)  AIF: `aif.action.VelocityController` velocity commands integrated into the servo targets;
-                      baseline: the servos commanded to the target's joint pose (its true inverse kinematics).
-  torque (panda)      AIF: `aif.aic.AICController` torques on motors; baseline: PD + gravity compensation on the
-                      target pose.
+  position (nao_arm, planar2)  AIF: `aif.action.VelocityController` velocity commands integrated into the servo
+                      targets; baseline: the servos commanded to the target's joint pose (its true inverse kinematics).
+  torque (panda)      AIF: the same velocity controller on the arm's joint impedance servo (setpoint + velocity
+                      reference, the baseline's PD + gravity compensation; `--panda-controller aic`: the torque AIC,
+                      `aif.aic.AICController`); baseline: PD + gravity compensation on the target pose.
+The velocity controller's gains are per robot (ROBOTS["action"]) unless --action.* is given: K = k_a·Δt·Π_joints
+must stay below what the servo can follow (planar2's soft servos lag ≈ 0.1 s).
 Metrics per episode (report.py): success (simulator ee within `success_mm` of the target's ee at the
 end), final ee error, final joint error, time to reach (first time within success_mm and staying), the error
 in the goal's own space (px, mm, deg or image MSE) and failures with their reasons.
 An ee pixel goal fixes the ray through the target, not its depth: with the default nao_arm models the AIF meets
-the pixel goal far more often than the 1 cm (3-D) criterion. With an image model every control tick renders B
+the pixel goal far more often than the 1 cm (3-D) criterion; `--depth-cue-deg σ` adds the depth as a second goal,
+the target's joint pose seen through σ° of noise (Π = 1/σ²), fused with the pixel goal by the same attractor. With an image model every control tick renders B
 images (≈ 40 ms each with this machine's software EGL): 100 targets × 3 s at 50 Hz take ≈ 10 min.
 """
 
