@@ -249,3 +249,12 @@ def test_image_goals_use_vjps_only():
         calls.append(dict(image.calls))
     assert calls[0] == calls[1], calls
     assert (mus[1] - q).abs().max() > 1e-3 > (mus[0] - q).abs().max()                 # the fused goal pulls
+
+
+def test_geometry_names_are_checked():
+    from bodyschema.aif.aic import AICConfig
+    with pytest.raises(ValueError, match="goal_geometry"):
+        AICConfig(goal_geometry="newton")
+    arm, mu, goal, _ = attractor_case(seed=51)
+    with pytest.raises(ValueError, match="geometry"):
+        attractor(arm, mu, goal, BETA, torch.ones_like(goal), "newton")
