@@ -181,3 +181,12 @@ def test_depth_cue_needs_a_joints_model_and_a_non_joint_goal():
         prepare(ReachingConfig(models=("analytic:nao_arm:ee_pixel",), depth_cue_deg=4.0, **SHORT))
     with pytest.raises(ValueError, match="depth_cue_deg"):
         ReachingConfig(depth_cue_deg=-1.0)
+
+
+def test_the_panda_aic_stays_selectable():
+    config = ReachingConfig(robot="panda", panda_controller="aic", trials=2, duration=0.2, baseline=False,
+                            mlflow=False, progress=False)
+    _, models, _, _, results, _ = simulate(config)
+    assert not results["aif"].failed.any() and {m.modality for m in models} == {"ee_xyz", "joints"}
+    with pytest.raises(ValueError, match="panda_controller"):
+        ReachingConfig(robot="panda", panda_controller="mpc")
