@@ -150,9 +150,10 @@ def prepare(config: SelfRecognitionConfig, models: Sequence):
 # ---- perception through time ---------------------------------------------------------------------------
 def score_episodes(perception: Perception, episodes: Episodes, visual: Sequence[str],
                    progress: bool = True) -> Scores:
-    """Run perception frame by frame over all episodes at once (warm start: the previous belief), once with one body
-    behind joints and vision and once on vision alone; per frame, the free energies of both hypotheses. Episodes
-    with a non-finite observation or a diverged belief fail."""
+    """Run perception frame by frame over all episodes at once (warm start: the previous belief) with one body behind
+    joints and vision, then release the belief to vision alone from there (the two-body hypothesis, refitted locally
+    each frame: a vision-only belief tracked on its own loses an image stream's pose within a few frames); per frame,
+    the free energies of both hypotheses. Episodes with a non-finite observation or a diverged belief fail."""
     from tqdm import tqdm
     n, t = episodes.proprio.shape[:2]
     streams = {"joints": episodes.proprio, **{m: episodes.visual[m] for m in visual}}
@@ -160,7 +161,6 @@ def score_episodes(perception: Perception, episodes: Episodes, visual: Sequence[
     alone = visual_only(perception)
     belief = torch.zeros(n, perception.config.order + 1, perception.latent_dim, dtype=torch.float64)
     belief[:, 0] = torch.from_numpy(np.nan_to_num(episodes.proprio[:, 0]))        # start at the joint readings
-    free = belief.clone()                                           # (N, order + 1, Dz), the vision-alone belief
     for frame in tqdm(range(t), desc="self-recognition", disable=not progress):
         _fail_non_finite(scores, streams, frame)
         rows = np.flatnonzero(~scores.failed)
@@ -169,15 +169,17 @@ def score_episodes(perception: Perception, episodes: Episodes, visual: Sequence[
         obs = {m: torch.from_numpy(np.asarray(x[rows, frame], dtype=np.float64)) for m, x in streams.items()}
         result = perception.infer(obs, belief[rows])
         seen = {m: obs[m] for m in visual}
-        apart = alone.infer(seen, free[rows])
+        apart = alone.infer(seen, result.mu_tilde)                 # released from the one-body belief
         diverged = result.diverged.numpy() | apart.diverged.numpy()
         for i in rows[diverged]:
             scores.failed[i], scores.reason[i] = True, f"perception diverged at frame {frame}"
         ok = ~diverged
-        belief[rows[ok]], free[rows[ok]] = result.mu_tilde[ok], apart.mu_tilde[ok]
+        belief[rows[ok]] = result.mu_tilde[ok]
         total, per_modality = _free_energy(perception.models, perception.precisions,
                                            {m: x[ok] for m, x in obs.items()}, result.mu[ok])
-        vision, _ = _free_energy(alone.models, alone.precisions, {m: x[ok] for m, x in seen.items()}, apart.mu[ok])
+        shown = {m: x[ok] for m, x in seen.items()}
+        vision = np.minimum(_free_energy(alone.models, alone.precisions, shown, apart.mu[ok])[0],   # its start is
+                            _free_energy(alone.models, alone.precisions, shown, result.mu[ok])[0])  # a candidate too
         joints, _ = _free_energy(perception.models[:1], perception.precisions, {"joints": obs["joints"][ok]},
                                  obs["joints"][ok])                 # its own body: the readings, ε = 0
         scores.total[rows[ok], frame] = total
