@@ -241,8 +241,8 @@ def plot_over_time(conditions: np.ndarray, per_frame: np.ndarray, period: float,
 def write_report(out: Path, episodes_rows: Sequence[Mapping], rows: Sequence[Mapping], curves, over_time,
                  notes: Sequence[str], conditions: np.ndarray, failed: np.ndarray, per_frame: np.ndarray,
                  period: float, plots: bool = True) -> dict[str, Path]:
-    """summary.md, summary.csv, viewing_time.csv, episodes.csv and (with `plots`) roc.png, viewing_time.png, delay.png, scores.png
-    and free_energy.png in `out`."""
+    """summary.md, summary.csv, viewing_time.csv, episodes.csv and (with `plots`) roc.png, viewing_time.png,
+    delay.png, scores.png and free_energy.png in `out`."""
     out.mkdir(parents=True, exist_ok=True)
     paths = {"summary_csv": write_csv(rows, out / "summary.csv"),
              "viewing_time_csv": write_csv(viewing_rows(over_time, period), out / "viewing_time.csv"),

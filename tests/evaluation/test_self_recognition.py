@@ -273,8 +273,8 @@ def test_short_benchmark_tells_self_from_a_second_arm_and_a_late_imitator(tmp_pa
     config = replace(SHORT, trials=20, steps=10, delays=(0.0, 0.4), out=tmp_path / "out", mlflow=True, plots=True,
                      tracking_uri=f"sqlite:///{tmp_path / 'mlflow.db'}")
     paths = run_self_recognition(config, models=[pixel_model])
-    for name in ("summary_md", "summary_csv", "viewing_time_csv", "episodes_csv", "roc", "viewing_time", "delay", "scores",
-                 "free_energy"):
+    for name in ("summary_md", "summary_csv", "viewing_time_csv", "episodes_csv", "roc", "viewing_time", "delay",
+                 "scores", "free_energy"):
         assert paths[name].is_file() and paths[name].stat().st_size > 0
     rows = {r["comparison"]: r for r in csv.DictReader(paths["summary_csv"].open())}
     assert list(rows) == ["pooled", "imitator_0.00s", "imitator_0.40s", "second_arm", "mirrored"]
