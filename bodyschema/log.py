@@ -87,3 +87,7 @@ class _StderrHandler(logging.StreamHandler):
     @stream.setter
     def stream(self, value) -> None:   # logging.StreamHandler.__init__ assigns it; the property always wins
         pass
+
+    def emit(self, record: logging.LogRecord) -> None:
+        sys.stdout.flush()             # output printed before this line appears before it, also when both go to a file
+        super().emit(record)
