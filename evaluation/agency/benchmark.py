@@ -30,7 +30,7 @@ from bodyschema.evaluation.core.config import TrialsConfig
 from bodyschema.evaluation.core.mlflow_log import table_metrics
 from bodyschema.evaluation.core.publish import publish
 from bodyschema.evaluation.core.runs import new_run
-from bodyschema.evaluation.core.specs import load_robot, models_field, resolve_models, trained_workspace
+from bodyschema.evaluation.core.specs import body_and_senses, models_field, resolve_models
 
 VISUAL = ("ee_pixel", "ee_xyz", "image")
 
@@ -91,19 +91,7 @@ class AgencyConfig(TrialsConfig):
 def prepare(config: AgencyConfig, models: Sequence):
     """(robot, [joints model, *visual models]); the house error for models of another robot or no visual model
     (a moved scene is seen, not felt)."""
-    from bodyschema.models.analytic import AnalyticModel
-    for m in models:
-        if m.body.robot != config.robot:
-            raise ValueError(must_be(f"{m.modality} model body", f"robot {config.robot!r}", m.body.robot,
-                                     "Evaluate models of the benchmark's robot (or set --robot)."))
-    visual = [m for m in models if m.modality != "joints"]
-    if not visual or any(m.modality not in VISUAL for m in visual):
-        raise ValueError(must_be("model modalities", f"at least one of {VISUAL} (plus optionally joints)",
-                                 [m.modality for m in models]))
-    robot = load_robot(models, actuators="position")
-    proprio = next((m for m in models if m.modality == "joints"), None) or AnalyticModel(robot.name, "joints")
-    robot.sampling_ranges = trained_workspace([proprio, *visual], robot)   # the added joints model's box too
-    return robot, [proprio, *visual]
+    return body_and_senses(models, config.robot, VISUAL)
 
 
 def predicted_free_energy(models: Sequence, predicted: np.ndarray, observed: dict[str, np.ndarray],

@@ -139,6 +139,26 @@ def check_models_match(models: Sequence, robot) -> None:
                                      f"{list(m.body.joint_names)}", "Evaluate models of the benchmark's robot."))
 
 
+def body_and_senses(models: Sequence, robot_name: str, visual_kinds: Sequence[str], hint: str = "",
+                    actuators: str = "position"):
+    """(robot, [joints model, *visual models]) for benchmarks that set proprioception against vision: every model of
+    `robot_name`, at least one visual model of `visual_kinds`; the robot's exact joints model is added when none is
+    given, and the sampling box is the one every model was trained on (the added joints model's too)."""
+    from bodyschema.models.analytic import AnalyticModel
+    for m in models:
+        if m.body.robot != robot_name:
+            raise ValueError(must_be(f"{m.modality} model body", f"robot {robot_name!r}", m.body.robot,
+                                     "Evaluate models of the benchmark's robot (or set --robot)."))
+    visual = [m for m in models if m.modality != "joints"]
+    if not visual or any(m.modality not in visual_kinds for m in visual):
+        raise ValueError(must_be("model modalities", f"at least one of {tuple(visual_kinds)} (plus optionally "
+                                 "joints)", [m.modality for m in models], hint))
+    robot = load_robot(models, actuators=actuators)
+    proprio = next((m for m in models if m.modality == "joints"), None) or AnalyticModel(robot.name, "joints")
+    robot.sampling_ranges = trained_workspace([proprio, *visual], robot)
+    return robot, [proprio, *visual]
+
+
 def on_device(models: Sequence, device: str) -> None:
     """Move every network to `device` (checked: the house error when CUDA is asked for but absent)."""
     from bodyschema.models.device import check_device

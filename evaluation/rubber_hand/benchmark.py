@@ -28,7 +28,7 @@ from bodyschema.evaluation.core.mlflow_log import table_metrics
 from bodyschema.evaluation.core.publish import publish
 from bodyschema.evaluation.core.runs import new_run
 from bodyschema.evaluation.core.sensing import sense
-from bodyschema.evaluation.core.specs import load_robot, models_field, resolve_models, trained_workspace
+from bodyschema.evaluation.core.specs import body_and_senses, models_field, resolve_models
 from bodyschema.evaluation.rubber_hand.report import condition_table, write_report
 from bodyschema.evaluation.rubber_hand.scene import camera_frame, episode_rng, rest_poses
 from bodyschema.evaluation.rubber_hand.stroking import MODES, felt_strokes, ownership, strokes
@@ -117,21 +117,9 @@ class Episodes:
 def prepare(config: RubberHandConfig, models: Sequence):
     """(robot, [joints model, *visual models], visual modalities); the house error for models of another robot or
     without a seen-hand modality."""
-    from bodyschema.models.analytic import AnalyticModel
-    for m in models:
-        if m.body.robot != config.robot:
-            raise ValueError(must_be(f"{m.modality} model body", f"robot {config.robot!r}", m.body.robot,
-                                     "Evaluate models of the benchmark's robot (or set --robot)."))
-    visual = [m for m in models if m.modality != "joints"]
-    if not visual or any(m.modality not in VISUAL for m in visual):
-        raise ValueError(must_be("model modalities", f"at least one of {VISUAL} (plus optionally joints)",
-                                 [m.modality for m in models],
-                                 "The seen hand is a point moved in space: an image model would need a rendered "
-                                 "fake hand."))
-    robot = load_robot(models)
-    proprio = next((m for m in models if m.modality == "joints"), None) or AnalyticModel(robot.name, "joints")
-    robot.sampling_ranges = trained_workspace([proprio, *visual], robot)   # the added joints model's box too
-    return robot, [proprio, *visual], [m.modality for m in visual]
+    robot, used = body_and_senses(models, config.robot, VISUAL, "The seen hand is a point moved in space: an image "
+                                  "model would need a rendered fake hand.")
+    return robot, used, [m.modality for m in used[1:]]
 
 
 def make_episodes(config: RubberHandConfig, robot, visual: Sequence[str]) -> Episodes:

@@ -32,7 +32,7 @@ from bodyschema.evaluation.core.config import TrialsConfig
 from bodyschema.evaluation.core.mlflow_log import table_metrics
 from bodyschema.evaluation.core.publish import publish
 from bodyschema.evaluation.core.runs import new_run
-from bodyschema.evaluation.core.specs import load_robot, models_field, resolve_models
+from bodyschema.evaluation.core.specs import body_and_senses, models_field, resolve_models
 from bodyschema.evaluation.self_recognition.report import roc_table, summary_notes, write_report
 from bodyschema.evaluation.self_recognition.sensors import sensors_of, visual_only
 from bodyschema.evaluation.self_recognition.streams import IMITATOR, Episodes, frames_of, make_episodes
@@ -131,20 +131,10 @@ class Scores:
 def prepare(config: SelfRecognitionConfig, models: Sequence):
     """(robot, Perception over [joints model, *visual models], visual modalities); the house error on models of
     another robot or of a modality that has no visual stream."""
-    from bodyschema.models.analytic import AnalyticModel
-    for m in models:
-        if m.body.robot != config.robot:
-            raise ValueError(must_be(f"{m.modality} model body", f"robot {config.robot!r}", m.body.robot,
-                                     "Evaluate models of the benchmark's robot (or set --robot)."))
-    visual = [m for m in models if m.modality != "joints"]
-    if not visual or any(m.modality not in VISUAL for m in visual):
-        raise ValueError(must_be("model modalities", f"at least one of {VISUAL} (plus optionally joints)",
-                                 [m.modality for m in models]))
-    robot = load_robot(models)                                     # checks joints; camera of the image model
-    proprio = next((m for m in models if m.modality == "joints"), None) or AnalyticModel(robot.name, "joints")
-    sensors, precisions = sensors_of(config, [proprio, *visual])
+    robot, used = body_and_senses(models, config.robot, VISUAL)    # checks joints; camera of the image model
+    sensors, precisions = sensors_of(config, used)
     perception = Perception(sensors, config.perception, precisions)
-    return robot, perception, [m.modality for m in visual]
+    return robot, perception, [m.modality for m in used[1:]]
 
 
 # ---- perception through time ---------------------------------------------------------------------------
