@@ -1,10 +1,11 @@
 """Estimation levels 1–3, "where is my body?": batched perception from perturbed beliefs, against the simulator.
 
 For every run (seeded, held-out targets: targets.py) and level, all trials are inferred in one batch by
-`aif.Perception` over the given models; level 3 is also run with multi-start (aif/multistart.py). Metrics per
+`aif.Perception` over the given models; level 3 is also run with multi-start (aif/multistart.py), and with an image
+encoder every level also starts from its guess ("+enc" rows: see evaluate_level). Metrics per
 level and run: joint error (deg, per joint and mean), end-effector error (mm, simulator FK at the belief),
 image MSE (with an image model), success rate (mean |joint error| < success_deg), steps, convergence,
-divergence and wall time. Tables, plots (level_report.py) and one MLflow run with them as artifacts.
+divergence and wall time. Tables, plots (report.py) and one MLflow run with them as artifacts.
 Robustness: `noise_sweep` and `broken_sweep` repeat one level under observation noise or a dead sensor.
 
 Models come as objects (`run_levels(config, models=[...])`) or as specs: "analytic:<robot>:<modality>",
