@@ -17,7 +17,7 @@ show_store, export_dataset. Models out: export_onnx. Perception: Perception, Per
 
 from __future__ import annotations
 
-import importlib
+from bodyschema.lazy import lazy_exports
 
 __version__ = "0.1.0"
 
@@ -37,20 +37,7 @@ _EXPORTS = {   # public name → module defining it (imported on first access)
 }
 _RENAMED = {"load_registered": ("bodyschema.training.registry", "load")}   # registry.load: models:/<name>@<alias>
 
-__all__ = sorted([*_EXPORTS, *_RENAMED, "__version__"])
-
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        value = getattr(importlib.import_module(_EXPORTS[name]), name)
-    elif name in _RENAMED:
-        module, attr = _RENAMED[name]
-        value = getattr(importlib.import_module(module), attr)
-    else:
-        raise AttributeError(f"module 'bodyschema' has no attribute {name!r}. Public names: {', '.join(__all__)}")
-    globals()[name] = value          # cached: the next access is a plain attribute
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+__all__, __getattr__, __dir__ = lazy_exports(
+    "bodyschema", globals(),
+    {**{name: (module, name) for name, module in _EXPORTS.items()}, **_RENAMED})
+__all__ = sorted([*__all__, "__version__"])

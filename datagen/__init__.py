@@ -6,20 +6,11 @@ Names are imported on first use: `generate` pulls in MuJoCo, which reading a sto
 
 from __future__ import annotations
 
-import importlib
+from bodyschema.lazy import lazy_exports
 
 _EXPORTS = {"DatagenConfig": "config", "generate": "generate", "validate_store": "validate",
             "summarize_store": "validate", "show_store": "show", "write_contact_sheet": "contact_sheet",
             "export_dataset": "export", "open_store": "store"}
 
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    if name not in _EXPORTS:
-        raise AttributeError(f"module 'bodyschema.datagen' has no attribute {name!r}")
-    return getattr(importlib.import_module(f"bodyschema.datagen.{_EXPORTS[name]}"), name)
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+__all__, __getattr__, __dir__ = lazy_exports(
+    "bodyschema.datagen", globals(), {name: (f"bodyschema.datagen.{module}", name) for name, module in _EXPORTS.items()})

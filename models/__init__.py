@@ -6,7 +6,7 @@ use: the GP kinds pull in gpytorch and scikit-learn, which a script using only a
 
 from __future__ import annotations
 
-import importlib
+from bodyschema.lazy import lazy_exports
 
 # Every name is lazy, the contract's too: `bodyschema.models.configs` and `kinds` (the CLI's `train` flags) must
 # import without torch, and importing them runs this file first.
@@ -16,14 +16,6 @@ _KIND_CLASSES = {"GPRModel": "gpr", "SklearnGPRModel": "sklearn_gpr", "MDNModel"
                  "SensoryModel": "contract", "load_model": "contract", "register_kind": "contract",
                  "BodySpec": "scaling"}
 
-__all__ = sorted(_KIND_CLASSES)
-
-
-def __getattr__(name: str):
-    if name not in _KIND_CLASSES:
-        raise AttributeError(f"module 'bodyschema.models' has no attribute {name!r}")
-    return getattr(importlib.import_module(f"bodyschema.models.{_KIND_CLASSES[name]}"), name)
-
-
-def __dir__() -> list[str]:
-    return sorted({*globals(), *__all__})
+__all__, __getattr__, __dir__ = lazy_exports(
+    "bodyschema.models", globals(),
+    {name: (f"bodyschema.models.{module}", name) for name, module in _KIND_CLASSES.items()})
