@@ -159,6 +159,22 @@ def body_and_senses(models: Sequence, robot_name: str, visual_kinds: Sequence[st
     return robot, [proprio, *visual]
 
 
+def resolve_encoder(spec: str | None, robot, tracking_uri: str | None = None):
+    """The image encoder of `spec` (None: none), checked against the benchmark robot and its camera image."""
+    if spec is None:
+        return None
+    encoder = resolve_model(spec, tracking_uri)
+    if getattr(encoder, "kind", None) != "encoder":
+        raise ValueError(must_be("encoder", "a model of kind 'encoder' (bodyschema train encoder)",
+                                 getattr(encoder, "kind", type(encoder).__name__)))
+    check_models_match([encoder], robot)
+    want = (*robot.image_size, *((3,) if robot.channels == 3 else ()))
+    if tuple(encoder.image_shape) != want:
+        raise ValueError(must_be("encoder image shape", f"the benchmark camera's {want}", encoder.image_shape,
+                                 "Train the encoder on images of the same camera and size as the decoder."))
+    return encoder
+
+
 def on_device(models: Sequence, device: str) -> None:
     """Move every network to `device` (checked: the house error when CUDA is asked for but absent)."""
     from bodyschema.models.device import check_device

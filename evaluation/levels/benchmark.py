@@ -31,7 +31,7 @@ from bodyschema.evaluation.core.mlflow_log import table_metrics
 from bodyschema.evaluation.core.publish import publish
 from bodyschema.evaluation.core.runs import new_run
 from bodyschema.evaluation.core.seeds import eval_rng
-from bodyschema.evaluation.core.specs import (check_models_match, load_robot, models_field, on_device, resolve_model,
+from bodyschema.evaluation.core.specs import (load_robot, models_field, on_device, resolve_encoder,
                                               resolve_models)
 from bodyschema.evaluation.levels import report as level_report
 from bodyschema.evaluation.levels.targets import initial_beliefs, make_targets
@@ -102,21 +102,6 @@ def levels_update(config: LevelsConfig, models: Sequence) -> PerceptionConfig:
         method = "adam+lm" if any(m.modality == "image" for m in models) else "flow"
     return replace(config.perception, method=method)
 
-
-def resolve_encoder(spec: str | None, robot, tracking_uri: str | None = None):
-    """The image encoder of `spec` (None: none), checked against the benchmark robot and its camera image."""
-    if spec is None:
-        return None
-    encoder = resolve_model(spec, tracking_uri)
-    if getattr(encoder, "kind", None) != "encoder":
-        raise ValueError(must_be("encoder", "a model of kind 'encoder' (bodyschema train encoder)",
-                                 getattr(encoder, "kind", type(encoder).__name__)))
-    check_models_match([encoder], robot)
-    want = (*robot.image_size, *((3,) if robot.channels == 3 else ()))
-    if tuple(encoder.image_shape) != want:
-        raise ValueError(must_be("encoder image shape", f"the benchmark camera's {want}", encoder.image_shape,
-                                 "Train the encoder on images of the same camera and size as the decoder."))
-    return encoder
 
 
 # ---- one level ----------------------------------------------------------------------------------------

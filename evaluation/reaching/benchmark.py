@@ -33,6 +33,7 @@ import torch
 
 from bodyschema.aif.action import ActionConfig, VelocityController
 from bodyschema.aif.aic import AICConfig, AICController
+from bodyschema.aif.goal_inference import goal_precision
 from bodyschema.aif.perception import PerceptionConfig
 from bodyschema.datagen.samplers import uniform
 from bodyschema.errors import must_be
@@ -42,12 +43,13 @@ from bodyschema.evaluation.core.runs import new_run
 from bodyschema.evaluation.core.seeds import EVAL_STREAM
 from bodyschema.evaluation.core.sensing import Sensors, sense
 from bodyschema.evaluation.core.sim import control_substeps
-from bodyschema.evaluation.core.specs import load_robot, models_field, resolve_models
+from bodyschema.evaluation.core.specs import load_robot, models_field, resolve_encoder, resolve_models
+from bodyschema.evaluation.reaching import goal_pose
 from bodyschema.evaluation.reaching import report as reaching_report
 from bodyschema.evaluation.reaching.loop import ImpedancePolicy, ServoPolicy, TorquePolicy, VelocityPolicy, rollout
 
 REACHING_STREAM = 0x4EAC_4100          # second entropy word: reaching targets are their own stream
-PURPOSE = {"targets": 0, "starts": 1, "noise": 2, "cue": 3}
+PURPOSE = {"targets": 0, "starts": 1, "noise": 2, "cue": 3, "imagined": 4}
 ROBOTS = {   # default models, control rate (Hz), duration (s), what the actuators take
     "planar2": {"models": ("analytic:planar2:ee_xyz", "analytic:planar2:joints"), "hz": 50.0, "duration": 3.0,
                 "actuators": "position",    # soft servos (kp 5, lag ≈ 0.1 s): K = k_a·Δt·Π_joints ≈ 16 s⁻², λ ≈ 2√K
@@ -87,6 +89,10 @@ class ReachingRunConfig(TrialsConfig):
                                            # (Π = 1/σ²), the depth an ee_pixel goal leaves open; needs a joints model
     spread: float = 1.0                    # targets and starts uniform in the middle `spread` of each joint's
                                            # sampling range: a goal across a joint limit stalls descent there
+    goal_inference: str = "auto"           # perceive each goal's pose in imagination first, then reach for it in
+                                           # joint space (goal_pose.py); auto: for image and ee_xyz goals
+    goal_starts: int = 8                   # starts of that search: the start pose, the encoder's guess, random
+    encoder: str | None = None             # an image encoder spec: its guess starts an image goal's search
 
     def __post_init__(self):
         super().__post_init__()
@@ -100,6 +106,10 @@ class ReachingRunConfig(TrialsConfig):
             raise ValueError(must_be("duration", "positive (s)", self.duration))
         if self.panda_controller not in PANDA_CONTROLLERS:
             raise ValueError(must_be("panda_controller", f"one of {PANDA_CONTROLLERS}", self.panda_controller))
+        if self.goal_inference not in goal_pose.MODES:
+            raise ValueError(must_be("goal_inference", f"one of {goal_pose.MODES}", self.goal_inference))
+        if self.goal_starts < 1:
+            raise ValueError(must_be("goal_starts", "at least 1 (the start pose)", self.goal_starts))
         if self.goal not in ("auto", *GOAL_PREFERENCE):
             raise ValueError(must_be("goal", f"'auto' or one of {GOAL_PREFERENCE}", self.goal))
 
@@ -259,6 +269,31 @@ def aif_policy(config: ReachingConfig, models, robot, goal_precisions: dict[str,
     return TorquePolicy(AICController(extra, aic, np.abs(robot.model.actuator_ctrlrange[:, 1])))
 
 
+def goal_inference_on(config: ReachingRunConfig, modality: str, names: list[str], robot) -> bool:
+    """Whether the AIF reaches for the goal's imagined pose: config.goal_inference for this goal, given a joints
+    model to reach through and a velocity controller ("auto" quietly falls back to the goal's own attractor)."""
+    if not goal_pose.wanted(config.goal_inference, modality) or modality == "joints":
+        return False
+    able = "joints" in names and (robot.actuation == "position" or config.panda_controller == "velocity")
+    if not able and config.goal_inference == "on":
+        raise ValueError(must_be("goal_inference", "'auto' or 'off' without a joints model and the velocity "
+                                 "controller", config.goal_inference,
+                                 "Add analytic:<robot>:joints (the imagined pose is reached through it)."))
+    return able
+
+
+def aif_goal(config: ReachingRunConfig, models, episodes: Episodes) -> tuple[dict, dict | None]:
+    """What the AIF controller reaches for: the imagined pose when goal inference ran (a joint goal that outweighs
+    the senses by β, aif.goal_inference.goal_precision), else the goal itself (with a depth cue's precision).
+    → goal, Π_goal per modality or None"""
+    imagined = episodes.extra.get("imagined")
+    if imagined is None:
+        return episodes.goal, episodes.extra.get("goal_precisions")
+    pi = goal_precision(models, torch.from_numpy(episodes.q_start), config.action_config.attractor_gain,
+                        {m: 0.0 for m in config.broken})
+    return {"joints": imagined.q.clone()}, {"joints": pi}
+
+
 def baseline_policy(config: ReachingConfig, robot, episodes: Episodes):
     if robot.actuation == "position":
         return ServoPolicy(episodes.q_target)
@@ -279,7 +314,8 @@ def simulate(config: ReachingConfig, models=None):
     robot, models, modality, episodes, sensed = prepare(config, models)
     substeps = control_substeps(config.rate, robot.model.opt.timestep)
     ticks = int(round(config.seconds * config.rate))
-    policies = {"aif": aif_policy(config, models, robot, episodes.extra.get("goal_precisions"))}
+    goals, precisions = aif_goal(config, models, episodes)
+    policies = {"aif": aif_policy(config, models, robot, precisions)}
     if config.baseline:
         policies["pd"] = baseline_policy(config, robot, episodes)
     results, walls = {}, {}
@@ -287,7 +323,7 @@ def simulate(config: ReachingConfig, models=None):
         sensors = Sensors(sensed if name == "aif" else (), dict(config.noise), frozenset(config.frozen),
                           reaching_rng(config.seed, "noise"))                  # the baselines sense the true state
         start = time.perf_counter()
-        goal = {k: v.clone() for k, v in episodes.goal.items()}
+        goal = {k: v.clone() for k, v in (goals if name == "aif" else episodes.goal).items()}
         results[name] = rollout(robot, policy, episodes.q_start, goal, episodes.target_xyz, sensors, ticks,
                                 substeps, config.progress, desc=f"reaching {name}")
         walls[name] = time.perf_counter() - start
@@ -314,7 +350,15 @@ def prepare(config: ReachingConfig, models=None):
         raise ValueError(must_be("depth_cue_deg", "0 unless the goal is not joints and a joints model is fused "
                                  "(velocity controller)", config.depth_cue_deg, "Add analytic:<robot>:joints."))
     shape = (robot.dq,) if modality == "joints" else next(m.output_shape for m in models if m.modality == modality)
+    infer_pose = goal_inference_on(config, modality, names, robot)
+    encoder = resolve_encoder(config.encoder, robot, config.tracking_uri) if infer_pose else None
     episodes = make_episodes(config, robot, modality, shape)
+    if infer_pose:
+        start = time.perf_counter()
+        ranges = robot.sampling_ranges if config.spread == 1 else spread_ranges(robot, config.spread)
+        episodes.extra["imagined"] = goal_pose.imagine(config, models, robot, episodes,
+                                                       reaching_rng(config.seed, "imagined"), ranges, encoder)
+        episodes.extra["imagined_wall_s"] = time.perf_counter() - start
     sensed = tuple(dict.fromkeys(names + builtin_sensors(robot)))
     unknown = sorted(set(dict(config.noise)) - set(sensed))
     if unknown:

@@ -16,6 +16,7 @@ from bodyschema.evaluation.core.mlflow_log import table_metrics
 from bodyschema.evaluation.core.publish import publish
 from bodyschema.evaluation.core.sensing import sense
 from bodyschema.evaluation.core.tables import markdown_table, write_csv
+from bodyschema.evaluation.reaching import goal_pose
 
 SUMMARY_COLUMNS = ("episodes", "success", "goal_success", "ee_err_mm", "ee_err_median_mm", "joint_err_deg",
                    "time_to_reach_s", "failed", "wall_s")
@@ -55,6 +56,8 @@ def episode_rows(config, robot, modality, episodes, name: str, result) -> list[d
     final = result.ee_err[-1]                                             # (B,) m
     joint = np.rad2deg(np.abs(result.q - episodes.q_target)).mean(axis=1)
     goal_err, goal_ok = goal_errors(config, robot, modality, episodes.goal[modality], result.q)
+    imagined = episodes.extra.get("imagined") if name == "aif" else None
+    imagined_mm = None if imagined is None else goal_pose.imagined_error_mm(robot, episodes, imagined)   # (B,)
     rows = []
     for i in range(len(final)):
         rows.append({"controller": name, "target": i, "success": bool(final[i] < tol and not result.failed[i]),
@@ -62,6 +65,8 @@ def episode_rows(config, robot, modality, episodes, name: str, result) -> list[d
                      "time_to_reach_s": float(reach[i]), f"goal_err_{GOAL_UNITS[modality]}": float(goal_err[i]),
                      "goal_success": bool(goal_ok[i] and not result.failed[i]), "failed": bool(result.failed[i]),
                      "reason": result.reasons[i] or ""})
+        if imagined_mm is not None:
+            rows[-1]["imagined_ee_err_mm"] = float(imagined_mm[i])
     return rows
 
 
@@ -78,6 +83,9 @@ def summarize(rows: list[dict], walls: dict[str, float]) -> list[dict]:
                       "joint_err_deg": float(np.mean([r["joint_err_deg"] for r in mine])),
                       "time_to_reach_s": float(np.nanmean(reached)) if np.isfinite(reached).any() else float("nan"),
                       "failed": int(sum(r["failed"] for r in mine)), "wall_s": float(walls[name])})
+        imagined = [r["imagined_ee_err_mm"] for r in mine if "imagined_ee_err_mm" in r]
+        if imagined:
+            table[-1]["imagined_ee_err_mm"] = float(np.median(imagined))
     return table
 
 
@@ -89,11 +97,15 @@ def markdown(table: list[dict], config, modality: str) -> str:
             f"ee error < {config.success_mm:g} mm; `goal_success`: final error in the goal space < {tol}; "
             "`time_to_reach_s`: mean over the episodes that reached and stayed. "
             "aif = active inference, pd = PD on the target's true joint pose.")
+    if "imagined_ee_err_mm" in table[0]:
+        text += (" The AIF first inferred each goal's pose in imagination (goal inference, then a joint-space "
+                 "attractor); `imagined_ee_err_mm`: median ee error of that pose.")
     if modality == "ee_pixel":
         text += " A pixel goal fixes the ray, not the depth: `success` can fail where `goal_success` holds."
     if config.noise or config.broken or config.frozen:
         text += f" Noise σ {dict(config.noise)}, broken {list(config.broken)}, frozen {list(config.frozen)}."
-    return markdown_table(table, SUMMARY_COLUMNS, "controller") + "\n" + text + "\n"
+    columns = SUMMARY_COLUMNS + (("imagined_ee_err_mm",) if "imagined_ee_err_mm" in table[0] else ())
+    return markdown_table(table, columns, "controller") + "\n" + text + "\n"
 
 
 def plot_errors(results: dict, path: Path, success_mm: float) -> Path:

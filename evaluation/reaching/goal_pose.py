@@ -1,0 +1,49 @@
+"""The reaching benchmark's goal inference: every episode's goal is first perceived in imagination
+(aif/goal_inference.py), and the AIF controller reaches for that imagined pose through its joints model.
+
+"auto" infers the pose of goals that fix where the end effector is (an image, an ee position); an ee pixel leaves
+its depth open, so it keeps its own attractor unless "on" (with a depth cue the cue joins the imagined senses).
+Image goals start the search from an image encoder's guess when one is given (`--encoder`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from bodyschema.aif.goal_inference import GoalPose, infer_goal_pose
+from bodyschema.aif.perception import Perception, PerceptionConfig
+from bodyschema.datagen.samplers import uniform
+
+MODES = ("auto", "on", "off")
+POSE_GOALS = ("image", "ee_xyz")     # goal modalities "auto" infers a pose for
+
+
+def wanted(mode: str, modality: str) -> bool:
+    return mode == "on" or (mode == "auto" and modality in POSE_GOALS)
+
+
+def imagine(config, models, robot, episodes, rng: np.random.Generator, ranges: np.ndarray,
+            encoder=None) -> GoalPose:
+    """The imagined pose of every episode's goal: perception over the goal's models (the depth cue's precision
+    when there is one) from the start pose, the encoder's guess of an image goal and random poses of `ranges`."""
+    goal_models = [m for m in models if m.modality in episodes.goal]
+    image = any(m.modality == "image" for m in goal_models)
+    perception = Perception(goal_models, PerceptionConfig(method="adam+lm" if image else "flow"),
+                            episodes.extra.get("goal_precisions"))
+    guesses = []
+    if encoder is not None and "image" in episodes.goal:
+        low, high = robot.sampling_ranges.T
+        guesses.append(np.clip(encoder.encode(episodes.goal["image"]).double().numpy(), low, high))
+    n, dq = episodes.q_start.shape
+    more = max(config.goal_starts - 1 - len(guesses), 0)
+    guesses += list(uniform(rng, ranges, n * more).reshape(more, n, dq))   # start-major: one draw per start
+    stacked = torch.from_numpy(np.stack(guesses, axis=1)) if guesses else None   # (N, S−1, Dq) rad
+    return infer_goal_pose(perception, episodes.goal, torch.from_numpy(episodes.q_start), stacked)
+
+
+def imagined_error_mm(robot, episodes, pose: GoalPose) -> np.ndarray:
+    """The imagined pose's ee distance from the target's ee: what imagination got wrong before any movement. (N,)"""
+    lim = robot.joint_limits
+    q = np.clip(pose.q.numpy(), lim[:, 0], lim[:, 1])
+    return 1e3 * np.linalg.norm(robot.fk(q) - episodes.target_xyz, axis=1)
