@@ -13,6 +13,7 @@ from bodyschema.evaluation.reaching.benchmark import (ReachingConfig, aif_policy
                                                       run_reaching, simulate)
 from bodyschema.evaluation.core.sensing import Sensors
 from bodyschema.evaluation.core.sim import control_substeps
+from bodyschema.evaluation.reaching import goal_pose
 from bodyschema.evaluation.reaching.loop import rollout
 from bodyschema.evaluation.reaching.report import time_to_reach
 
@@ -154,6 +155,31 @@ def test_planar2_with_the_analytic_model_reaches_every_target():
     final = results["aif"].ee_err[-1]                                                 # (B,) m
     assert modality == "ee_xyz" and not results["aif"].failed.any()
     assert (final < 0.01).all(), np.round(1e3 * final, 1)
+
+
+def test_goal_inference_reaches_planar2_over_its_full_ranges():
+    """Over the full joint ranges the goal's own attractor stalls at a joint limit where the goal needs the long way
+    round; the pose imagined from several starts is reached along the straight joint-space path."""
+    config = ReachingConfig(robot="planar2", trials=20, baseline=False, mlflow=False, progress=False)
+    final = {}
+    for mode in ("auto", "off"):
+        robot, _, _, episodes, results, _ = simulate(replace(config, goal_inference=mode))
+        final[mode] = results["aif"].ee_err[-1]                                         # (B,) m
+        if mode == "auto":
+            assert goal_pose.imagined_error_mm(robot, episodes, episodes.extra["imagined"]).max() < 0.1
+    assert (final["auto"] < 0.01).all(), np.round(1e3 * final["auto"], 1)
+    assert np.mean(final["off"] < 0.01) < 1.0
+
+
+def test_goal_inference_settings_are_checked():
+    with pytest.raises(ValueError, match="goal_inference"):
+        ReachingConfig(goal_inference="maybe")
+    with pytest.raises(ValueError, match="goal_starts"):
+        ReachingConfig(goal_starts=0)
+    with pytest.raises(ValueError, match="goal_inference"):                             # nothing to reach it through
+        prepare(ReachingConfig(robot="panda", models=("analytic:panda:ee_xyz",), goal_inference="on", **SHORT))
+    config = ReachingConfig(robot="panda", models=("analytic:panda:ee_xyz",), **SHORT)
+    assert "imagined" not in prepare(config)[3].extra                                   # auto falls back quietly
 
 
 def test_spread_out_of_range_raises():
