@@ -290,7 +290,7 @@ def aif_goal(config: ReachingRunConfig, models, episodes: Episodes) -> tuple[dic
     if imagined is None:
         return episodes.goal, episodes.extra.get("goal_precisions")
     pi = goal_precision(models, torch.from_numpy(episodes.q_start), config.action_config.attractor_gain,
-                        {m: 0.0 for m in config.broken})
+                        {**dict(config.perception.precisions), **{m: 0.0 for m in config.broken}})
     return {"joints": imagined.q.clone()}, {"joints": pi}
 
 
@@ -327,6 +327,7 @@ def simulate(config: ReachingConfig, models=None):
         results[name] = rollout(robot, policy, episodes.q_start, goal, episodes.target_xyz, sensors, ticks,
                                 substeps, config.progress, desc=f"reaching {name}")
         walls[name] = time.perf_counter() - start
+    walls["aif"] += episodes.extra.get("imagined_wall_s", 0.0)            # its imagination is part of its work
     return robot, models, modality, episodes, results, walls
 
 

@@ -25,12 +25,13 @@ def wanted(mode: str, modality: str) -> bool:
 
 def imagine(config, models, robot, episodes, rng: np.random.Generator, ranges: np.ndarray,
             encoder=None) -> GoalPose:
-    """The imagined pose of every episode's goal: perception over the goal's models (the depth cue's precision
-    when there is one) from the start pose, the encoder's guess of an image goal and random poses of `ranges`."""
+    """The imagined pose of every episode's goal: perception over the goal's models (the perception's precision
+    overrides, and the depth cue's when there is one) from the start pose, the encoder's guess of an image goal and random poses of `ranges`."""
     goal_models = [m for m in models if m.modality in episodes.goal]
     image = any(m.modality == "image" for m in goal_models)
+    given = {**dict(config.perception.precisions), **episodes.extra.get("goal_precisions", {})}
     perception = Perception(goal_models, PerceptionConfig(method="adam+lm" if image else "flow"),
-                            episodes.extra.get("goal_precisions"))
+                            {name: pi for name, pi in given.items() if name in episodes.goal})
     guesses = []
     if encoder is not None and "image" in episodes.goal:
         low, high = robot.sampling_ranges.T
