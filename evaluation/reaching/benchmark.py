@@ -89,8 +89,7 @@ class ReachingRunConfig(TrialsConfig):
                                            # (Π = 1/σ²), the depth an ee_pixel goal leaves open; needs a joints model
     spread: float = 1.0                    # targets and starts uniform in the middle `spread` of each joint's
                                            # sampling range: a goal across a joint limit stalls descent there
-    goal_inference: str = "auto"           # perceive each goal's pose in imagination first, then reach for it in
-                                           # joint space (goal_pose.py); auto: for image and ee_xyz goals
+    goal_inference: str = "auto"           # imagine each goal's pose, then reach it: auto (image, ee_xyz) | on | off
     goal_starts: int = 8                   # starts of that search: the start pose, the encoder's guess, random
     encoder: str | None = None             # an image encoder spec: its guess starts an image goal's search
 
