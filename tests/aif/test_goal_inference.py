@@ -7,8 +7,8 @@ import pytest
 import torch
 
 from bodyschema.aif.goal_inference import goal_precision, infer_goal_pose
-from bodyschema.aif.perception import Perception
-from tests.aif.toys import ToyJoints, planar_poses
+from bodyschema.aif.perception import Perception, PerceptionConfig
+from tests.aif.toys import ToyBlobImage, ToyJoints, planar_poses
 from tests.toy_models import LINKS_M, ToyPlanarArm
 
 
@@ -29,6 +29,19 @@ def test_the_imagined_pose_produces_the_goal_from_a_far_belief():
     assert exact(pose) >= 0.95 and exact(pose) > exact(alone), (exact(alone), exact(pose))
     assert (pose.F <= alone.F + 1.0).all()                                  # within the margin of the belief's
     assert pose.q.shape == (40, 2) and pose.chosen.shape == (40,) and (alone.chosen == 0).all()
+
+
+def test_an_image_goal_is_imagined_through_the_image_models_own_update():
+    """An image goal (a large output: adam+lm, as perception's levels take) is reproduced by the imagined pose."""
+    image = ToyBlobImage()
+    q = planar_poses(20, seed=5)
+    goal = {"image": image.predict(q)}
+    g = torch.Generator().manual_seed(6)
+    guesses = (torch.rand(20, 7, 2, generator=g, dtype=torch.float64) * 2 - 1) * 2.5
+    start = planar_poses(20, seed=7)
+    pose = infer_goal_pose(Perception([image], PerceptionConfig(method="adam+lm")), goal, start, guesses)
+    ee_err = (image.arm.predict(pose.q) - image.arm.predict(q)).norm(dim=-1)   # (20,) m: the blob fixes the ee only
+    assert (ee_err < 1e-3).double().mean() >= 0.9, ee_err
 
 
 def test_of_two_exact_solutions_the_one_nearest_the_belief_wins():
