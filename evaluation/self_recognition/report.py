@@ -22,6 +22,7 @@ TABLE_COLUMNS = ("delay_s", "others", "auc", "threshold", "tpr", "fpr", "t95_s",
                  "median_other", "failed")
 SCORE_NAMES = {"contingency": "F(one body) − F(two bodies)", "visual": "visual free energy",
                "total": "free energy of all modalities"}
+_START_NOTE = {"reading": "the joint readings", "previous": "the previous frame's belief"}
 DECISION = 0.95                        # balanced accuracy of a "95 % decision"; also the AUC level of t_auc95_s
 
 
@@ -138,7 +139,8 @@ def summary_notes(config, robot: str, visual: Sequence[str], period: float, rows
             f"{config.imitation_noise:.4g} rad, delays {', '.join(f'{d:g}' for d in config.delays)} s); noise σ: "
             f"joints {config.proprio_noise:.4g} rad, visual {({m: s for m, s in config.visual_noise if m in visual})}.",
             f"Score: time-averaged {SCORE_NAMES[config.score]} after ≤ {config.perception.max_steps} perception "
-            f"updates per frame; 'is this me?' = score ≤ threshold (Youden's J per comparison; pooled: "
+            f"updates per frame (one body from {_START_NOTE[config.start]}); "
+            f"'is this me?' = score ≤ threshold (Youden's J per comparison; pooled: "
             f"{pooled['threshold']:.4g}, TPR {pooled['tpr']:.3f} at FPR {pooled['fpr']:.3f}, AUC {pooled['auc']:.4f}). "
             f"t95_s: viewing time from which the best balanced accuracy stays ≥ {DECISION:g} (a 95 % decision); "
             f"t_auc95_s: from which the AUC stays ≥ {DECISION:g}; NaN: not within the episode.",
