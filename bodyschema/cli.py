@@ -342,7 +342,7 @@ def main(argv: list[str] | None = None) -> int:
         check_renamed_flags(argv)
         with _config_errors_as_ours():            # a parsing error: tyro's message box, exit 2
             config = tyro.cli(commands(_command_words(argv)), prog="bodyschema", args=argv, description=DESCRIPTION)
-        return run(quiet_progress(config) if verbosity == log.QUIET else config)
+        return run(log.progress_of(config))
     except KeyboardInterrupt:
         print(f"\n{command}: interrupted. Run the same command again to resume.", file=sys.stderr)
         return 130
@@ -394,15 +394,6 @@ def _config_errors_as_ours():
 
     with hook(reject):
         yield
-
-
-def quiet_progress(config):
-    """`config` with every `progress` flag in its tree off (--quiet)."""
-    changes = {f.name: quiet_progress(getattr(config, f.name)) for f in dataclasses.fields(config)
-               if dataclasses.is_dataclass(getattr(config, f.name)) and not isinstance(getattr(config, f.name), type)}
-    if getattr(config, "progress", None) is True:
-        changes["progress"] = False
-    return dataclasses.replace(config, **changes) if changes else config
 
 
 def _bug(command: str, error: BaseException) -> int:

@@ -14,6 +14,8 @@ import logging
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from bodyschema.log import progress_of
+
 logger = logging.getLogger(__name__)   # the section headers (info); tables and paths written are printed
 
 
@@ -66,7 +68,7 @@ def _datagen(config: DemoConfig) -> dict[str, Path]:
         logger.info(f"== datagen {robot}: {job.n} samples, sampler {job.sampler}")
         job = replace(job, workers=config.workers, seed=config.seed, overwrite=True,
                       out=config.out / "data" / f"{robot}.zarr")
-        stores[robot] = generate(job)
+        stores[robot] = generate(progress_of(job))
         problems = validate_store(stores[robot])
         if problems:
             raise RuntimeError(f"demo dataset {stores[robot]} is invalid:\n" + "\n".join(problems))
@@ -87,8 +89,8 @@ def _train(config: DemoConfig, nao_store: Path) -> dict[str, str]:
     uris = {}
     for kind, job in jobs.items():
         logger.info(f"== train {kind} on nao_arm {job.modality}")
-        result = train(replace(job, seed=config.seed, run_root=config.out / "runs",
-                               tracking_uri=config.tracking_uri))
+        result = train(progress_of(replace(job, seed=config.seed, run_root=config.out / "runs",
+                                           tracking_uri=config.tracking_uri)))
         shown = ", ".join(f"{k}={v:.4g}" for k, v in result.metrics.items() if k.startswith("val_"))
         print(f"{result.registered_name} v{result.model_version} {shown}"
               f"{' (new champion)' if result.champion else ''}; plots: {list(map(str, result.plots.values()))}")
@@ -102,7 +104,7 @@ def _evaluate(config: DemoConfig, uri: str, kind: str) -> None:
     logger.info(f"== AIF perception, levels 1–3, with {uri} loaded from the registry")
     levels = LevelsConfig(models=(uri,), trials=config.trials, runs=config.runs, seed=config.seed,
                           out=config.out / "results" / f"levels_{kind}", tracking_uri=config.tracking_uri)
-    summary = run_levels(levels)
+    summary = run_levels(progress_of(levels))
     print(summary.paths["summary_md"].read_text())
     print("plots:", ", ".join(str(p) for k, p in summary.paths.items() if str(p).endswith(".png")))
 
@@ -121,18 +123,18 @@ def _act(config: DemoConfig, gpr_uri: str) -> None:
     reaching = ReachingConfig(robot="nao_arm", models=(gpr_uri, "analytic:nao_arm:joints"), goal="ee_xyz",
                               trials=config.reach_targets, seed=config.seed, out=results / "reaching",
                               tracking_uri=config.tracking_uri, perception=sensed)
-    print(run_reaching(reaching)["summary_md"].read_text())
+    print(run_reaching(progress_of(reaching))["summary_md"].read_text())
     logger.info("== reaching on the 7-DOF torque panda: 10 ee_xyz goals in 3 s, the velocity controller on the joint "
                 "impedance servo vs PD on the true inverse kinematics (analytic models)")
     panda = ReachingConfig(robot="panda", trials=10, seed=config.seed, out=results / "reaching_panda",
                            tracking_uri=config.tracking_uri)
-    print(run_reaching(panda)["summary_md"].read_text())
+    print(run_reaching(progress_of(panda))["summary_md"].read_text())
     logger.info(f"== self-recognition: {config.episodes} babbling episodes per condition, is the ee stream mine "
                 f"or an imitator's? ({gpr_uri})")
     recognition = SelfRecognitionConfig(robot="nao_arm", models=(gpr_uri,), trials=config.episodes,
                                         seed=config.seed, out=results / "self_recognition",
                                         tracking_uri=config.tracking_uri)
-    print(run_self_recognition(recognition)["summary_md"].read_text())
+    print(run_self_recognition(progress_of(recognition))["summary_md"].read_text())
 
 
 def _body_and_agency(config: DemoConfig, gpr_uri: str) -> None:
@@ -147,9 +149,9 @@ def _body_and_agency(config: DemoConfig, gpr_uri: str) -> None:
     rubber = RubberHandConfig(robot="nao_arm", models=(gpr_uri,), trials=4, displacements=(0.05, 0.10),
                               visual_sigmas=(0.005, 0.01, 0.02), duration=20.0, seed=config.seed,
                               out=results / "rubber_hand", tracking_uri=config.tracking_uri)
-    print(run_rubber_hand(rubber)["summary"].read_text())
+    print(run_rubber_hand(progress_of(rubber))["summary"].read_text())
     logger.info(f"== did I do it? own movements vs the same movements pushed or seen in a moved scene "
                 f"({gpr_uri})")
     agency = AgencyConfig(robot="nao_arm", models=(gpr_uri,), trials=100, seed=config.seed, out=results / "agency",
                           tracking_uri=config.tracking_uri)
-    print(run_agency(agency)["summary"].read_text())
+    print(run_agency(progress_of(agency))["summary"].read_text())

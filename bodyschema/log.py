@@ -68,6 +68,21 @@ def progress_bars() -> bool:
     return _verbosity != QUIET
 
 
+def progress_of(config):
+    """`config` with every `progress` flag in its tree off under --quiet; as it is otherwise. The CLI applies it
+    to the command's config, and a command that builds configs of its own (the demo) to each of them."""
+    return _without_progress(config) if _verbosity == QUIET else config
+
+
+def _without_progress(config):
+    import dataclasses
+    changes = {f.name: _without_progress(getattr(config, f.name)) for f in dataclasses.fields(config)
+               if dataclasses.is_dataclass(getattr(config, f.name)) and not isinstance(getattr(config, f.name), type)}
+    if getattr(config, "progress", None) is True:
+        changes["progress"] = False
+    return dataclasses.replace(config, **changes) if changes else config
+
+
 def tracking_line(uri: str) -> None:
     """The tracking URI a command uses, on stderr even with --quiet: an empty registry read from the wrong
     folder's mlflow.db is otherwise silent (issue 15). It is one line and never on stdout, which scripts parse."""

@@ -88,12 +88,14 @@ class Outer:
     n: int = 3
 
 
-def test_quiet_turns_every_progress_flag_of_the_tree_off():
-    quiet = cli.quiet_progress(Outer())
-    assert quiet == Outer(inner=Inner(progress=False), progress=False, n=3)
+def test_quiet_turns_every_progress_flag_of_the_tree_off(monkeypatch):
     train = tyro.cli(cli.COMMANDS, args=["train", "gpr", "--data", "d.zarr"])
-    assert train.progress is True and cli.quiet_progress(train).progress is False
-    assert cli.quiet_progress(train).model == train.model, "nothing else changes"
+    assert log.progress_of(Outer()) == Outer(), "only under --quiet"
+    monkeypatch.setattr(log, "_verbosity", log.QUIET)
+    quiet, quiet_train = log.progress_of(Outer()), log.progress_of(train)
+    assert quiet == Outer(inner=Inner(progress=False), progress=False, n=3)
+    assert train.progress is True and quiet_train.progress is False
+    assert quiet_train.model == train.model, "nothing else changes"
 
 
 @pytest.mark.parametrize("argv, line", [
