@@ -180,6 +180,8 @@ def test_goal_inference_settings_are_checked():
         prepare(ReachingConfig(robot="panda", models=("analytic:panda:ee_xyz",), goal_inference="on", **SHORT))
     config = ReachingConfig(robot="panda", models=("analytic:panda:ee_xyz",), **SHORT)
     assert "imagined" not in prepare(config)[3].extra                                   # auto falls back quietly
+    with pytest.raises(ValueError, match="encoder"):                                    # no image goal to start
+        prepare(ReachingConfig(robot="panda", encoder="models:/some-encoder@champion", **SHORT))
 
 
 def test_spread_out_of_range_raises():
