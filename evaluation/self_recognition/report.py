@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from bodyschema.evaluation.core.tables import markdown_table, write_csv
+from bodyschema.evaluation.self_recognition.sensors import perception_config
 from bodyschema.evaluation.self_recognition.streams import SELF
 
 TABLE_COLUMNS = ("delay_s", "others", "auc", "threshold", "tpr", "fpr", "t95_s", "t_auc95_s", "median_self",
@@ -138,13 +139,21 @@ def summary_notes(config, robot: str, visual: Sequence[str], period: float, rows
             f"{', '.join(config.sources)} (imitator: gain {config.imitation_gain:g}, motor noise "
             f"{config.imitation_noise:.4g} rad, delays {', '.join(f'{d:g}' for d in config.delays)} s); noise σ: "
             f"joints {config.proprio_noise:.4g} rad, visual {({m: s for m, s in config.visual_noise if m in visual})}.",
-            f"Score: time-averaged {SCORE_NAMES[config.score]} after ≤ {config.perception.max_steps} perception "
-            f"updates per frame (one body from {_START_NOTE[config.start]}); "
+            f"Score: time-averaged {SCORE_NAMES[config.score]} after {_updates(config, visual)} per frame (one body "
+            f"from {_START_NOTE[config.start]}); "
             f"'is this me?' = score ≤ threshold (Youden's J per comparison; pooled: "
             f"{pooled['threshold']:.4g}, TPR {pooled['tpr']:.3f} at FPR {pooled['fpr']:.3f}, AUC {pooled['auc']:.4f}). "
             f"t95_s: viewing time from which the best balanced accuracy stays ≥ {DECISION:g} (a 95 % decision); "
             f"t_auc95_s: from which the AUC stays ≥ {DECISION:g}; NaN: not within the episode.",
             f"Failed episodes: {failed}; wall time {wall:.1f} s."]
+
+
+def _updates(config, visual: Sequence[str]) -> str:
+    """The perception updates of one hypothesis per frame, e.g. "≤ 10 + 10 adam+lm updates"."""
+    perception = perception_config(config, visual)
+    steps = perception.max_steps
+    return f"≤ {steps} + {steps} adam+lm updates" if perception.method == "adam+lm" else \
+        f"≤ {steps} {perception.method} updates"
 
 
 # ---- plots ---------------------------------------------------------------------------------------------

@@ -16,7 +16,7 @@ from bodyschema.evaluation.self_recognition.benchmark import (SelfRecognitionCon
                                                              run_self_recognition, score_episodes)
 from bodyschema.evaluation.self_recognition.report import (auc, balanced_accuracy, best_threshold, roc_curve,
                                                           roc_table, time_to)
-from bodyschema.evaluation.self_recognition.sensors import NoisySensor, visual_only
+from bodyschema.evaluation.self_recognition.sensors import NoisySensor, perception_config, visual_only
 from bodyschema.evaluation.self_recognition.streams import episode_conditions, imitate, make_episodes, mirror
 from bodyschema.evaluation.core.sensing import sense
 from bodyschema.models.analytic import AnalyticModel
@@ -105,6 +105,12 @@ def test_sensor_noise_adds_to_a_learned_models_variance_and_sets_an_exact_models
     torch.testing.assert_close(seen.predict(z), learned.predict(z))
     _, exact, _ = prepare(config, [AnalyticModel("nao_arm", "ee_pixel")])
     assert exact.precisions == {"joints": pytest.approx(100.0), "ee_pixel": pytest.approx(4.0)}
+
+
+def test_an_image_model_is_perceived_by_adam_then_lm_and_kinematics_by_the_flow_as_in_the_levels():
+    assert perception_config(SHORT, ["joints", "image"]).method == "adam+lm"
+    assert perception_config(SHORT, ["joints", "ee_pixel"]).method == "flow"
+    assert perception_config(replace(SHORT, update="lm"), ["joints", "image"]).method == "lm"
 
 
 def test_the_vision_alone_hypothesis_keeps_the_visual_models_and_their_precisions(setup):
@@ -256,7 +262,8 @@ def arm_decoder():
 
 def fast_arm_episodes(n: int, frames: int, jump: float):
     """n self episodes, then n of a second arm, of a toy arm whose joints each jump ±`jump` rad every frame (a
-    babbling nao_arm moves up to ~25–30° in one 0.05 s frame); joints read with 1° noise, images noise-free."""
+    babbling nao_arm moves up to ~25–30° in one 0.05 s frame; the toy's 12×16 image has wider basins, so it jumps
+    further); joints read with 1° noise, images noise-free."""
     from bodyschema.evaluation.self_recognition.streams import Episodes
 
     def walk(seed):                                                   # (n, T, 2) rad
@@ -277,12 +284,13 @@ def fast_arm_episodes(n: int, frames: int, jump: float):
 
 def test_one_body_keeps_an_image_decoders_pose_however_far_the_arm_moved_since_the_last_frame(arm_decoder):
     # Each frame the one-body belief starts at the joint readings, inside the image F's basin of the felt pose. Started
-    # at the last frame's belief (the former code) it lands ~0.5 rad away, in a minimum of the image F that the
-    # joints cannot pull it out of: its own body's image F stayed 15-40× its floor and self vs second arm fell to
-    # chance (pooled AUC 0.54 with the 56×80 nao_arm decoder).
+    # at the last frame's belief (the former code) it starts 0.7 rad away and may settle in a minimum of the image F
+    # that the joints cannot pull it out of: its own body's image F then stays 10-40× its floor (with the 56×80
+    # nao_arm decoder self vs second arm fell to chance, pooled AUC 0.54).
     from tests.aif.toys import ToyJoints
-    episodes = fast_arm_episodes(12, 8, jump=0.5)
-    perception = Perception([ToyJoints(1.0 / np.radians(1.0) ** 2), arm_decoder], SelfRecognitionConfig().perception,
+    episodes = fast_arm_episodes(12, 8, jump=0.7)
+    update = perception_config(SelfRecognitionConfig(), ["joints", "image"])   # the benchmark's, for an image model
+    perception = Perception([ToyJoints(1.0 / np.radians(1.0) ** 2), arm_decoder], update,
                             {"image": 1e4})                       # vision outweighs the joints, as 56×80 images do
     mine = episodes.kind == "self"
     images = torch.from_numpy(episodes.visual["image"][mine].reshape(-1, *ARM_IMAGE)).double()
@@ -296,7 +304,7 @@ def test_one_body_keeps_an_image_decoders_pose_however_far_the_arm_moved_since_t
     cost = held.score()
     assert auc(cost[mine], cost[~mine]) == 1.0
     lost = scores["previous"].visual[mine] > 2.0 * floor              # the case is one that the warm start fails
-    assert lost.any(axis=1).sum() >= 3
+    assert lost.any(axis=1).sum() >= 3, lost.any(axis=1).sum()
 
 
 # ---- failures, errors, determinism ----------------------------------------------------------------------
@@ -323,7 +331,7 @@ def test_a_model_of_another_robot_or_without_a_visual_modality_raises_the_house_
 
 @pytest.mark.parametrize("bad, field", [
     (dict(trials=1), "trials"), (dict(sources=("twin",)), "sources"), (dict(score="mean"), "score"),
-    (dict(start="warm"), "start"),
+    (dict(start="warm"), "start"), (dict(update="newton"), "update"),
     (dict(visual_noise=(("ee_pixel", -1.0),)), "visual_noise"),
     (dict(delays=(0.0, 0.2)), "delays"),                             # SHORT's episode: 4 × 0.05 s = 0.2 s
     (dict(steps=20, delays=(0.0, 1.0)), "delays"), (dict(delays=(-0.05,)), "delays"), (dict(delays=()), "delays"),
