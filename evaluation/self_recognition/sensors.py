@@ -1,6 +1,7 @@
 """What the self-recognition robot perceives through: its models seen through noisy sensors (`NoisySensor`), the
-perception update (`perception_config`: adam+lm for images, as in the levels), and the two hypotheses it compares: one body behind the joints and the visual stream (the benchmark's Perception), or a
-visual stream of its own (`visual_only`: the same visual models, their belief free of the joints)."""
+perception update (`perception_config`: adam+lm for images, as in the levels), and the two hypotheses it compares:
+one body behind the joints and the visual stream (the benchmark's Perception), or a visual stream of its own
+(`visual_only`: the same visual models, their belief free of the joints)."""
 
 from __future__ import annotations
 
