@@ -21,7 +21,6 @@ round differently at another batch size).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
@@ -35,7 +34,6 @@ from bodyschema.aif.generalized import implicit_step, local_linear_step, shift, 
 from bodyschema.aif.priors import PRIORS, attractor, prior_terms
 from bodyschema.errors import must_be
 from bodyschema.models.contract import as_input
-from bodyschema.models.sensor_noise import with_sensor_noise
 
 INTEGRATORS = ("local_linear", "implicit", "euler")
 STEPS = {"local_linear": local_linear_step, "implicit": implicit_step}
@@ -64,8 +62,6 @@ class PerceptionConfig:
     divergence_step: float = 1e3   # rad; an Euler step larger than this marks the trial diverged
     divergence_ratio: float | None = 100.0   # E growing this much above max(E_start, 1) marks it diverged
     precisions: tuple[tuple[str, float], ...] = ()   # per-modality overrides, e.g. (("ee_xyz", 1e4),)
-    sensor_noise: tuple[tuple[str, float], ...] = ()   # σ of a sensor in its unit, e.g. (("ee_xyz", 1e-3),):
-                                                        # Π = 1/(σ² + 1/Π_model) (models/sensor_noise.py)
     precision_update: str = "step"  # "step": Π from model.precision(μ) at every step; "initial": at μ0 only
     record: bool = False           # keep the trajectory of μ̃, F and the prediction errors
     step_control: str = "auto"     # "descent": a step that raises F is undone and that trial's Δt shrinks (order 0);
@@ -116,9 +112,6 @@ class PerceptionConfig:
                 raise ValueError(must_be(name, "positive", getattr(self, name)))
         if self.patience < 1:
             raise ValueError(must_be("patience", "at least 1", self.patience))
-        for name, sigma in self.sensor_noise:
-            if not (isinstance(sigma, (int, float)) and math.isfinite(sigma) and sigma >= 0):
-                raise ValueError(must_be(f"sensor_noise[{name!r}]", "a finite σ ≥ 0 in the output's unit", sigma))
         if self.precision_update not in ("step", "initial"):
             raise ValueError(must_be("precision_update", "'step' or 'initial'", self.precision_update))
 
@@ -185,15 +178,14 @@ class Perception:
 
     models: one model per modality, all over the same robot and joints (checked).
     precisions: modality → float or tensor (broadcast to (B, *out)) overriding `model.precision`; 0 = broken
-        sensor, its observation may then be omitted. Overrides here win over `config.precisions`, and an override
-        is the whole precision (config.sensor_noise adds to the model's own uncertainty only).
+        sensor, its observation may then be omitted. Overrides here win over `config.precisions`.
     limits: (low, high) rad per joint; defaults to the models' `body.q_low / q_high`.
     """
 
     def __init__(self, models: Sequence, config: PerceptionConfig = PerceptionConfig(),
                  precisions: Mapping[str, float | torch.Tensor] | None = None,
                  limits: tuple[Sequence[float], Sequence[float]] | None = None):
-        self.models = with_sensor_noise(list(models), dict(config.sensor_noise))
+        self.models = list(models)
         self.body = check_models(self.models)
         self.config = config
         known = {m.modality for m in self.models}
