@@ -26,7 +26,8 @@ def wanted(mode: str, modality: str) -> bool:
 def imagine(config, models, robot, episodes, rng: np.random.Generator, ranges: np.ndarray,
             encoder=None) -> GoalPose:
     """The imagined pose of every episode's goal: perception over the goal's models (the perception's precision
-    overrides, and the depth cue's when there is one) from the start pose, the encoder's guess of an image goal and random poses of `ranges`."""
+    overrides, and the depth cue's when there is one) from the start pose, the encoder's guess of an image goal
+    and random poses of `ranges`."""
     goal_models = [m for m in models if m.modality in episodes.goal]
     image = any(m.modality == "image" for m in goal_models)
     given = {**dict(config.perception.precisions), **episodes.extra.get("goal_precisions", {})}
