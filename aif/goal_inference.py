@@ -40,7 +40,7 @@ class GoalPose:
 def infer_goal_pose(perception: Perception, goal: Mapping[str, torch.Tensor], belief: torch.Tensor,
                     guesses: torch.Tensor | None = None, margin: float = 1.0) -> GoalPose:
     """perception: over the goal's modalities (their precisions are the goal's); goal: modality → (B, *out);
-    belief: (B, Dz) rad; guesses: (B, S, Dz) rad further starts, or None; margin: nats of F that still count as the best."""
+    belief: (B, Dz) rad; guesses: (B, S, Dz) rad further starts, or None; margin: nats of F within the best."""
     dz = perception.latent_dim
     if not isinstance(belief, torch.Tensor) or belief.ndim != 2 or belief.shape[1] != dz:
         got = tuple(belief.shape) if isinstance(belief, torch.Tensor) else type(belief).__name__
@@ -71,10 +71,10 @@ def goal_precision(models, mu: torch.Tensor, gain: float,
     diagonal of Σ_m J_mᵀ Π_m J_m at beliefs mu (B, Dz) rad (the senses' information about the joints, each
     model's own precision unless overridden). A goal weaker than the senses cannot lead the belief, and action
     follows the belief: an image sense (JᵀΠJ ~ 1e6–1e7 rad⁻² per joint) would hold it where the arm is."""
-    mu = mu.to(torch.float64)
-    live = [m for m in models if (precisions or {}).get(m.modality, 1.0) != 0]
-    given = {name: torch.as_tensor(float(p), dtype=torch.float64).expand(len(mu), *m.output_shape)
-             for m in live for name, p in (precisions or {}).items() if name == m.modality}
+    mu, overrides = mu.to(torch.float64), dict(precisions or {})
+    live = [m for m in models if overrides.get(m.modality) != 0]              # a broken sense informs nothing
+    given = {m.modality: torch.full((len(mu), *m.output_shape), float(overrides[m.modality]), dtype=torch.float64)
+             for m in live if m.modality in overrides}
     at_mu = {m.modality: m.predict(model_input(m, mu)).detach().to(torch.float64) for m in live}
     terms = sensory_terms(live, at_mu, given, mu, need_hessian=True, need_grad=False)
     information = torch.diagonal(terms.hessian, dim1=1, dim2=2).mean(-1)   # (B,) rad⁻²

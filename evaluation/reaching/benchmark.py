@@ -21,8 +21,9 @@ perceives each goal's pose in imagination, from several starts (an image encoder
 reaches for that pose through its joints model.
 An ee pixel goal fixes the ray through the target, not its depth: with the default nao_arm models the AIF meets
 the pixel goal far more often than the 1 cm (3-D) criterion; `--depth-cue-deg σ` adds the depth as a second goal,
-the target's joint pose seen through σ° of noise (Π = 1/σ²), fused with the pixel goal by the same attractor. With an image model every control tick renders B
-images: 100 targets × 3 s at 50 Hz, imagination included, took 81–117 s on 2 shared cores.
+the target's joint pose seen through σ° of noise (Π = 1/σ²), fused with the pixel goal by the same attractor.
+With an image model every control tick renders B images: 100 targets × 3 s at 50 Hz, imagination included, took
+81–117 s on 2 shared cores.
 """
 
 from __future__ import annotations
