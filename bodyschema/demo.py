@@ -17,10 +17,11 @@ from pathlib import Path
 from bodyschema.log import progress_of
 
 logger = logging.getLogger(__name__)   # the section headers (info); tables and paths written are printed
-# The ee sensor's own noise (1 mm → Π = 1e6 m⁻²) sets its precision. A GP fitted to noise-free kinematics claims
-# Π ≈ 1e9 near its data, and the −½ ln|Π(μ)| term of F then pulls the belief off the reading toward the poses where
-# the GP is surest (measured on a GPR of 800 points like the demo's: level 1 9.9° and 12.7 mm off the reading with
-# the GP's own Π, 0.69° and 0.002 mm with the sensor's; reaching 0 of 10 within 1 cm vs 9 of 10).
+# The ee sensor's own noise (1 mm → Π = 1e6 m⁻²) sets its precision. A GP claims Π ≈ 1e9 near its data, varying
+# with the pose; along the pose direction ee_xyz leaves unobserved (4 joints, 3 outputs) F is flat but for
+# −½ ln|Π(μ)|, which slides the belief toward the GP's surest poses and beyond them, off the reading (measured on an
+# 800-point GPR like the demo's: level 1 9.9° and 12.7 mm off the reading with the GP's own Π, 10.6° with one
+# trained on a 1 mm noise floor, 0.69° and 0.002 mm with the sensor's; reaching 0 of 10 within 1 cm vs 9 of 10).
 EE_PRECISION = (("ee_xyz", 1e6),)
 
 
