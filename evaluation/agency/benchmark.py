@@ -26,7 +26,7 @@ import torch
 from bodyschema.errors import must_be
 from bodyschema.evaluation.agency.report import roc_rows, write_report
 from bodyschema.evaluation.agency.streams import SOURCES, delayed, episode_rng, make_episodes, observe
-from bodyschema.evaluation.core.config import TrialsConfig
+from bodyschema.evaluation.core.config import TrialsConfig, check_names
 from bodyschema.evaluation.core.mlflow_log import table_metrics
 from bodyschema.evaluation.core.publish import publish
 from bodyschema.evaluation.core.runs import new_run
@@ -57,8 +57,7 @@ class AgencyConfig(TrialsConfig):
 
     def __post_init__(self):
         super().__post_init__()
-        if not self.sources or len(set(self.sources)) != len(self.sources) or set(self.sources) - set(SOURCES):
-            raise ValueError(must_be("sources", f"distinct names among {SOURCES}", self.sources))
+        check_names("sources", self.sources, SOURCES)
         if self.trials < 2 * len(self.sources):
             raise ValueError(must_be("trials", f"at least {2 * len(self.sources)} (half self, ≥ 1 per source)",
                                      self.trials, "Use ≥ 200 for a stable ROC."))

@@ -35,3 +35,9 @@ class TrialsConfig(BenchmarkConfig):
         super().__post_init__()
         if not isinstance(self.trials, int) or self.trials < 1:
             raise ValueError(must_be("trials", "at least 1", self.trials))
+
+
+def check_names(name: str, values: tuple[str, ...], allowed: tuple[str, ...]) -> None:
+    """The house error unless `values` is a non-empty tuple of distinct names among `allowed`."""
+    if not values or len(set(values)) != len(values) or set(values) - set(allowed):
+        raise ValueError(must_be(name, f"distinct names among {allowed}", values))

@@ -23,7 +23,7 @@ import torch
 
 from bodyschema.aif.perception import Perception, PerceptionConfig
 from bodyschema.errors import must_be
-from bodyschema.evaluation.core.config import TrialsConfig
+from bodyschema.evaluation.core.config import TrialsConfig, check_names
 from bodyschema.evaluation.core.mlflow_log import table_metrics
 from bodyschema.evaluation.core.publish import publish
 from bodyschema.evaluation.core.runs import new_run
@@ -69,8 +69,7 @@ class RubberHandConfig(TrialsConfig):
             values = getattr(self, name)
             if not values or not all(isinstance(v, (int, float)) and math.isfinite(v) and v > 0 for v in values):
                 raise ValueError(must_be(name, "a non-empty tuple of distances > 0 in m", values))
-        if not self.modes or set(self.modes) - set(MODES) or len(set(self.modes)) != len(self.modes):
-            raise ValueError(must_be("modes", f"distinct names among {MODES}", self.modes))
+        check_names("modes", self.modes, MODES)
         for name in ("duration", "period", "stroke_rate_hz", "binding_sigma_s", "spatial_sigma", "spatial_range"):
             if not getattr(self, name) > 0:
                 raise ValueError(must_be(name, "positive", getattr(self, name)))

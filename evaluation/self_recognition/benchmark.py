@@ -28,7 +28,7 @@ import torch
 from bodyschema.aif.free_energy import sensory_terms
 from bodyschema.aif.perception import METHODS, Perception, PerceptionConfig
 from bodyschema.errors import must_be
-from bodyschema.evaluation.core.config import TrialsConfig
+from bodyschema.evaluation.core.config import TrialsConfig, check_names
 from bodyschema.evaluation.core.mlflow_log import table_metrics
 from bodyschema.evaluation.core.publish import publish
 from bodyschema.evaluation.core.runs import new_run
@@ -72,8 +72,7 @@ class SelfRecognitionConfig(TrialsConfig):
 
     def __post_init__(self):
         super().__post_init__()
-        if not self.sources or len(set(self.sources)) != len(self.sources) or set(self.sources) - set(SOURCES):
-            raise ValueError(must_be("sources", f"distinct names among {SOURCES}", self.sources))
+        check_names("sources", self.sources, SOURCES)
         if self.trials < 2:
             raise ValueError(must_be("trials", "at least 2 episodes per condition", self.trials,
                                      "Use ≥ 100 for a stable ROC."))
