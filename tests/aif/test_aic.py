@@ -9,18 +9,17 @@ import torch
 from bodyschema.aif.aic import AICConfig, AICController
 from bodyschema.models.contract import BaseSensoryModel
 from tests.aif.toys import ToyJoints
+from tests.threads import one_thread
 from tests.toy_models import ToyPlanarArm
 
 LIMITS = np.array([50.0, 50.0])                     # N·m, 2 joints
 
 
 @pytest.fixture(autouse=True)
-def one_thread():
+def single_thread():
     """Per-tick tensors are tiny: intra-op threads only add synchronisation (several times slower on 2 cores)."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
+    with one_thread():
+        yield
 
 
 class LinearSensor(BaseSensoryModel):

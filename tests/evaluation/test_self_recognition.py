@@ -20,9 +20,16 @@ from bodyschema.evaluation.self_recognition.sensors import NoisySensor, percepti
 from bodyschema.evaluation.self_recognition.streams import episode_conditions, imitate, make_episodes, mirror
 from bodyschema.evaluation.core.sensing import sense
 from bodyschema.models.analytic import AnalyticModel
+from tests.threads import one_thread
 
 SHORT = SelfRecognitionConfig(trials=8, steps=4, delays=(0.0, 0.1), sources=("imitator", "second_arm", "mirrored"),
                               mlflow=False, progress=False, plots=False)
+
+
+@pytest.fixture
+def single_thread():
+    with one_thread():
+        yield
 
 
 @pytest.fixture(scope="module")
@@ -210,10 +217,10 @@ def test_image_streams_are_rendered_frames_scaled_as_training_data_and_flipped_i
     robot.close()
 
 
+@pytest.mark.usefixtures("single_thread")
 def test_an_image_model_runs_the_benchmark_on_frames_from_its_own_camera(tmp_path, pixel_model):
     from bodyschema.datagen.robot import Robot
     from bodyschema.models.pixel import PixelDecoder
-    torch.set_num_threads(1)
     robot = Robot.load("nao_arm", image_size=(14, 20))
     q = np.random.default_rng(0).uniform(*robot.sampling_ranges.T, size=(32, robot.dq))
     decoder = PixelDecoder(pixel_model.body, "image", (14, 20), fc_hidden=8, channels=(4,), epochs=2, batch_size=32)
@@ -357,8 +364,8 @@ def test_the_same_seed_reproduces_the_scores_exactly(setup, short_run):
 
 
 # ---- end to end -----------------------------------------------------------------------------------------
+@pytest.mark.usefixtures("single_thread")
 def test_short_benchmark_tells_self_from_a_second_arm_and_a_late_imitator(tmp_path, monkeypatch, pixel_model):
-    torch.set_num_threads(1)
     monkeypatch.chdir(tmp_path)
     config = replace(SHORT, trials=20, steps=10, delays=(0.0, 0.4), out=tmp_path / "out", mlflow=True, plots=True,
                      tracking_uri=f"sqlite:///{tmp_path / 'mlflow.db'}")

@@ -23,6 +23,7 @@ FD_STEP = 1e-6            # rad; central differences in float64
 FD_RTOL = 1e-4            # relative Jacobian error allowed against finite differences
 PRECISION_FD_STEP = 1e-3  # rad; a GP's Π = 1/(s − ‖L⁻¹k‖²) cancels digits: a smaller step differences rounding noise
 PRECISION_FD_RTOL = 1e-3
+FRESH_PROCESS_RTOL = 1e-12  # float64 results summed in another order (kernel choice, thread split): see the test
 _FITTED: dict[type, object] = {}   # one fitted model per concrete test class
 
 
@@ -110,12 +111,26 @@ class SensoryModelContract:
         again = self.make_model(seed=0)
         torch.testing.assert_close(again.predict(z), model.predict(z), rtol=0, atol=0)
 
-    def test_save_then_load_in_fresh_process_gives_identical_outputs(self, model, tmp_path):
+    def test_save_then_load_in_process_gives_bit_identical_outputs(self, model, tmp_path):
+        # Same process, same threads, same kernels: the loaded tensors must give the very same bits.
+        z = self.make_inputs(self.batch, torch.float64)
+        model.save(tmp_path / "model")
+        loaded = type(model).load(tmp_path / "model")
+        for name in ("predict", "jacobian", "precision"):
+            torch.testing.assert_close(getattr(loaded, name)(z), getattr(model, name)(z), rtol=0, atol=0, msg=name)
+        assert loaded.body == model.body
+
+    def test_save_then_load_in_fresh_process_gives_the_same_outputs(self, model, tmp_path):
+        # A fresh process may pick another kernel or thread split for a float64 convolution or matrix product and
+        # so sum in another order (seen: 9.4e-16 on 187 of 384 pixels). Reordering a sum of K products moves it by
+        # at most ~K·2⁻⁵³·Σ|terms|: FRESH_PROCESS_RTOL covers K up to ~10⁴ with margin; bit-identity is checked
+        # in-process above. The child runs with the parent's thread count all the same.
         z = self.make_inputs(self.batch, torch.float64)
         model.save(tmp_path / "model")
         torch.save(z, tmp_path / "z.pt")
         script = textwrap.dedent(f"""
             import torch
+            torch.set_num_threads({torch.get_num_threads()})
             from bodyschema.models import load_model
             m = load_model({str(tmp_path / 'model')!r})
             z = torch.load({str(tmp_path / 'z.pt')!r})
@@ -123,10 +138,10 @@ class SensoryModelContract:
         """)
         subprocess.run([sys.executable, "-c", script], check=True)
         out = torch.load(tmp_path / "out.pt")
-        torch.testing.assert_close(out["x"], model.predict(z), rtol=0, atol=0)
-        torch.testing.assert_close(out["j"], model.jacobian(z), rtol=0, atol=0)
-        torch.testing.assert_close(out["p"], model.precision(z), rtol=0, atol=0)
-        assert type(model).load(tmp_path / "model").body == model.body
+        for name, key in (("predict", "x"), ("jacobian", "j"), ("precision", "p")):
+            expected = getattr(model, name)(z)
+            torch.testing.assert_close(out[key], expected, rtol=FRESH_PROCESS_RTOL,
+                                       atol=FRESH_PROCESS_RTOL * float(expected.abs().max()), msg=name)
 
     # ---- bad input --------------------------------------------------------------------------------------
     def test_wrong_latent_dim_raises(self, model):

@@ -1,12 +1,11 @@
 """The pixel decoder under the shared contract on tiny blob images, plus its training and its layout."""
 
-from contextlib import contextmanager
-
 import pytest
 import torch
 
 from bodyschema.models.pixel import PixelDecoder
 from tests.models.contract import SensoryModelContract
+from tests.threads import one_thread
 from tests.toy_models import ToyPlanarArm
 
 TINY = dict(fc_hidden=16, channels=(8, 4), epochs=15, batch_size=32, lr=1e-2, patience=100)
@@ -25,17 +24,6 @@ def blob_images(q: torch.Tensor, shape=HW, width_px: float = 1.5) -> torch.Tenso
     if len(shape) == 3:
         img = torch.stack([img * (c + 1) / shape[2] for c in range(shape[2])], -1)   # (N, H, W, C)
     return img.float()
-
-
-@contextmanager
-def one_thread():
-    """Tiny fits are all per-op overhead; a second thread only adds contention on a shared 2-core machine."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(threads)
 
 
 def peak_px(images: torch.Tensor) -> torch.Tensor:

@@ -1,0 +1,15 @@
+"""Suite-wide guards."""
+
+import pytest
+import torch
+
+
+@pytest.fixture(autouse=True)
+def torch_threads_restored():
+    """A test that changes torch's thread count must restore it (tests/threads.one_thread does): a leaked count
+    changes the float rounding of every later test in the process, which made the suite depend on its order."""
+    threads = torch.get_num_threads()
+    yield
+    leaked = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    assert leaked == threads, f"the test left torch.get_num_threads() at {leaked} (was {threads}): use tests.threads.one_thread"
