@@ -2,6 +2,7 @@
 
     bodyschema datagen --robot nao_arm --n 2000 --sampler babble --workers 2 --out data/nao.zarr
     bodyschema validate data/nao.zarr | bodyschema show data/nao.zarr   (summary + contact sheet PNG)
+    bodyschema import recording/ --angles deg --robot nao_arm --out data/real.zarr   (images + CSV, HDF5, LeRobot)
     bodyschema export dataset --to lerobot|hdf5 data/nao.zarr OUT | bodyschema export onnx MODEL_SPEC OUT.onnx
     bodyschema train gpr --data data/nao.zarr --modality ee_xyz --noise-floor 1e-6   (train KIND --help: its flags)
     bodyschema registry list | bodyschema registry promote NAME VERSION
@@ -48,6 +49,7 @@ import tyro
 
 from bodyschema import log
 from bodyschema.datagen.config import DatagenConfig
+from bodyschema.datagen.importers.config import ImportConfig
 from bodyschema.demo import DemoConfig
 from bodyschema.evaluation import registry
 from bodyschema.evaluation.report import ReportConfig, write_report
@@ -182,6 +184,8 @@ def commands(words: list[str] | None = None):
         _command("datagen", DatagenConfig, "Generate a motor-babbling dataset (Zarr v3)."),
         _command("validate", ValidateArgs, "Check a dataset store; exit 0 when valid, else list every problem."),
         _command("show", ShowArgs, "Summarize a dataset store and draw a contact sheet of its images (PNG)."),
+        _command("import", ImportConfig, "Import recordings (images + CSV of angles, HDF5, LeRobot v3.0) into a "
+                                         "dataset store."),
         _group("train", "Fit one sensory model on a dataset, log it to MLflow and register it. "
                         "`bodyschema train KIND --help` lists KIND's hyper-parameters with their defaults.",
                *train_commands()),
@@ -226,6 +230,11 @@ def run(config) -> int:
             print(f"- {problem}", file=sys.stderr)
         print(f"{config.path}: {'valid' if not problems else f'{len(problems)} problem(s)'}")
         return 1 if problems else 0
+    elif isinstance(config, ImportConfig):
+        from bodyschema.datagen.importers.run import import_recording
+        from bodyschema.datagen.validate import summarize_store
+
+        print(summarize_store(import_recording(config)))
     elif isinstance(config, TrainConfig):
         from bodyschema.training.train import train
 

@@ -1,0 +1,132 @@
+"""A LeRobot dataset, codebase v3.0 (the inverse of datagen/export_lerobot.py): meta/info.json, the frames in
+data/chunk-*/file-*.parquet, images as PNG bytes in the parquet or as video files (decoded with OpenCV's FFmpeg
+where it has the codec; else the house error).
+
+Joint angles: `observation.state` (or --joint-key), its names from the features. This project's export also
+brings back velocity, ee_xyz, ee_pixel, jacobian (3·Dq values → (3, Dq)), touch, its units and store attrs
+(meta/bodyschema.json); a foreign dataset gives the state, the image and `episode_index` / `timestamp`.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from bodyschema.datagen.importers.folder_csv import from_opencv
+from bodyschema.datagen.importers.recording import Recording
+from bodyschema.errors import must_be
+
+OWN_FORMAT = "bodyschema-lerobot"
+OWN_ARRAYS = {"observation.velocity": "qvel", "observation.ee_xyz": "ee_xyz", "observation.ee_pixel": "ee_pixel",
+              "observation.jacobian": "jacobian", "observation.touch": "touch"}
+
+
+def read_lerobot(root: Path, joint_keys: tuple[str, ...], image_key: str | None, images: bool) -> Recording:
+    info = _info(root)
+    ours = _ours(root)
+    frames = _frames(root)
+    state_key = joint_keys[0] if joint_keys else "observation.state"
+    feats = info.get("features", {})
+    if state_key not in feats or state_key not in frames.column_names:
+        raise ValueError(must_be(f"joint key {state_key!r}", "a feature of the dataset", sorted(feats),
+                                 "Pass --joint-key with the feature of the joint angles."))
+    q = _vectors(frames, state_key)                                                  # (N, K)
+    arrays = _own_arrays(frames, q.shape[1]) if ours else {}
+    recorded = (ours or {}).get("store_attrs", {}).get("features")
+    if recorded is None or "episode" in recorded:
+        arrays["episode"] = frames.column("episode_index").to_numpy().astype(np.int32)
+    if recorded is None or "t" in recorded:
+        arrays["t"] = frames.column("timestamp").to_numpy().astype(np.float32)
+    key = _image_key(feats, image_key) if images else None
+    pictures = _images(root, info, frames, key) if key else None
+    return Recording(q, _names(feats[state_key], q.shape[1]), pictures,
+                     [f"frame {i}" for i in range(len(q))] if key else [], arrays,
+                     unit="rad" if ours else None, attrs=(ours or {}).get("store_attrs", {}),
+                     files=[p for p in root.rglob("*") if p.is_file()],
+                     params={"format": "lerobot", "codebase_version": info["codebase_version"],
+                             "state_key": state_key, "image_key": key, "fps": info.get("fps")})
+
+
+def _info(root: Path) -> dict:
+    path = root / "meta" / "info.json"
+    try:
+        info = json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        raise ValueError(must_be("SOURCE", "a LeRobot dataset with a readable meta/info.json", str(root))) from e
+    version = str(info.get("codebase_version"))
+    if not version.startswith("v3"):
+        raise ValueError(must_be("the LeRobot codebase_version", "v3.0", version,
+                                 "Convert older datasets with LeRobot's v2.1 → v3.0 script."))
+    return info
+
+
+def _ours(root: Path) -> dict | None:
+    path = root / "meta" / "bodyschema.json"
+    if not path.is_file():
+        return None
+    ours = json.loads(path.read_text())
+    return ours if ours.get("format") == OWN_FORMAT else None
+
+
+def _frames(root: Path):
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    files = sorted((root / "data").glob("chunk-*/file-*.parquet"))
+    if not files:
+        raise ValueError(must_be("SOURCE", "a LeRobot dataset with data/chunk-*/file-*.parquet", str(root)))
+    table = pa.concat_tables([pq.read_table(p) for p in files])
+    return table.take(np.argsort(table.column("index").to_numpy(), kind="stable"))
+
+
+def _vectors(frames, key: str) -> np.ndarray:
+    values = frames.column(key).combine_chunks()
+    flat = values.flatten().to_numpy(zero_copy_only=False)
+    return np.asarray(flat, float).reshape(len(values), -1)
+
+
+def _names(feature: dict, k: int) -> tuple[str, ...] | None:
+    names = feature.get("names")
+    if isinstance(names, dict):                      # LeRobot also writes {"motors": [...]}
+        names = next(iter(names.values()), None)
+    return tuple(map(str, names)) if isinstance(names, list) and len(names) == k else None
+
+
+def _own_arrays(frames, dq: int) -> dict[str, np.ndarray]:
+    out = {}
+    for key, name in OWN_ARRAYS.items():
+        if key in frames.column_names:
+            values = _vectors(frames, key)
+            out[name] = values.reshape(len(values), 3, dq) if name == "jacobian" else values
+    return out
+
+
+def _image_key(feats: dict, key: str | None) -> str | None:
+    visual = [k for k, f in feats.items() if f.get("dtype") in ("image", "video")]
+    if key is not None:
+        if key not in visual:
+            raise ValueError(must_be("--image-key", f"one of the image features {visual}", key))
+        return key
+    if len(visual) > 1:
+        raise ValueError(must_be("--image-key", "named when there are several cameras", None,
+                                 f"Image features: {visual}; or pass --no-images."))
+    return visual[0] if visual else None
+
+
+def _images(root: Path, info: dict, frames, key: str) -> list[np.ndarray]:
+    if info["features"][key]["dtype"] == "image":
+        import cv2
+        cells = frames.column(key).to_pylist()
+        return [from_opencv(_decoded(cv2, cell, i), f"frame {i}") for i, cell in enumerate(cells)]
+    from bodyschema.datagen.importers.video import video_frames
+    return video_frames(root, info, frames, key)
+
+
+def _decoded(cv2, cell: dict | None, i: int) -> np.ndarray:
+    data = (cell or {}).get("bytes")
+    image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED) if data else None
+    if image is None:
+        raise ValueError(must_be(f"image of frame {i}", "encoded bytes (PNG, JPEG) in the parquet", "none"))
+    return image

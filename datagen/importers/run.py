@@ -1,0 +1,123 @@
+"""`import_recording(config)`: read the source, apply the body, prepare the images, add forward kinematics when
+asked, and write the store (writer.py). The root attrs are a generated store's, with sampler "imported", no seed,
+and `source` = {format, path, sha256 of every file read}.
+
+Camera and reach attrs describe what the robot computes: they are recorded (and `validate_store` checks ee_pixel
+against the camera, ee_xyz against the reach) when those arrays come from the robot (--fk) or from a bodyschema
+export, and left None when a foreign recording brings its own ee readings, whose camera and frame are unknown.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from bodyschema.datagen.importers.body import Body, joint_angles, joint_box, resolve_body
+from bodyschema.datagen.importers.config import ImportConfig
+from bodyschema.datagen.importers.images import prepare_images
+from bodyschema.datagen.importers.recording import EXTRA_ARRAYS, Recording, check_finite, source_sha256
+from bodyschema.datagen.importers.writer import chunk_rows, store_features, write_store
+from bodyschema.datagen.store import SCHEMA_VERSION, now, versions
+from bodyschema.errors import must_be
+
+logger = logging.getLogger(__name__)
+FK_ARRAYS = ("ee_xyz", "ee_pixel", "jacobian")
+
+
+def import_recording(config: ImportConfig) -> Path:
+    """Import `config.source` into the store `config.out`; returns its path once complete and valid."""
+    source = Path(config.source)
+    if not source.exists():
+        raise FileNotFoundError(must_be("SOURCE", "an existing folder, HDF5 file or LeRobot dataset", str(source)))
+    rec = read_source(source, config)
+    arrays: dict[str, np.ndarray] = {}
+    if config.images and rec.images is not None:
+        arrays["image"] = prepare_images(rec.images, rec.image_names, config.crop, config.resize, config.gray)
+    image_size = tuple(arrays["image"].shape[1:3]) if "image" in arrays else None
+    body = resolve_body(config, rec, image_size)
+    try:
+        q = joint_angles(config, rec, body)                                          # (N, Dq) rad
+        arrays["q"] = q.astype(np.float32)
+        arrays.update(_extras(rec, config))
+        foreign = {k for k in FK_ARRAYS if k in arrays} if not rec.attrs else set()
+        if config.fk:
+            arrays.update(_forward_kinematics(body, q, arrays))
+            foreign = set()
+        attrs = _attrs(config, rec, body, arrays, source, foreign)
+    finally:
+        if body.robot is not None:
+            body.robot.close()
+    return write_store(Path(config.out), arrays, attrs, config.overwrite)
+
+
+def read_source(source: Path, config: ImportConfig) -> Recording:
+    fmt = config.format if config.format != "auto" else _detect(source)
+    if fmt == "hdf5":
+        from bodyschema.datagen.importers.hdf5 import read_hdf5
+        return read_hdf5(source, config.joint_key, config.image_key, config.ee_key, config.images)
+    if fmt == "lerobot":
+        from bodyschema.datagen.importers.lerobot import read_lerobot
+        return read_lerobot(source, config.joint_key, config.image_key, config.images)
+    if not source.is_dir():
+        raise ValueError(must_be("SOURCE of --format folder", "a folder of images with a CSV", str(source)))
+    from bodyschema.datagen.importers.folder_csv import read_folder
+    return read_folder(source, config.csv, config.images)
+
+
+def _detect(source: Path) -> str:
+    if source.is_file():
+        if source.suffix.lower() in (".h5", ".hdf5", ".hdf"):
+            return "hdf5"
+        raise ValueError(must_be("SOURCE", "a folder, an .h5/.hdf5 file or a LeRobot dataset folder", str(source),
+                                 "Pass --format to say which it is."))
+    return "lerobot" if (source / "meta" / "info.json").is_file() else "folder"
+
+
+def _extras(rec: Recording, config: ImportConfig) -> dict[str, np.ndarray]:
+    """The recorded readings besides q, finite, in the store's dtypes (qvel converted like the angles)."""
+    out = {}
+    for name, values in rec.arrays.items():
+        values = np.asarray(values)
+        if name == "qvel" and config.angles == "deg":
+            values = values * config.to_rad
+        if values.dtype.kind == "f":
+            check_finite(name, values, rec.image_names or None)
+        out[name] = values.astype(EXTRA_ARRAYS[name])
+    return out
+
+
+def _forward_kinematics(body: Body, q: np.ndarray, arrays: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """ee_xyz (N, 3) m, ee_pixel (N, 2) px and jacobian (N, 3, Dq) m/rad of the robot at the recorded q."""
+    observed = body.robot.observe(q, image=False)
+    replaced = [k for k in FK_ARRAYS if k in arrays]
+    if "ee_xyz" in replaced:
+        gap = np.linalg.norm(arrays["ee_xyz"] - observed["ee_xyz"], axis=1).max()
+        logger.warning(f"import --fk: the recorded {replaced} are replaced by the robot's (recorded ee_xyz up to "
+                       f"{1e3 * gap:.1f} mm from the robot's forward kinematics)")
+    return {k: observed[k] for k in FK_ARRAYS}
+
+
+def _attrs(config: ImportConfig, rec: Recording, body: Body, arrays: dict, source: Path, foreign: set) -> dict:
+    n, step = len(arrays["q"]), chunk_rows(arrays)
+    feats = store_features(arrays)
+    robot_made = {k: body.attrs.get(k) for k in ("mjcf_sha256", "camera_name", "intrinsics", "extrinsics",
+                                                  "reach_m", "base_m")}
+    if "ee_pixel" in foreign:
+        robot_made.update(intrinsics=None, extrinsics=None)
+    if "ee_xyz" in foreign or "jacobian" in foreign:
+        robot_made.update(reach_m=None, base_m=None)
+    image = arrays.get("image")
+    root = source if source.is_dir() else source.parent
+    return {"schema_version": SCHEMA_VERSION, "robot": body.name, "dq": len(body.joint_names),
+            "joint_names": list(body.joint_names), "joint_limits": body.joint_limits.tolist(),
+            "sampling_ranges": joint_box(arrays["q"].astype(np.float64), body).tolist(), "workspace": None,
+            **robot_made, "image_size": None if image is None else list(image.shape[1:3]),
+            "channels": None if image is None else (3 if image.ndim == 4 else 1), "images": image is not None,
+            "sampler": "imported", "sampler_params": rec.params, "seed": None, "config": config.to_dict(),
+            "versions": versions(), "created_at": now(), "n": n, "chunk_len": step, "n_shards": -(-n // step),
+            "features": feats,
+            "source": {"format": rec.params.get("format"), "path": str(source.resolve()), "files": len(rec.files),
+                       "sha256": source_sha256(rec.files, root)},
+            "recorded_attrs": rec.attrs or None}

@@ -1,0 +1,64 @@
+"""LeRobot v3.0 video features: the frame of each row, decoded with OpenCV's FFmpeg backend.
+
+An episode's frames sit in one video file (meta/episodes: `videos/<key>/chunk_index`, `file_index`,
+`from_timestamp`); the row's frame is number round((from_timestamp + timestamp) · fps) of that file. Each file is
+decoded once, front to back (seeking in long-GOP codecs is not frame-exact). A codec the installed FFmpeg cannot
+decode is the house error, not an empty image.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from bodyschema.datagen.importers.folder_csv import from_opencv
+from bodyschema.errors import must_be
+
+VIDEO_PATH = "videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4"   # LeRobot's default
+HINT = ("Re-encode the dataset with image (PNG) features, or use an OpenCV build whose FFmpeg decodes this codec "
+        "(LeRobot encodes AV1 by default).")
+
+
+def video_frames(root: Path, info: dict, frames, key: str) -> list[np.ndarray]:
+    import pandas as pd
+
+    episodes = pd.concat([pd.read_parquet(p) for p in sorted((root / "meta" / "episodes").glob("chunk-*/*.parquet"))])
+    episodes = episodes.set_index("episode_index")
+    fps = float(info["fps"])
+    template = info.get("video_path") or VIDEO_PATH
+    decoded: dict[Path, list[np.ndarray]] = {}
+    out = []
+    for episode, t in zip(frames.column("episode_index").to_numpy(), frames.column("timestamp").to_numpy()):
+        row = episodes.loc[int(episode)]
+        path = root / template.format(video_key=key, chunk_index=int(row[f"videos/{key}/chunk_index"]),
+                                      file_index=int(row[f"videos/{key}/file_index"]))
+        if path not in decoded:
+            decoded[path] = _decode(path)
+        number = int(round((float(row[f"videos/{key}/from_timestamp"]) + float(t)) * fps))
+        if number >= len(decoded[path]):
+            raise ValueError(must_be(f"frame {number} of {path.name}", f"in the video ({len(decoded[path])} "
+                                     "frames decoded)", "past its end", HINT))
+        out.append(decoded[path][number])
+    return out
+
+
+def _decode(path: Path) -> list[np.ndarray]:
+    import cv2
+
+    if not path.is_file():
+        raise FileNotFoundError(must_be("video file", "present", str(path)))
+    capture = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
+    images = []
+    try:
+        while capture.isOpened():
+            ok, image = capture.read()
+            if not ok:
+                break
+            images.append(from_opencv(image, path.name))
+    finally:
+        capture.release()
+    if not images:
+        raise ValueError(must_be(f"video {path.name}", "decodable by the installed OpenCV/FFmpeg", "no frame decoded",
+                                 HINT))
+    return images

@@ -1,0 +1,56 @@
+"""The shared writer of every importer: arrays and attrs → a complete, validated store, or nothing at all.
+
+The store is written as datagen writes one (store.py: the same features, chunks of `chunk_len` rows, each chunk's
+checksum in its done marker, the completion marker last) into a temporary sibling of OUT; `validate_store` must
+find no problem there before it is renamed into place. Any failure removes the sibling: OUT is either the old
+state or the whole new store.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bodyschema.datagen.export import write_atomically
+from bodyschema.datagen.integrity import shard_digest
+from bodyschema.datagen.store import (StoreWriteError, create_store, features, mark_complete, mark_shard_done,
+                                      write_shard)
+from bodyschema.errors import must_be
+
+ROWS_WITH_IMAGES, ROWS_WITHOUT = 512, 16384   # rows per chunk, as datagen's default shards
+
+
+def store_features(arrays: dict[str, np.ndarray]) -> dict[str, dict[str, Any]]:
+    """The schema's features of the arrays present (store.features, restricted to them)."""
+    image = arrays.get("image")
+    full = features(arrays["q"].shape[1], None if image is None else image.shape[1:], "touch" in arrays, True)
+    return {name: spec for name, spec in full.items() if name in arrays}
+
+
+def chunk_rows(arrays: dict[str, np.ndarray]) -> int:
+    return ROWS_WITH_IMAGES if "image" in arrays else ROWS_WITHOUT
+
+
+def write_store(out: Path, arrays: dict[str, np.ndarray], attrs: dict[str, Any], overwrite: bool) -> Path:
+    """Write `arrays` (each (N, ...) in the store dtype) with `attrs` to `out`, validated, atomically."""
+    return write_atomically(Path(out), lambda tmp: _write(tmp, arrays, attrs), overwrite)
+
+
+def _write(path: Path, arrays: dict[str, np.ndarray], attrs: dict[str, Any]) -> None:
+    from bodyschema.datagen.validate import validate_store
+
+    n, step = len(arrays["q"]), int(attrs["chunk_len"])
+    try:
+        root = create_store(path, attrs["features"], n, step, attrs["n_shards"], attrs)
+        for shard, start in enumerate(range(0, n, step)):
+            write_shard(root, start, {name: values[start:start + step] for name, values in arrays.items()})
+            mark_shard_done(root, shard, shard_digest(root, start, min(n, start + step)))
+        mark_complete(root)
+    except OSError as e:
+        raise StoreWriteError.from_os_error(path, e) from e
+    problems = validate_store(path)
+    if problems:
+        raise ValueError(must_be("the imported store", "valid", f"{len(problems)} problem(s)",
+                                 "Nothing was written. Fix the recording:\n - " + "\n - ".join(problems)))
