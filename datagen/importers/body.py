@@ -93,8 +93,9 @@ def joint_angles(config: ImportConfig, rec: Recording, body: Body) -> np.ndarray
     check_finite("joint angles", rec.q, rec.image_names or None)
     q = _in_body_order(rec, body) * _factor(config, rec)
     unit = "deg" if config.angles == "deg" else "rad"
+    # An export's joint box is where targets were drawn; a babbling arm overshoots it, so only --ranges bound q.
     for box, what in ((body.joint_limits, "the joint limits"), (body.ranges, "--ranges")):
-        if box is None:
+        if box is None or (what == "--ranges" and config.ranges is None):
             continue
         outside = (q < box[:, 0] - RANGE_TOL) | (q > box[:, 1] + RANGE_TOL)
         if outside.any():
