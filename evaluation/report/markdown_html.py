@@ -1,6 +1,7 @@
 """Markdown → HTML for the report page, by markdown-it-py (CommonMark, with its pipe-table rule enabled), plus
 what the page adds: GitHub's heading anchors (`slug`, so the contents list works on GitHub and in the HTML page
-alike) and images embedded as base64 data URIs (`embedded_image`): a self-contained page, no network.
+alike) and images embedded as base64 data URIs (`embedded_image`, only the files the page allows): a
+self-contained page, no network.
 Raw HTML in a summary.md is shown as text, not passed through."""
 
 from __future__ import annotations
@@ -9,9 +10,11 @@ import base64
 import html
 import mimetypes
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from pathlib import Path
 from urllib.parse import unquote
+
+from bodyschema.evaluation.report.confined import resolved
 
 STYLE = ("body{font-family:system-ui,sans-serif;max-width:60rem;margin:2rem auto;padding:0 1rem;line-height:1.45}"
          "table{border-collapse:collapse;margin:1rem 0}th,td{border:1px solid #ccc;padding:.25rem .6rem}"
@@ -59,11 +62,12 @@ def html_page(body: str, title: str) -> str:
             f"<style>{STYLE}</style>\n</head>\n<body>\n{body}\n</body>\n</html>\n")
 
 
-def embedded_image(page_dir: Path) -> Callable[[str], str | None]:
-    """Image link → base64 data URI of the file relative to `page_dir`; None for URLs (no network) or no file."""
+def embedded_image(page_dir: Path, allowed: Collection[Path]) -> Callable[[str], str | None]:
+    """Image link → base64 data URI of the file relative to `page_dir`, only when that file (symlinks resolved) is
+    one of `allowed`: a link in a summary.md can never make the page read another file. None otherwise."""
     def src(link: str) -> str | None:
-        path = page_dir / link
-        if re.match(r"[a-zA-Z][\w+.-]*:", link) or not path.is_file():
+        path = resolved(page_dir / link)
+        if path not in allowed or not path.is_file():
             return None
         mime = mimetypes.guess_type(path.name)[0] or "application/octet-stream"
         return f"data:{mime};base64,{base64.b64encode(path.read_bytes()).decode('ascii')}"

@@ -5,8 +5,10 @@ A section is one run of a benchmark: for every benchmark folder (`results/<name>
 holding run folders `<run-id>/` and a `latest` link) the run named with `--runs`, else the latest; a plain folder
 holding a `summary.md` is a section too. Under each section's summary the models the run used (models.csv:
 spec, registered name, version, source run, weights digest). Files that cannot belong to the run are skipped and
-listed at the end: empty or truncated files, and plots/CSVs older than their summary.md by more than
-`stale_after_s`. The HTML embeds images as base64
+listed at the end: empty or truncated files, plots/CSVs older than their summary.md by more than
+`stale_after_s`, and files whose real path leaves their run folder (a symlink elsewhere). A summary.md shows only
+images of its own run folder; its other image links are dropped with a note, never read (confined.py). Every name
+taken from the file system or a models.csv is escaped (`escape_markdown`). The HTML embeds images as base64
 and needs no network; `markdown_to_html` (markdown-it-py, tables enabled) converts what summary.md files hold
 (headings, paragraphs, pipe tables, lists, code, links, images). Both pages are written to temporary files
 and renamed only once complete, so a failure never leaves a half-written report.
@@ -25,6 +27,8 @@ from urllib.parse import quote, unquote
 
 from bodyschema.errors import must_be
 from bodyschema.evaluation.core.runs import MODELS_CSV, is_benchmark_folder, latest_run
+from bodyschema.evaluation.core.tables import escape_markdown, markdown_table
+from bodyschema.evaluation.report.confined import is_inside, resolved
 from bodyschema.evaluation.report.markdown_html import LINK, embedded_image, html_page, markdown_to_html, slug
 
 KNOWN_ORDER = ("levels", "reaching", "adaptation", "self_recognition", "rubber_hand", "agency",
@@ -32,6 +36,8 @@ KNOWN_ORDER = ("levels", "reaching", "adaptation", "self_recognition", "rubber_h
 MAX_DEPTH = 2                  # results/<benchmark>/<run> or results/<group>/<benchmark>/<run>
 NO_RESULTS_HINT = "Run `bodyschema evaluate levels` first."
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+OUTSIDE = "outside its run folder (a link elsewhere): not read"
+URL = re.compile(r"[a-zA-Z][\w+.-]*:")
 
 
 @dataclass(frozen=True)
@@ -70,9 +76,14 @@ def find_sections(results: Path, stale_after_s: float = 3600.0, runs=()
     """Every readable benchmark section under `results`, in report order, and the (file, reason) pairs skipped;
     `runs`: run folders chosen instead of their benchmark's latest."""
     skipped, sections = [], []
-    for folder in _folders(results, runs=[Path(r).resolve() for r in runs]):
+    folders = list(_folders(results, runs=[resolved(r) for r in runs]))
+    _check_runs(runs, folders, results)
+    for folder in folders:
         summary_path = _summary_file(folder)
         if summary_path is None:
+            continue
+        if not is_inside(summary_path, folder):
+            skipped.append((summary_path, OUTSIDE))
             continue
         try:
             text = summary_path.read_text(encoding="utf-8")
@@ -88,7 +99,8 @@ def find_sections(results: Path, stale_after_s: float = 3600.0, runs=()
     skipped += [(top, "outputs but no summary.md") for top in _unreported(results, owned)]
     for section in sections:
         for path in _owned_files(section.folder, owned):
-            reason = _skip_reason(path, section.summary_path.stat().st_mtime, stale_after_s)
+            reason = (OUTSIDE if not is_inside(path, section.folder)
+                      else _skip_reason(path, section.summary_path.stat().st_mtime, stale_after_s))
             if reason:
                 skipped.append((path, reason))
             else:
@@ -109,6 +121,17 @@ def _folders(results: Path, depth: int = 1, runs=()):
             yield child
             if depth < MAX_DEPTH:
                 yield from _folders(child, depth + 1, runs)
+
+
+def _check_runs(runs, folders: list[Path], results: Path) -> None:
+    """Every run named with --runs is one the report shows: the house error, never a silent fallback to latest."""
+    chosen = {resolved(f) for f in folders}
+    for run in runs:
+        if resolved(run) not in chosen:
+            hint = ("Name one run per benchmark, as results/<benchmark>/<run-id>." if is_inside(run, results)
+                    else f"It is outside {results.as_posix()!r}: pass --results with the folder that holds it.")
+            raise ValueError(must_be("runs", f"run folders of benchmarks under results {results.as_posix()!r}",
+                                     str(run), hint))
 
 
 def _summary_file(folder: Path) -> Path | None:
@@ -161,14 +184,15 @@ def render_markdown(sections: list[Section], skipped: list[tuple[Path, str]], pa
     """The report page; links are relative to `page_dir`, where the page is written."""
     heads = [s.name.replace("/", " / ") for s in sections] + (["Skipped files"] if skipped else [])
     n_plots = sum(len(s.plots) for s in sections)
-    lines = [f"# {title}", "", f"_Generated {_when(time.time())} from `{results.as_posix()}/`: "
-             f"{len(sections)} sections, {n_plots} plots._", "", "## Contents", ""]
-    lines += [f"- [{h}](#{slug(h)})" for h in heads] + [""]
+    lines = [f"# {escape_markdown(title)}", "", f"_Generated {_when(time.time())} from "
+             f"{escape_markdown(results.as_posix())}/: {len(sections)} sections, {n_plots} plots._", "",
+             "## Contents", ""]
+    lines += [f"- [{escape_markdown(h)}](#{slug(h)})" for h in heads] + [""]
     for head, section in zip(heads, sections):
-        lines += [f"## {head}", ""] + _section_body(section, page_dir) + [""]
+        lines += [f"## {escape_markdown(head)}", ""] + _section_body(section, page_dir) + [""]
     if skipped:
         lines += ["## Skipped files", ""]
-        lines += [f"- `{_rel(p, page_dir)}`: {reason}" for p, reason in skipped] + [""]
+        lines += [f"- {escape_markdown(_rel(p, page_dir))}: {reason}" for p, reason in skipped] + [""]
     return "\n".join(lines)
 
 
@@ -177,34 +201,34 @@ def _section_body(section: Section, page_dir: Path) -> list[str]:
     newest = max(p.stat().st_mtime for p in files)
     summary, linked = _relink(_demote_headings(section.summary, 2), section.folder, page_dir)
     summary_time = _when(section.summary_path.stat().st_mtime)
-    lines = [f"_Folder `{_rel(section.folder, page_dir)}/` · last modified {_when(newest)} "
-             f"(`{section.summary_path.name}` {summary_time})._", "", summary.strip(), ""]
-    lines += _models(section.folder / MODELS_CSV)
+    lines = [f"_Folder {escape_markdown(_rel(section.folder, page_dir))}/ · last modified {_when(newest)} "
+             f"(summary.md {summary_time})._", "", summary.strip(), ""]
+    lines += _models(section.folder / MODELS_CSV, section.folder)
     plots = [p for p in section.plots if p.resolve() not in linked]
     if plots:
         lines += ["**Plots**", ""]
         for p in plots:
-            lines += [f"![{p.stem}]({_link(p, page_dir)})", "",
-                      f"`{p.relative_to(section.folder).as_posix()}` · {_when(p.stat().st_mtime)}", ""]
+            lines += [f"![{escape_markdown(p.stem)}]({_link(p, page_dir)})", "",
+                      f"{escape_markdown(p.relative_to(section.folder).as_posix())} · {_when(p.stat().st_mtime)}", ""]
     if section.tables:
         lines += ["**Tables**", ""]
-        lines += [f"- [{p.relative_to(section.folder).as_posix()}]({_link(p, page_dir)}) · {_when(p.stat().st_mtime)}"
-                  for p in section.tables]
+        lines += [f"- [{escape_markdown(p.relative_to(section.folder).as_posix())}]({_link(p, page_dir)}) · "
+                  f"{_when(p.stat().st_mtime)}" for p in section.tables]
     return lines
 
 
-def _models(path: Path) -> list[str]:
+def _models(path: Path, folder: Path) -> list[str]:
     """The run's models (models.csv) as a Markdown table: which weights produced the numbers above."""
-    if not path.is_file():
+    if not (path.is_file() and is_inside(path, folder)):
         return []
     with open(path, newline="") as f:
-        rows = list(csv.DictReader(f))
-    if not rows:
+        reader = csv.DictReader(f)
+        rows = list(reader)
+    keys = reader.fieldnames or []
+    if not rows or not keys:
         return []
-    keys = list(rows[0])
-    lines = ["**Models**", "", "| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
-    lines += ["| " + " | ".join(f"`{r[k]}`" if r[k] else "–" for k in keys) + " |" for r in rows]
-    return lines + [""]
+    cells = [{keys[0]: "–"} | {k: v for k, v in r.items() if k in keys and v} for r in rows]   # empty: "–"
+    return ["**Models**", "", markdown_table(cells, keys[1:], keys[0])]
 
 
 def _demote_headings(text: str, by: int) -> str:
@@ -225,11 +249,13 @@ def _relink(text: str, folder: Path, page_dir: Path) -> tuple[str, set[Path]]:
 
     def fix(m: re.Match) -> str:
         target = m[3]
-        if re.match(r"[a-zA-Z][\w+.-]*:|[#/]", target):            # URL, anchor or absolute path: as is
-            return m[0]
         path = folder / unquote(target)
+        if m[1] and (URL.match(target) or not is_inside(path, folder)):     # never read, never fetched
+            return f"_(image {escape_markdown(target)} not shown: only files of its run folder are)_"
+        if URL.match(target) or target.startswith(("#", "/")):          # a link to a URL, anchor or absolute path
+            return m[0]
         if m[1]:
-            images.add(path.resolve())
+            images.add(resolved(path))
         return f"{m[1]}[{m[2]}]({_link(path, page_dir)})"
     return LINK.sub(fix, text), images
 
@@ -265,10 +291,16 @@ def write_report(config: ReportConfig = ReportConfig()) -> dict[str, Path]:
     md_path.parent.mkdir(parents=True, exist_ok=True)
     page_dir = md_path.parent
     text = render_markdown(sections, skipped, page_dir, config.title, results)
-    page = html_page(markdown_to_html(text, embedded_image(page_dir)), config.title)
+    page = html_page(markdown_to_html(text, embedded_image(page_dir, _embeddable(sections))), config.title)
     paths = {"markdown": md_path, "html": md_path.with_suffix(".html")}
     write_atomically({paths["markdown"]: text, paths["html"]: page})
     return paths
+
+
+def _embeddable(sections: list[Section]) -> set[Path]:
+    """The only files the HTML page reads as images: each run's plots and the images its summary.md shows."""
+    plots = {resolved(p) for s in sections for p in s.plots}
+    return plots | {p for s in sections for p in _relink(s.summary, s.folder, s.folder)[1]}
 
 
 def write_atomically(texts: dict[Path, str]) -> None:
