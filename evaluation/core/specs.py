@@ -34,10 +34,12 @@ def models_field(when_empty: str):
 def resolve_models(specs: Sequence[str], when_empty: Sequence[str], tracking_uri: str | None = None,
                    models: Sequence | None = None) -> list:
     """The models of a benchmark run: `models` when given as objects, else the specs (or `when_empty`) resolved.
-    Each model carries `provenance` (PROVENANCE_KEYS → str): what its spec resolved to."""
+    Each model carries `provenance` (PROVENANCE_KEYS → str): what its spec resolved to. A model resolved before
+    (a sweep passes its resolved models to each case) keeps its provenance; a bare object is named by its class."""
     if models is not None:
         for m in models:
-            _attach(m, {"spec": f"<{type(m).__name__} object>", "name": getattr(m, "kind", type(m).__name__)})
+            if not getattr(m, "provenance", None):
+                _attach(m, {"spec": f"<{type(m).__name__} object>", "name": getattr(m, "kind", type(m).__name__)})
         return list(models)
     return [resolve_model(spec, tracking_uri) for spec in (specs or when_empty)]
 
