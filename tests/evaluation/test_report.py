@@ -15,6 +15,7 @@ import tyro
 
 from bodyschema.evaluation.report import page as report
 from bodyschema.evaluation.report.markdown_html import markdown_to_html, slug
+from bodyschema.evaluation.report.sections import PNG_SIGNATURE
 from bodyschema.evaluation.report import ReportConfig, write_report
 
 TABLE = "| level | joint_err_deg |\n|:---|---:|\n| 1 | 0.5 |\n| 3+ms | 2 \\| 3 |\n"
@@ -25,7 +26,7 @@ def write_png(path: Path, shade: int) -> Path:
     def chunk(kind: bytes, data: bytes) -> bytes:
         return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(report.PNG_SIGNATURE + chunk(b"IHDR", struct.pack(">IIBBBBB", 1, 1, 8, 0, 0, 0, 0))
+    path.write_bytes(PNG_SIGNATURE + chunk(b"IHDR", struct.pack(">IIBBBBB", 1, 1, 8, 0, 0, 0, 0))
                      + chunk(b"IDAT", zlib.compress(bytes([0, shade]))) + chunk(b"IEND", b""))
     return path
 

@@ -1,0 +1,141 @@
+"""The sections of the report: for every benchmark folder under `results` (`results/<name>/` or
+`results/<group>/<name>/`, holding run folders `<run-id>/` and a `latest` link) the run named with `--runs`, else the
+latest; a plain folder holding a `summary.md` is a section too. The files of each run that the report may not use are
+returned as skipped, with the reason: empty or truncated, older than the summary.md by more than `stale_after_s`, or
+with a real path outside the run folder (a symlink elsewhere: never opened)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from bodyschema.errors import must_be
+from bodyschema.evaluation.core.runs import is_benchmark_folder, latest_run
+from bodyschema.evaluation.report.confined import is_inside, resolved
+
+KNOWN_ORDER = ("levels", "reaching", "adaptation", "self_recognition", "rubber_hand", "agency",
+               "robustness")                                                         # then others, A→Z
+MAX_DEPTH = 2                  # results/<benchmark>/<run> or results/<group>/<benchmark>/<run>
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+OUTSIDE = "outside its run folder (a link elsewhere): not read"
+
+
+@dataclass
+class Section:
+    name: str                          # the benchmark folder relative to results, e.g. "adaptation/jupiter"
+    folder: Path                       # the run folder (or a plain folder holding a summary.md)
+    summary_path: Path
+    summary: str                       # the summary.md text
+    plots: list[Path] = field(default_factory=list)
+    tables: list[Path] = field(default_factory=list)
+
+
+def find_sections(results: Path, stale_after_s: float = 3600.0, runs=()
+                  ) -> tuple[list[Section], list[tuple[Path, str]]]:
+    """Every readable benchmark section under `results`, in report order, and the (file, reason) pairs skipped;
+    `runs`: run folders chosen instead of their benchmark's latest."""
+    skipped, sections = [], []
+    folders = list(_folders(results, runs=[resolved(r) for r in runs]))
+    _check_runs(runs, folders, results)
+    for folder in folders:
+        summary_path = _summary_file(folder)
+        if summary_path is None:
+            continue
+        if not is_inside(summary_path, folder):
+            skipped.append((summary_path, OUTSIDE))
+            continue
+        try:
+            text = summary_path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as e:
+            skipped.append((summary_path, f"unreadable ({type(e).__name__})"))
+            continue
+        if not text.strip():
+            skipped.append((summary_path, "empty summary"))
+            continue
+        name = folder.parent if folder.parent != results and is_benchmark_folder(folder.parent) else folder
+        sections.append(Section(name.relative_to(results).as_posix(), folder, summary_path, text))
+    owned = [s.folder for s in sections]
+    skipped += [(top, "outputs but no summary.md") for top in _unreported(results, owned)]
+    for section in sections:
+        for path in _owned_files(section.folder, owned):
+            reason = (OUTSIDE if not is_inside(path, section.folder)
+                      else _skip_reason(path, section.summary_path.stat().st_mtime, stale_after_s))
+            if reason:
+                skipped.append((path, reason))
+            else:
+                (section.plots if path.suffix.lower() == ".png" else section.tables).append(path)
+    sections.sort(key=lambda s: _order_key(s.name))
+    return sections, sorted(skipped)
+
+
+def _folders(results: Path, depth: int = 1, runs=()):
+    """Candidate sections: the chosen run of every benchmark folder, and plain folders (not inside a benchmark)."""
+    for child in sorted(p for p in results.iterdir() if p.is_dir() and not p.name.startswith((".", "_"))):
+        if is_benchmark_folder(child):
+            chosen = [r for r in runs if r.parent == child.resolve()]
+            run = child / chosen[-1].name if chosen else latest_run(child)
+            if run is not None:
+                yield run
+        else:
+            yield child
+            if depth < MAX_DEPTH:
+                yield from _folders(child, depth + 1, runs)
+
+
+def _check_runs(runs, folders: list[Path], results: Path) -> None:
+    """Every run named with --runs is one the report shows: the house error, never a silent fallback to latest."""
+    chosen = {resolved(f) for f in folders}
+    for run in runs:
+        if resolved(run) not in chosen:
+            hint = ("Name one run per benchmark, as results/<benchmark>/<run-id>." if is_inside(run, results)
+                    else f"It is outside {results.as_posix()!r}: pass --results with the folder that holds it.")
+            raise ValueError(must_be("runs", f"run folders of benchmarks under results {results.as_posix()!r}",
+                                     str(run), hint))
+
+
+def _summary_file(folder: Path) -> Path | None:
+    return folder / "summary.md" if (folder / "summary.md").is_file() else None
+
+
+def _unreported(results: Path, sections: list[Path]) -> list[Path]:
+    """Top-level folders holding plots or CSVs but no section: a benchmark that wrote no summary.md."""
+    tops = [p for p in results.iterdir() if p.is_dir() and not p.name.startswith((".", "_"))]
+    return [t for t in tops if not any(t == s or t in s.parents for s in sections) and _owned_files(t, [])]
+
+
+def _owned_files(folder: Path, sections: list[Path]) -> list[Path]:
+    """PNG and CSV files of `folder` and its subfolders, except those of nested sections; hidden files are skipped."""
+    nested = [s for s in sections if s != folder and folder in s.parents]
+    files = []
+    for path in sorted(folder.rglob("*")):
+        rel = path.relative_to(folder).parts
+        if (path.suffix.lower() in (".png", ".csv") and path.is_file() and not any(p.startswith(".") for p in rel)
+                and not any(n in path.parents for n in nested)):
+            files.append(path)
+    return files
+
+
+def _skip_reason(path: Path, summary_mtime: float, stale_after_s: float) -> str | None:
+    try:
+        stat = path.stat()
+        with open(path, "rb") as f:
+            head = f.read(len(PNG_SIGNATURE))
+    except OSError as e:                                              # removed or locked by a running benchmark
+        return f"unreadable ({type(e).__name__})"
+    if stat.st_size == 0:
+        return "empty file"
+    if path.suffix.lower() == ".png" and head != PNG_SIGNATURE:
+        return "not a PNG (truncated or corrupt)"
+    if summary_mtime - stat.st_mtime > stale_after_s:
+        return f"stale: {_duration(summary_mtime - stat.st_mtime)} older than its summary.md (an earlier run)"
+    return None
+
+
+def _order_key(name: str) -> tuple:
+    top = name.split("/")[0].replace("-", "_")
+    rank = KNOWN_ORDER.index(top) if top in KNOWN_ORDER else len(KNOWN_ORDER)
+    return rank, top, name.count("/"), name                  # a benchmark's own section before its cases
+
+
+def _duration(seconds: float) -> str:
+    return f"{seconds / 3600:.1f} h" if seconds >= 3600 else f"{seconds / 60:.0f} min"
