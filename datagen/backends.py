@@ -7,20 +7,29 @@ Two safety rules hold for both:
   machine's routable address unless Ray clusters are disabled for this node (RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0,
   what Ray does by default on Windows/macOS); then GCS, raylet, object manager, runtime-env agent, workers and
   the driver listen on loopback (measured with Ray 2.60: `*:<port>` and the external IP before, 127.0.0.1 after).
+
+`backend(name, workers)` brings the backend up before the caller creates anything, and yields the runner. With
+RAY_ADDRESS, the address Ray will dial is first checked with a TCP connect of RAY_CONNECT_TIMEOUT_S (Ray itself
+retries an unreachable GCS for minutes, ~41 s per try, and turns 127.0.0.1 into this machine's routable address).
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import socket
 import sys
 import threading
 import time
 from typing import Callable, Iterator
 
+from bodyschema.errors import must_be
+
 WATCH_S = 0.5  # s between checks of the parent pid: the worker exits at most this long after its driver
 LOCAL_RAY_ENV = {"RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0"}  # Ray's switch for a loopback-only node
 IN_FLIGHT_PER_WORKER = 4  # Ray tasks submitted ahead per worker: the driver never holds every shard's task
+RAY_CONNECT_TIMEOUT_S = 5.0  # s to reach RAY_ADDRESS's GCS port: a cluster on a LAN answers in milliseconds
+Runner = Callable[[Callable, list, Callable[[int], None]], None]  # runner(fn, jobs, on_done)
 
 
 def exit_with_parent(parent: int) -> None:
@@ -67,31 +76,84 @@ def local_ray_env() -> Iterator[None]:
                 os.environ[k] = v
 
 
-def run_ray(fn: Callable, jobs: list[tuple], workers: int, on_done: Callable[[int], None]) -> None:
-    """Run fn(*job) for every job as Ray tasks: on the cluster named by RAY_ADDRESS, else on a local loopback Ray."""
+@contextlib.contextmanager
+def backend(name: str, workers: int) -> Iterator[Runner]:
+    """The backend `name` ("loky" | "ray") up and running for the `with` body: yields runner(fn, jobs, on_done)."""
+    if name != "ray":
+        yield lambda fn, jobs, on_done: run_loky(fn, jobs, workers, on_done)
+        return
+    with ray_session(workers) as ray:
+        yield lambda fn, jobs, on_done: run_ray(ray, fn, jobs, workers, on_done)
+
+
+@contextlib.contextmanager
+def ray_session(workers: int) -> Iterator:
+    """Ray connected for the `with` body: the cluster named by RAY_ADDRESS, else a local loopback Ray (shut down)."""
     address = os.environ.get("RAY_ADDRESS")
     with contextlib.ExitStack() as stack:
         if not address:
             stack.enter_context(local_ray_env())
-        import ray
-
+        ray = _import_ray()
         if not ray.is_initialized():
             if address:
+                check_reachable(address)
                 ray.init()  # the cluster named by RAY_ADDRESS (its nodes need bodyschema installed)
             else:
                 ray.init(address="local", num_cpus=workers, include_dashboard=False, _node_ip_address="127.0.0.1",
                          log_to_driver=False, configure_logging=False)
             stack.callback(ray.shutdown)
-        task = ray.remote(num_cpus=1, max_retries=0)(fn)
-        todo, pending = iter(jobs), []
-        window = IN_FLIGHT_PER_WORKER * workers
-        while True:
-            pending += [task.remote(*job) for job in _take(todo, window - len(pending))]
-            if not pending:
-                break
-            done, pending = ray.wait(pending, num_returns=1)
-            ray.get(done)
-            on_done(len(done))
+        yield ray
+
+
+def _import_ray():
+    try:
+        import ray
+    except ImportError as e:
+        raise ValueError(must_be("--backend ray", "backed by an installed Ray", f"{type(e).__name__}: {e}",
+                                 "pip install 'bodyschema[ray]', or use --backend loky (local cores).")) from e
+    return ray
+
+
+def ray_dial_address(address: str) -> str | None:
+    """host:port that Ray will connect to for `address` (Ray Client's ray:// as given); None: nothing to dial."""
+    if address.startswith("ray://"):
+        return address.removeprefix("ray://")
+    from ray._private.services import canonicalize_bootstrap_address
+
+    try:
+        return canonicalize_bootstrap_address(address)  # "auto": the running cluster; 127.0.0.1 -> this node's IP
+    except ValueError as e:
+        raise ValueError(must_be("RAY_ADDRESS", "host:port, ray://host:port or auto", address, str(e))) from e
+
+
+def check_reachable(address: str, timeout_s: float = RAY_CONNECT_TIMEOUT_S) -> None:
+    """Raise ConnectionError (the house message) unless the port Ray dials for `address` accepts a TCP connection."""
+    dial = ray_dial_address(address)
+    if dial is None:
+        return  # "local", or "auto" without a running cluster: ray.init says so at once
+    host, _, port = dial.rpartition(":")
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s).close()
+    except (OSError, ValueError) as e:
+        raise ConnectionError(must_be(
+            "RAY_ADDRESS", f"a Ray cluster accepting connections within {timeout_s:g} s",
+            f"{address} (Ray dials {dial}): {type(e).__name__}: {e}",
+            "Start the cluster (`ray start --head`) or unset RAY_ADDRESS for a local Ray; Ray replaces "
+            "127.0.0.1/localhost by this machine's address. Nothing was written.")) from e
+
+
+def run_ray(ray, fn: Callable, jobs: list[tuple], workers: int, on_done: Callable[[int], None]) -> None:
+    """Run fn(*job) for every job as Ray tasks on the connected Ray, at most IN_FLIGHT_PER_WORKER per worker ahead."""
+    task = ray.remote(num_cpus=1, max_retries=0)(fn)
+    todo, pending = iter(jobs), []
+    window = IN_FLIGHT_PER_WORKER * workers
+    while True:
+        pending += [task.remote(*job) for job in _take(todo, window - len(pending))]
+        if not pending:
+            break
+        done, pending = ray.wait(pending, num_returns=1)
+        ray.get(done)
+        on_done(len(done))
 
 
 def _take(items: Iterator, k: int) -> list:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -23,6 +24,9 @@ KINEMATIC_SAMPLERS = ("uniform", "gaussian")
 WORKSPACES = ("full", "camera")  # must equal every robot's ROBOT_DEFAULTS[...]["workspaces"] names (tested)
 IMAGE_SIDE_RANGE = (8, 1024)  # px; below 8 nothing is visible, above 1024 one sample is > 3 MB
 EXECUTION_FIELDS = ("workers", "backend", "out", "overwrite")  # how, not what: excluded from identity()
+MAX_GRAVITY = 100.0  # m/s^2, ~10 g (Jupiter: 24.8); far beyond, the babbling simulation diverges (1e30: NaN-like)
+WORKERS_PER_CPU = 4  # more processes than this per core only add start-up and memory, never speed
+BABBLE_FLAGS = ("hold_s", "record_hz", "episode_s")  # shape babbling only: set with another sampler, a mistake
 
 
 @dataclass(frozen=True)
@@ -67,6 +71,9 @@ class DatagenConfig:
                 continue
             if not isinstance(value, int) or isinstance(value, bool) or value < low:
                 problems.append(must_be(name, f"an integer >= {low}", value))
+        if isinstance(self.workers, int) and self.workers > max_workers():
+            problems.append(must_be("workers", f"<= {max_workers()} ({WORKERS_PER_CPU} x {os.cpu_count()} CPUs)",
+                                    self.workers, "Each worker is a process; more than the cores only wait."))
         if self.image_size is not None:
             lo, hi = IMAGE_SIDE_RANGE
             size = self.image_size
@@ -90,8 +97,9 @@ class DatagenConfig:
                 fix("ranges", ranges)
         if self.gravity is not None:
             if (not isinstance(self.gravity, (int, float)) or isinstance(self.gravity, bool)
-                    or not 0 <= self.gravity < math.inf):
-                problems.append(must_be("gravity", "a finite magnitude >= 0 in m/s^2 (down), or None", self.gravity))
+                    or not 0 <= self.gravity <= MAX_GRAVITY):
+                problems.append(must_be("gravity", f"a magnitude in [0, {MAX_GRAVITY:g}] m/s^2 (down), or None",
+                                        self.gravity, "Earth is 9.81, Mars 3.7, Jupiter 24.8."))
             else:
                 fix("gravity", float(self.gravity))
         try:
@@ -102,15 +110,38 @@ class DatagenConfig:
             problems.append(must_be("hold_s", "(min, max) seconds with 0 < min <= max", self.hold_s))
         else:
             fix("hold_s", hold)
-        if not (isinstance(self.record_hz, (int, float)) and self.record_hz > 0):
-            problems.append(must_be("record_hz", "a positive rate in Hz", self.record_hz))
-        elif not (isinstance(self.episode_s, (int, float)) and self.episode_s * self.record_hz >= 2):
+        if not (isinstance(self.record_hz, (int, float)) and 0 < self.record_hz < math.inf):
+            problems.append(must_be("record_hz", "a finite positive rate in Hz", self.record_hz))
+        elif not (isinstance(self.episode_s, (int, float)) and math.isfinite(self.episode_s * self.record_hz)):
+            problems.append(must_be("episode_s", "a finite duration in s", self.episode_s,
+                                    "An episode longer than --n is cut to --n samples anyway."))
+        elif self.episode_s * self.record_hz < 2:
             problems.append(must_be("episode_s", f"long enough for >= 2 samples at record_hz={self.record_hz}",
                                     self.episode_s, "Raise --episode-s or --record-hz."))
+        problems += self._conflicts()
         if self.out is not None:
             fix("out", Path(self.out))
         if problems:
             raise ValueError("\n".join(problems))
+
+    def _conflicts(self) -> list[str]:
+        """Flags the user set that this config would silently ignore (compared with the defaults)."""
+        problems = []
+        if not self.images:
+            ignored = {_flag(name): getattr(self, name) for name, default in (("rgb", False), ("image_size", None))
+                       if getattr(self, name) != default}
+            if ignored:
+                problems.append(must_be("image flags with --no-images", "unset (nothing is rendered)", ignored,
+                                        "Drop them, or drop --no-images."))
+        if self.kinematic:
+            defaults = {f.name: f.default for f in dataclasses.fields(self) if f.name in BABBLE_FLAGS}
+            ignored = {_flag(name): getattr(self, name) for name, default in defaults.items()
+                       if getattr(self, name) != default}
+            if ignored:
+                problems.append(must_be(f"babbling flags with --sampler {self.sampler}",
+                                        "unset (they shape babbling only)", ignored,
+                                        "Drop them, or pass --sampler babble."))
+        return problems
 
     @property
     def store_path(self) -> Path:
@@ -136,8 +167,8 @@ class DatagenConfig:
         return 512 if self.images else 16384
 
     def episode_len(self) -> int:
-        """Samples per babbling episode (fixed, so episodes and shards line up)."""
-        return max(2, round(self.episode_s * self.record_hz))
+        """Samples per babbling episode (fixed, so episodes and shards line up); at most n, all a store holds."""
+        return min(self.n, max(2, round(self.episode_s * self.record_hz)))
 
     def to_dict(self) -> dict[str, Any]:
         """The config as plain JSON values (tuples as lists, Path as str), as stored in the Zarr attrs."""
@@ -159,3 +190,12 @@ class DatagenConfig:
             return tuple(tup(x) for x in v) if isinstance(v, list) else v
 
         return cls(**{k: tup(v) for k, v in values.items()})
+
+
+def _flag(field: str) -> str:
+    return "--" + field.replace("_", "-")
+
+
+def max_workers() -> int:
+    """The most worker processes a run may start: WORKERS_PER_CPU per CPU of this machine."""
+    return WORKERS_PER_CPU * (os.cpu_count() or 1)

@@ -6,7 +6,10 @@ split depending on the config only, never on the worker count. Shard i draws fro
 Each worker builds its own Robot (once per process), writes its own chunks straight into the store and then its
 shard's done marker holding the shard's checksum; the root attr `complete=True` is written last. Rerunning skips
 done shards and rewrites those whose chunks are missing, unreadable or differ from their checksum (`integrity`).
-Before anything is built or written, `guards` checks the shard count, disk, memory and (with images) rendering.
+Before anything is built or written, `guards` checks MUJOCO_GL, the output folder, the shard count, disk, memory and
+(with images) rendering, and a babbling run simulates one probe episode (a diverging simulation is an error). Then
+the backend comes up (a Ray cluster that does not answer fails here), and the run holds the store's lock
+(`locks.store_lock`) from before it looks at the store until it is complete: one datagen run per store.
 """
 
 from __future__ import annotations
@@ -17,24 +20,30 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from bodyschema.datagen.robot import Robot  # first: sets MUJOCO_GL before mujoco is imported
+from bodyschema.datagen.guards import check_gl_backend
+
+check_gl_backend()  # before mujoco is first imported (by robot): an unknown MUJOCO_GL is the house error
+
+from bodyschema.datagen.robot import Robot  # noqa: E402
 
 import numpy as np  # noqa: E402
 from tqdm.auto import tqdm  # noqa: E402
 
-from bodyschema.datagen.backends import run_loky, run_ray  # noqa: E402
+from bodyschema.datagen.backends import Runner, backend  # noqa: E402
 from bodyschema.datagen.config import DatagenConfig  # noqa: E402
-from bodyschema.datagen.guards import check_resources, n_shards, probe_render  # noqa: E402
+from bodyschema.datagen.guards import check_resources, check_writable, n_shards, probe_render  # noqa: E402
 from bodyschema.datagen.integrity import (clear_shard, data_arrays, failing_shards,  # noqa: E402
                                           shard_digest)
 from bodyschema.datagen.reach import arm_reach  # noqa: E402
 from bodyschema.datagen.samplers import Babbler, sample_kinematic  # noqa: E402
+from bodyschema.datagen.locks import store_lock  # noqa: E402
 from bodyschema.datagen.store import (SCHEMA_VERSION, StoreWriteError, create_store, drop_shard_marks,  # noqa: E402
-                                      features, mark_complete, mark_shard_done, now, open_store, shards_done,
-                                      versions, write_shard)
+                                      features, has_done_markers, mark_complete, mark_shard_done, now, open_store,
+                                      reset_done_markers, shards_done, versions, write_shard)
 from bodyschema.errors import must_be  # noqa: E402
 
 logger = logging.getLogger(__name__)
+PROBE_SAMPLES = 200  # babbling: samples of the probe episode simulated before anything is written (~10 s of motion)
 
 
 @dataclass(frozen=True)
@@ -102,7 +111,7 @@ def sampling_ranges(config: DatagenConfig, robot: Robot) -> np.ndarray:
 
 def run_shard(path: str, config_dict: dict, shard: Shard) -> int:
     """Sample, observe and write one shard, then its done marker with its checksum. Returns the rows written."""
-    config = DatagenConfig.from_dict(config_dict)
+    config = DatagenConfig.from_dict({**config_dict, "workers": 1})  # its bound is the driver machine's CPUs
     robot, babbler = _robot(config)
     rng = np.random.default_rng(np.random.SeedSequence([config.seed, shard.index]))
     ranges = sampling_ranges(config, robot)
@@ -150,6 +159,13 @@ def _attrs(config: DatagenConfig, robot: Robot, ranges: np.ndarray, shards: int,
             "n_shards": shards, "features": feats, "reach_m": reach, "base_m": base.tolist()}
 
 
+def probe_babble(config: DatagenConfig, robot: Robot, ranges: np.ndarray) -> None:
+    """Simulate one short episode as shard 0 starts, so a diverging simulation fails before a store exists."""
+    babbler = Babbler(robot.model, list(robot.joint_names), robot.joint_limits, config.record_hz, config.hold_s)
+    rng = np.random.default_rng(np.random.SeedSequence([config.seed, 0]))
+    babbler.episode(rng, ranges, min(config.episode_len(), PROBE_SAMPLES))
+
+
 def _check_location(path: Path) -> None:
     """Fail before any work when the output cannot be written (disk space is checked earlier, in guards)."""
     try:
@@ -193,9 +209,22 @@ def _prepare(path: Path, config: DatagenConfig, feats: dict, attrs: dict) -> Non
                 raise FileExistsError(must_be("out", "a store holding every array of its schema", f"{lost} missing",
                                               "Pass --overwrite to regenerate it (same config, same data)."))
             if old.get("created"):
+                _restore_markers(path, attrs["n_shards"])
                 return  # resume
     try:
         create_store(path, feats, config.n, chunk_len(config), attrs["n_shards"], attrs)
+    except OSError as e:
+        raise StoreWriteError.from_os_error(path, e) from e
+
+
+def _restore_markers(path: Path, shards: int) -> None:
+    """A store whose `shard_done` was deleted or replaced has no checksums to trust: every shard is rewritten."""
+    root = open_store(path, mode="r+")
+    if has_done_markers(root, shards):
+        return
+    logger.warning(f"datagen: {path} lost its shard checksums (shard_done): rewriting every shard")
+    try:
+        reset_done_markers(root, shards)
     except OSError as e:
         raise StoreWriteError.from_os_error(path, e) from e
 
@@ -215,6 +244,7 @@ def _repair(path: Path, root) -> None:
 def generate(config: DatagenConfig, progress: bool = True) -> Path:
     """Write (or finish) the dataset described by `config`; returns the store path once it is complete."""
     path = config.store_path.resolve()  # absolute: Ray workers do not share the driver's working directory
+    check_writable(path)  # creates nothing; a read-only or pseudo file system (/proc, /sys) is named as such
     robot = Robot.load(config.robot, image_size=config.image_size, rgb=config.rgb, gravity=config.gravity)
     try:
         ranges = sampling_ranges(config, robot)
@@ -223,32 +253,41 @@ def generate(config: DatagenConfig, progress: bool = True) -> Path:
         feats = features(robot.dq, image_shape if config.images else None, has_touch, not config.kinematic)
         check_resources(config, feats, chunk_len(config), path)  # O(1): before any per-shard list or any write
         attrs = _attrs(config, robot, ranges, n_shards(config, chunk_len(config)), feats)
+        if not config.kinematic:
+            probe_babble(config, robot, ranges)
         if config.images:
             probe_render(robot)  # an unusable MUJOCO_GL fails here, not as a store full of NaN
     finally:
         robot.close()
-    _check_location(path)
-    shards = plan_shards(config)
-    try:
-        _prepare(path, config, feats, attrs)
-        root = open_store(path, mode="r+")
-        _repair(path, root)
-        done, config_dict = shards_done(root), config.to_dict()
-        jobs = [(str(path), config_dict, s) for s in shards if not done[s.index]]
-        with tqdm(total=len(shards), initial=len(shards) - len(jobs), unit="shard", disable=not progress,
-                  desc=f"datagen {config.robot}/{config.sampler} -> {path.name}") as bar:
-            if jobs:
-                (run_ray if config.backend == "ray" else run_loky)(run_shard, jobs, config.workers, bar.update)
-        root = open_store(path, mode="r+")
-        missing = np.flatnonzero(~shards_done(root))
-        if missing.size:
-            raise RuntimeError(must_be("every shard", "done after the run", f"shards {missing[:20].tolist()} not done",
-                                       "Rerun the same command to resume."))
-        if not root.attrs.get("complete"):
+    with backend(config.backend, config.workers) as run_jobs:  # up (or refused) before anything is created
+        _check_location(path)
+        with store_lock(path):
             try:
-                mark_complete(root)
-            except OSError as e:
-                raise StoreWriteError.from_os_error(path, e) from e
-    finally:
-        release_robots()
+                _run(path, config, feats, attrs, run_jobs, progress)
+            finally:
+                release_robots()
     return path
+
+
+def _run(path: Path, config: DatagenConfig, feats: dict, attrs: dict, run_jobs: Runner, progress: bool) -> None:
+    """Under the store's lock: create or resume the store, run the shards not done, then mark it complete."""
+    shards = plan_shards(config)
+    _prepare(path, config, feats, attrs)
+    root = open_store(path, mode="r+")
+    _repair(path, root)
+    done, config_dict = shards_done(root), config.to_dict()
+    jobs = [(str(path), config_dict, s) for s in shards if not done[s.index]]
+    with tqdm(total=len(shards), initial=len(shards) - len(jobs), unit="shard", disable=not progress,
+              desc=f"datagen {config.robot}/{config.sampler} -> {path.name}") as bar:
+        if jobs:
+            run_jobs(run_shard, jobs, bar.update)
+    root = open_store(path, mode="r+")
+    missing = np.flatnonzero(~shards_done(root))
+    if missing.size:
+        raise RuntimeError(must_be("every shard", "done after the run", f"shards {missing[:20].tolist()} not done",
+                                   "Rerun the same command to resume."))
+    if not root.attrs.get("complete"):
+        try:
+            mark_complete(root)
+        except OSError as e:
+            raise StoreWriteError.from_os_error(path, e) from e

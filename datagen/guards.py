@@ -1,4 +1,5 @@
-"""Checks that run before a datagen job builds or writes anything: size, disk, memory, rendering.
+"""Checks that run before a datagen job builds or writes anything: GL backend, writable folder, size, disk, memory,
+rendering.
 
 Everything here is O(1) in n: the shard count is computed, never listed, so `--n 1000000000000` is refused in
 milliseconds instead of growing a Python list past the machine's memory (measured: > 23 GB before this check).
@@ -6,9 +7,11 @@ milliseconds instead of growing a Python list past the machine's memory (measure
 
 from __future__ import annotations
 
+import importlib
 import math
 import os
 import shutil
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -20,8 +23,34 @@ MAX_SHARDS = 100_000  # one done-marker file and one task per shard: beyond this
 WORK_FACTOR = 3  # a worker holds ~3x its shard's stored bytes (float64 kinematics, the arrays, encode, read-back)
 
 
+GL_BACKENDS = "egl (headless GPU or Mesa), osmesa (software) or glfw (a display)"
+
+
 class RenderingUnavailable(OSError):
     """No OpenGL context could be made for rendering (MUJOCO_GL unusable on this machine)."""
+
+
+def check_gl_backend() -> None:
+    """Import mujoco, turning an unknown MUJOCO_GL (mujoco refuses to import at all) into the house ValueError."""
+    os.environ.setdefault("MUJOCO_GL", "egl")  # as robot.py: headless unless the user chose
+    try:
+        importlib.import_module("mujoco")
+    except RuntimeError as e:
+        if "MUJOCO_GL" not in str(e):
+            raise
+        raise ValueError(must_be("MUJOCO_GL", f"one of {GL_BACKENDS}", os.environ["MUJOCO_GL"],
+                                 "Set it to egl or osmesa, or unset it (egl).")) from e
+
+
+def check_writable(path: Path) -> None:
+    """Refuse an output whose nearest existing folder takes no new file (read-only, /proc, /sys); creates nothing."""
+    folder = _existing_parent(path)
+    try:
+        with tempfile.NamedTemporaryFile(dir=folder, prefix=".bodyschema-probe-"):
+            pass
+    except OSError as e:
+        raise PermissionError(must_be(f"the folder of --out {path}", "writable", f"{folder}: {type(e).__name__}: {e}",
+                                      "Choose --out in a folder you can write to; nothing was written.")) from e
 
 
 def sample_bytes(feats: dict) -> int:

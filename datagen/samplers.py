@@ -4,10 +4,13 @@ Kinematic samplers draw independent poses inside the sampling ranges. Motor babb
 position actuators track random joint targets, each held for a random duration, under gravity (`mj_step`), and the
 trajectory is recorded at a fixed rate in episodes that each start at rest from a random pose. All randomness
 comes from the `np.random.Generator` passed in. Returned q are float32 (what is stored), clipped to the joint limits.
+A diverged simulation (any MuJoCo warning, non-finite or absurd joint velocities) is an error, never data; MuJoCo's
+warnings go to our logger instead of a MUJOCO_LOG.TXT in the working folder.
 """
 
 from __future__ import annotations
 
+import logging
 import os
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # as robot.py: must precede the first `import mujoco` of the process
@@ -15,7 +18,22 @@ os.environ.setdefault("MUJOCO_GL", "egl")  # as robot.py: must precede the first
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
+from bodyschema.datagen.store import MAX_JOINT_SPEED  # noqa: E402
 from bodyschema.errors import must_be  # noqa: E402
+
+logger = logging.getLogger(__name__)
+_last_warning = ["none"]  # MuJoCo's latest warning text in this process, quoted by the divergence error
+
+
+def _on_mujoco_warning(message: str) -> None:
+    _last_warning[0] = message.strip()
+    logger.debug("MuJoCo: %s", _last_warning[0])  # one per step once diverged: the error says it, once
+
+
+def route_mujoco_warnings() -> None:
+    """Send MuJoCo's warnings to our logger (its default also appends them to MUJOCO_LOG.TXT in the cwd)."""
+    if mujoco.get_mju_user_warning() is None:  # leave a handler someone else installed
+        mujoco.set_mju_user_warning(_on_mujoco_warning)
 
 
 def uniform(rng: np.random.Generator, ranges: np.ndarray, n: int) -> np.ndarray:
@@ -69,6 +87,7 @@ class Babbler:
         self.hold_steps = (max(1, round(hold_s[0] / dt)), max(1, round(hold_s[1] / dt)))
         touch = [s for s in range(model.nsensor) if model.sensor_type[s] == mujoco.mjtSensor.mjSENS_TOUCH]
         self.touch_adr = int(model.sensor_adr[touch[0]]) if touch else None  # contact force (N) during babbling
+        route_mujoco_warnings()
 
     def _position_actuator(self, joint_id: int, name: str) -> int:
         m = self.model
@@ -109,10 +128,24 @@ class Babbler:
                 nstep = min(record_at, next_switch) - step
                 mujoco.mj_step(m, d, nstep)
                 step += nstep
+        self._check_stable(qvel)
         out = {"q": to_stored_q(q, self.limits), "qvel": qvel.astype(np.float32), "t": t.astype(np.float32)}
         if self.touch_adr is not None:
             out["touch"] = touch.astype(np.float32)
         return out
+
+    def _check_stable(self, qvel: np.ndarray) -> None:
+        """Raise FloatingPointError if this episode warned (MuJoCo resets a diverged state and goes on) or its joint
+        velocities `qvel` (n, Dq) rad/s are non-finite or beyond MAX_JOINT_SPEED."""
+        warned = {mujoco.mjtWarning(i).name: int(self.data.warning[i].number)
+                  for i in range(int(mujoco.mjtWarning.mjNWARNING)) if self.data.warning[i].number}
+        with np.errstate(invalid="ignore"):
+            speed = float(np.abs(qvel).max())
+        if warned or not speed <= MAX_JOINT_SPEED:
+            raise FloatingPointError(must_be(
+                "the babbling simulation", f"stable (no MuJoCo warning, |qvel| <= {MAX_JOINT_SPEED:g} rad/s)",
+                f"warnings {warned}, max |qvel| {speed:.3g} rad/s; last MuJoCo warning: {_last_warning[0]}",
+                "Lower --gravity (9.81 on Earth) or check the robot's model; nothing diverged was stored."))
 
     def episodes(self, rng: np.random.Generator, ranges: np.ndarray, lengths: list[int],
                  first_episode: int) -> dict[str, np.ndarray]:

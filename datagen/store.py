@@ -3,7 +3,8 @@
 Layout of one store (a directory `*.zarr`), all data arrays sharing the first (sample) axis N:
     q (N, Dq) f32 rad · ee_xyz (N, 3) f32 m · ee_pixel (N, 2) f32 px · jacobian (N, 3, Dq) f32 m/rad
     image (N, H, W[, 3]) u8 (when rendered) · touch (N, 1) f32 N (robots with a touch sensor)
-    babbling only: qvel (N, Dq) f32 rad/s · episode (N,) i32 · t (N,) f32 s since the episode start
+    babbling only: qvel (N, Dq) f32 rad/s (|qvel| <= MAX_JOINT_SPEED) · episode (N,) i32 · t (N,) f32 s since the
+    episode start
     shard_done (n_shards,) u64 — bookkeeping, one chunk per shard: 0 until the shard's data are written, then
     the shard's checksum (`integrity.shard_digest` of its rows of every array, read back as stored), so a chunk
     deleted, truncated or changed later is found by `validate_store` and rewritten by the next `datagen` run.
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import datetime as dt
 import importlib.metadata
+import json
 import platform
 from pathlib import Path
 from typing import Any
@@ -36,6 +38,7 @@ REQUIRED_ATTRS = ("schema_version", "robot", "mjcf_sha256", "dq", "joint_names",
                   "sampler_params", "seed", "config", "versions", "created_at", "n", "chunk_len", "n_shards",
                   "features", "complete", "reach_m", "base_m")
 WRITE_ALL_CHUNKS = {"array.write_empty_chunks": True}  # zarr skips fill-valued chunks by default: never missing
+MAX_JOINT_SPEED = 1e3  # rad/s; babbling measured <= 27 rad/s (panda, 9.81-100 m/s^2); a diverged simulation ~1e26
 
 
 class StoreWriteError(OSError):
@@ -109,11 +112,27 @@ def create_store(path: Path, feats: dict[str, dict[str, Any]], n: int, chunk_len
 
 def open_store(path: Path, mode: str = "r") -> zarr.Group:
     """Open an existing store; a clear error when `path` is not a Zarr v3 group."""
+    check_root_metadata(Path(path))
     try:
         return zarr.open_group(str(path), mode=mode, zarr_format=3)
     except (FileNotFoundError, zarr.errors.GroupNotFoundError, ValueError, KeyError) as e:
         raise FileNotFoundError(must_be("path", "a Zarr v3 dataset store (a directory with zarr.json)", str(path),
                                         "Create one with `bodyschema datagen --out PATH`.")) from e
+
+
+def check_root_metadata(path: Path) -> None:
+    """Raise the house ValueError when `path`/zarr.json exists but is not a JSON object (zarr fails obscurely)."""
+    meta = path / "zarr.json"
+    if not meta.is_file():
+        return  # no store at all: open_store's own error says so
+    try:
+        value = json.loads(meta.read_bytes())
+    except ValueError as e:  # not JSON, or not UTF-8
+        raise ValueError(must_be(f"{meta}", "a JSON object (Zarr v3 group metadata)", f"unreadable JSON: {e}",
+                                 "The store's root metadata was edited or truncated; regenerate the store.")) from e
+    if not isinstance(value, dict):
+        raise ValueError(must_be(f"{meta}", "a JSON object (Zarr v3 group metadata)", f"a JSON {type(value).__name__}",
+                                 "The store's root metadata was edited or truncated; regenerate the store."))
 
 
 def write_shard(root: zarr.Group, start: int, arrays: dict[str, np.ndarray]) -> None:
@@ -135,6 +154,22 @@ def drop_shard_marks(root: zarr.Group, shards) -> None:
     root.attrs["complete"] = False
     for shard in shards:
         root[DONE][int(shard)] = 0
+
+
+def has_done_markers(root: zarr.Group, n_shards: int) -> bool:
+    """True when `shard_done` exists as this schema writes it: one uint64 checksum per shard."""
+    if DONE not in root.array_keys():
+        return False
+    markers = root[DONE]
+    return markers.dtype == np.uint64 and markers.shape == (n_shards,)
+
+
+def reset_done_markers(root: zarr.Group, n_shards: int) -> None:
+    """Recreate `shard_done` as all "not done" (it was deleted or replaced): every shard is rewritten and checked."""
+    root.attrs["complete"] = False
+    if DONE in root.array_keys():
+        del root[DONE]
+    root.create_array(DONE, shape=(n_shards,), chunks=(1,), dtype="uint64", fill_value=0, compressors=None)
 
 
 def shard_digests(root: zarr.Group) -> np.ndarray:
@@ -171,5 +206,5 @@ def is_complete(path: Path) -> bool:
     """True when `path` is a store whose completion marker is written."""
     try:
         return bool(open_store(path).attrs.get("complete", False))
-    except FileNotFoundError:
+    except (FileNotFoundError, ValueError):  # no store, or its root metadata is not a JSON object
         return False

@@ -5,14 +5,19 @@ Checks, all reported together:
   (Zarr would read a missing chunk as fill values: zeros for images) and, per done shard, the checksum in its
   marker equal to the one of its rows as stored now (`integrity`);
 - layout: required attrs, each array's presence, dtype (image uint8, ...) and shape, first axes agreeing;
+- attrs: robot a shipped name or a plain identifier (no path), joint_names/joint_limits/sampling_ranges of q's
+  width (limits finite, lo <= hi); for a shipped robot, its joint count, joint names, joint limits and MJCF sha256;
 - content, per chunk of rows: readable (Zstd checksums catch corrupted bytes), finite, and physical: q inside the
-  recorded ranges, ee_xyz within the arm's reach of its base, |each Jacobian column| <= the reach (m/rad),
-  ee_pixel equal to ee_xyz projected through the stored camera, touch and t >= 0, episode >= 0.
+  recorded ranges and the joint limits, ee_xyz within the arm's reach of its base, |each Jacobian column| <= the
+  reach (m/rad), ee_pixel equal to ee_xyz projected through the stored camera, touch and t >= 0, episode >= 0,
+  |qvel| <= MAX_JOINT_SPEED.
 Arrays are read one chunk of rows at a time, so memory stays small for image datasets.
 """
 
 from __future__ import annotations
 
+import functools
+import re
 from pathlib import Path
 
 import numpy as np
@@ -20,7 +25,7 @@ import zarr
 
 from bodyschema.datagen.camera import project
 from bodyschema.datagen.integrity import block_digest, data_arrays, missing_chunks
-from bodyschema.datagen.store import DONE, REQUIRED_ATTRS, features, has_checksums, open_store
+from bodyschema.datagen.store import DONE, MAX_JOINT_SPEED, REQUIRED_ATTRS, features, has_checksums, open_store
 from bodyschema.errors import must_be
 
 PIXEL_TOL = 0.05  # px; float32 storage of ee_xyz/ee_pixel gives ~1e-4 px, a real shift is >= 0.1 px
@@ -29,6 +34,93 @@ REACH_TOL = 1e-4  # m (and m/rad); float32 rounding is ~1e-7 m, while the reach 
 RESUME_HINT = "Rerun the same `bodyschema datagen` command to resume it."
 REPAIR_HINT = "Rerun the same `bodyschema datagen` command: it rewrites the damaged shards."
 REGENERATE_HINT = "The generator wrote impossible values; regenerate with --overwrite and report it."
+EDITED_HINT = "The store's attrs were edited or come from another robot; regenerate it with `bodyschema datagen`."
+ROBOT_NAME = re.compile(r"[^/\\:\x00-\x1f]{1,100}")  # a name (models, runs, files use it), never a path
+
+
+def shipped_names() -> tuple[str, ...]:
+    """The shipped robots' names (importing the robot module: mujoco, with a known MUJOCO_GL)."""
+    from bodyschema.datagen.guards import check_gl_backend
+
+    check_gl_backend()
+    from bodyschema.datagen.robot import ROBOT_NAMES
+
+    return tuple(ROBOT_NAMES)
+
+
+@functools.lru_cache(maxsize=None)
+def shipped_robot(name: str) -> tuple[str, tuple[str, ...], np.ndarray]:
+    """(MJCF sha256, joint names, (Dq, 2) joint limits rad) of the shipped robot `name` (compiled once per process)."""
+    from bodyschema.datagen.robot import Robot
+
+    robot = Robot.load(name)
+    try:
+        return robot.mjcf_sha256, tuple(robot.joint_names), np.array(robot.joint_limits, float)
+    finally:
+        robot.close()
+
+
+def _box(attrs: dict, key: str, dq: int, problems: list[str]) -> np.ndarray | None:
+    """attrs[key] as a (dq, 2) finite float array with lo <= hi, else a problem and None."""
+    if key not in attrs:
+        return None  # reported with the required attrs
+    try:
+        box = np.asarray(attrs[key], float)
+    except (TypeError, ValueError):
+        box = None
+    if box is None or box.shape != (dq, 2) or not np.isfinite(box).all() or (box[:, 0] > box[:, 1]).any():
+        problems.append(must_be(f"attrs {key}", f"({dq}, 2) finite (lo, hi) rad with lo <= hi, one per q column",
+                                _short(attrs[key]), EDITED_HINT))
+        return None
+    return box
+
+
+def _short(value) -> str:
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+def _check_attrs(attrs: dict, dq: int | None, problems: list[str]) -> np.ndarray | None:
+    """The attrs' types and shapes, and their agreement with the shipped robot they name; returns the (Dq, 2) joint
+    limits q must lie in (the shipped robot's, else the store's own when well-formed), or None."""
+    robot, shipped = attrs.get("robot"), shipped_names()
+    if "robot" in attrs and not (isinstance(robot, str) and ROBOT_NAME.fullmatch(robot) and robot not in (".", "..")):
+        problems.append(must_be("attrs robot", f"one of {shipped} or a robot record's name (no '/', '\\', ':')",
+                                _short(robot), EDITED_HINT))
+        robot = None
+    if dq is None:
+        return None  # no usable q: nothing to compare the attrs with
+    names = attrs.get("joint_names")
+    names_ok = isinstance(names, list) and len(names) == dq and all(isinstance(n, str) for n in names)
+    if "joint_names" in attrs and not names_ok:
+        problems.append(must_be("attrs joint_names", f"{dq} strings (q's width)", _short(names), EDITED_HINT))
+    if "dq" in attrs and attrs["dq"] != dq:
+        problems.append(must_be("attrs dq", f"q's width {dq}", _short(attrs["dq"]), EDITED_HINT))
+    _box(attrs, "sampling_ranges", dq, problems)
+    limits = _box(attrs, "joint_limits", dq, problems)
+    if robot in shipped:
+        return _check_shipped(robot, attrs, dq, names_ok, limits, problems)
+    return limits
+
+
+def _check_shipped(robot: str, attrs: dict, dq: int, names_ok: bool, limits: np.ndarray | None,
+                   problems: list[str]) -> np.ndarray | None:
+    """The store's q width, joint names, limits and MJCF digest equal to those of the shipped `robot`."""
+    sha, names, true_limits = shipped_robot(robot)
+    if dq != len(names):
+        problems.append(must_be("q's width", f"{robot}'s joint count {len(names)}", dq, EDITED_HINT))
+        return None
+    if names_ok and attrs["joint_names"] != list(names):
+        problems.append(must_be("attrs joint_names", f"{robot}'s {list(names)}", _short(attrs.get("joint_names")),
+                                EDITED_HINT))
+    if limits is not None and not np.allclose(limits, true_limits, rtol=0, atol=RANGE_TOL):
+        problems.append(must_be("attrs joint_limits", f"{robot}'s {true_limits.tolist()}", _short(limits.tolist()),
+                                EDITED_HINT))
+    recorded = attrs.get("mjcf_sha256")
+    if recorded is not None and recorded != sha:
+        problems.append(must_be("attrs mjcf_sha256", f"the shipped {robot}'s {sha}", _short(recorded),
+                                "The store was made from another model file; " + EDITED_HINT))
+    return true_limits
 
 
 def _expected_features(attrs: dict) -> dict[str, dict]:
@@ -92,7 +184,8 @@ class _Tally:
             entry[2] = max(entry[2], float(np.max(worst[bad])))
 
 
-def _check_values(block: dict[str, np.ndarray], attrs: dict, start: int, tally: _Tally) -> None:
+def _check_values(block: dict[str, np.ndarray], attrs: dict, limits: np.ndarray | None, start: int,
+                  tally: _Tally) -> None:
     """Finiteness and physical range of one chunk of rows; NaN/inf rows are counted once, as not finite."""
     finite = {}
     for name, values in block.items():
@@ -107,9 +200,14 @@ def _check_values(block: dict[str, np.ndarray], attrs: dict, start: int, tally: 
             tally.add(f"nonneg:{name}", (block[name].reshape(len(block[name]), -1) < 0).any(axis=1) & ok[name], start)
     q_range = _q_range(attrs)
     if "q" in block and q_range is not None and q_range.shape == (block["q"].shape[1], 2):
-        q = block["q"]
-        out = ((q < q_range[:, 0] - RANGE_TOL) | (q > q_range[:, 1] + RANGE_TOL)).any(axis=1)
-        tally.add("q", out & ok["q"], start)
+        tally.add("q", _outside(block["q"], q_range) & ok["q"], start)
+    if ("q" in block and limits is not None and limits.shape == (block["q"].shape[1], 2)
+            and not (q_range is not None and np.array_equal(q_range, limits))):  # the same box: reported once
+        tally.add("limits:q", _outside(block["q"], limits) & ok["q"], start)
+    if "qvel" in block:
+        with np.errstate(invalid="ignore"):
+            speed = np.abs(block["qvel"].astype(float)).max(axis=1)  # (B,) rad/s
+        tally.add("speed:qvel", ~(speed <= MAX_JOINT_SPEED) & ok["qvel"], start, speed)
     reach, base = attrs.get("reach_m"), attrs.get("base_m")
     if reach is not None and base is not None:
         if "ee_xyz" in block:
@@ -127,9 +225,17 @@ def _check_values(block: dict[str, np.ndarray], attrs: dict, start: int, tally: 
         tally.add("pixel", ~(err <= PIXEL_TOL) & ok["ee_xyz"] & ok["ee_pixel"], start, np.nan_to_num(err))
 
 
+def _outside(q: np.ndarray, box: np.ndarray) -> np.ndarray:
+    """(B,) rows of q (B, Dq) with a joint outside box (Dq, 2) by more than RANGE_TOL."""
+    return ((q < box[:, 0] - RANGE_TOL) | (q > box[:, 1] + RANGE_TOL)).any(axis=1)
+
+
 def _q_range(attrs: dict) -> np.ndarray | None:
     key = "sampling_ranges" if attrs.get("sampler") in ("uniform", "gaussian") else "joint_limits"
-    return np.asarray(attrs[key], float) if key in attrs else None
+    try:
+        return np.asarray(attrs[key], float) if key in attrs else None
+    except (TypeError, ValueError):  # not numbers: reported by _check_attrs
+        return None
 
 
 def _report_values(tally: _Tally, attrs: dict, problems: list[str]) -> None:
@@ -148,6 +254,12 @@ def _report_values(tally: _Tally, attrs: dict, problems: list[str]) -> None:
         elif kind == "q":
             problems.append(must_be("q", f"inside the recorded {ranges_key} (+-{RANGE_TOL} rad)",
                                     f"{count} rows outside, first at row {row}"))
+        elif key == "limits:q":
+            problems.append(must_be("q", f"inside the {attrs.get('robot')} joint limits (+-{RANGE_TOL} rad)",
+                                    f"{count} rows outside, first at row {row}", EDITED_HINT))
+        elif key == "speed:qvel":
+            problems.append(must_be("qvel", f"|qvel| <= {MAX_JOINT_SPEED:g} rad/s (a stable simulation)",
+                                    f"{where}, up to {worst:.4g} rad/s", REGENERATE_HINT))
         elif key == "reach:ee_xyz":
             problems.append(must_be("ee_xyz", f"within the arm's reach, {reach:.4f} m of its base {base} m",
                                     f"{where}, up to {worst:.4g} m away", REGENERATE_HINT))
@@ -163,6 +275,8 @@ def _report_values(tally: _Tally, attrs: dict, problems: list[str]) -> None:
 def _done_digests(root: zarr.Group, problems: list[str]) -> np.ndarray | None:
     """(n_shards,) uint64 recorded checksums (0: not done), reporting shards not done; None if unreadable."""
     if DONE not in root.array_keys():
+        problems.append(must_be(DONE, "present (the per-shard checksums)", "missing: checksums missing",
+                                "No shard can be checked without it: " + REPAIR_HINT))
         return None
     try:
         digests = np.asarray(root[DONE][:])
@@ -181,7 +295,7 @@ def _done_digests(root: zarr.Group, problems: list[str]) -> np.ndarray | None:
 
 
 def _check_content(path: Path, root: zarr.Group, usable: dict[str, zarr.Array], attrs: dict,
-                   digests: np.ndarray | None, problems: list[str]) -> None:
+                   digests: np.ndarray | None, limits: np.ndarray | None, problems: list[str]) -> None:
     """Chunk files on disk, then every chunk of rows once: readable, checksum, finite and physical values."""
     if not usable:
         return
@@ -211,7 +325,7 @@ def _check_content(path: Path, root: zarr.Group, usable: dict[str, zarr.Array], 
         if checksum and shard < len(digests) and digests[shard] and len(block) == len(usable):
             if block_digest(block) != int(digests[shard]):
                 mismatched.append(shard)
-        _check_values(block, attrs, start, tally)
+        _check_values(block, attrs, limits, start, tally)
     if mismatched:
         problems.append(must_be("every done shard", f"equal to the checksum in its {DONE} marker",
                                 f"{len(mismatched)} differ, shards {mismatched[:20]}",
@@ -235,7 +349,8 @@ def validate_store(path: str | Path) -> list[str]:
                                 RESUME_HINT))
     digests = _done_digests(root, problems)
     usable = _check_layout(root, attrs, problems)
-    _check_content(Path(path), root, usable, attrs, digests, problems)
+    limits = _check_attrs(attrs, usable["q"].shape[1] if "q" in usable else None, problems)
+    _check_content(Path(path), root, usable, attrs, digests, limits, problems)
     return problems
 
 

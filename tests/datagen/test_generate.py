@@ -177,7 +177,7 @@ def test_ranges_outside_the_joint_limits_are_refused(tmp_path):
 
 def test_unwritable_output_fails_before_any_work(tmp_path):
     (tmp_path / "a_file").write_text("")
-    with pytest.raises(OSError, match="output location must be writable"):
+    with pytest.raises(OSError, match="--out .* must be writable"):
         generate(DatagenConfig(n=8, out=tmp_path / "a_file" / "d.zarr"), progress=False)
 
 
