@@ -15,13 +15,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
+from bodyschema.datagen.robot_record import REQUIRED_WORKSPACES, check_robot_ref, robot_label
 from bodyschema.errors import must_be
 
-ROBOTS = ("planar2", "nao_arm", "panda")  # must equal bodyschema.datagen.robot.ROBOT_NAMES (tested)
 SAMPLERS = ("uniform", "gaussian", "babble")
 BACKENDS = ("loky", "ray")
 KINEMATIC_SAMPLERS = ("uniform", "gaussian")
-WORKSPACES = ("full", "camera")  # must equal every robot's ROBOT_DEFAULTS[...]["workspaces"] names (tested)
+WORKSPACES = REQUIRED_WORKSPACES  # the joint boxes every robot record names
 IMAGE_SIDE_RANGE = (8, 1024)  # px; below 8 nothing is visible, above 1024 one sample is > 3 MB
 EXECUTION_FIELDS = ("workers", "backend", "out", "overwrite")  # how, not what: excluded from identity()
 MAX_GRAVITY = 100.0  # m/s^2, ~10 g (Jupiter: 24.8); far beyond, the babbling simulation diverges (1e30: NaN-like)
@@ -33,7 +33,7 @@ BABBLE_FLAGS = ("hold_s", "record_hz", "episode_s")  # shape babbling only: set 
 class DatagenConfig:
     """One dataset: which robot, how many samples, how they are drawn, and where they go."""
 
-    robot: Literal["planar2", "nao_arm", "panda"] = "planar2"  # which arm; planar2 (2-DoF toy): seconds to make
+    robot: str = "planar2"  # planar2 | nao_arm | panda, or an MJCF/URDF/record path; planar2 (2-DoF): seconds
     n: int = 10_000  # samples; 10k fits a GPR on ee_xyz and an MDN on pixels within minutes
     sampler: Literal["uniform", "gaussian", "babble"] = "uniform"  # how q is drawn; uniform covers the box evenly
     image_size: tuple[int, int] | None = None  # (H, W) px; None: the robot's camera default (nao_arm 56 x 80)
@@ -59,8 +59,8 @@ class DatagenConfig:
             object.__setattr__(self, name, value)
 
         problems: list[str] = []
-        if self.robot not in ROBOTS:
-            problems.append(must_be("robot", f"one of {ROBOTS}", self.robot))
+        if check_robot_ref(self.robot):
+            problems.append(check_robot_ref(self.robot))
         if self.sampler not in SAMPLERS:
             problems.append(must_be("sampler", f"one of {SAMPLERS}", self.sampler))
         if self.backend not in BACKENDS:
@@ -146,7 +146,8 @@ class DatagenConfig:
     @property
     def store_path(self) -> Path:
         """Where the store goes: `out`, or data/<robot>_<sampler>_<n>.zarr."""
-        return self.out if self.out is not None else Path("data") / f"{self.robot}_{self.sampler}_{self.n}.zarr"
+        name = f"{robot_label(self.robot)}_{self.sampler}_{self.n}.zarr"
+        return self.out if self.out is not None else Path("data") / name
 
     @property
     def workspace_name(self) -> str:

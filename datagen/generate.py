@@ -35,6 +35,8 @@ from bodyschema.datagen.guards import check_resources, check_writable, n_shards,
 from bodyschema.datagen.integrity import (clear_shard, data_arrays, failing_shards,  # noqa: E402
                                           shard_digest)
 from bodyschema.datagen.reach import arm_reach  # noqa: E402
+from bodyschema.datagen.robot_attrs import robot_attrs  # noqa: E402
+from bodyschema.datagen.robot_infer import check_view  # noqa: E402
 from bodyschema.datagen.samplers import Babbler, sample_kinematic  # noqa: E402
 from bodyschema.datagen.locks import store_lock  # noqa: E402
 from bodyschema.datagen.store import (SCHEMA_VERSION, StoreWriteError, create_store, drop_shard_marks,  # noqa: E402
@@ -133,7 +135,7 @@ def run_shard(path: str, config_dict: dict, shard: Shard) -> int:
 
 # ---- the job --------------------------------------------------------------------------------------------------
 def _attrs(config: DatagenConfig, robot: Robot, ranges: np.ndarray, shards: int, feats: dict) -> dict:
-    base, reach = arm_reach(robot.model)  # the physical bounds validate_store checks ee_xyz and jacobian against
+    base, reach = arm_reach(robot.model, robot.ee_site)  # the bounds validate_store checks ee_xyz, jacobian against
     if config.sampler == "uniform":
         params = {"low": ranges[:, 0].tolist(), "high": ranges[:, 1].tolist(), "touch": "at rest at q"}
     elif config.sampler == "gaussian":
@@ -156,7 +158,8 @@ def _attrs(config: DatagenConfig, robot: Robot, ranges: np.ndarray, shards: int,
             "image_size": list(robot.image_size), "channels": robot.channels, "images": config.images,
             "sampler": config.sampler, "sampler_params": params, "seed": config.seed, "config": config.to_dict(),
             "versions": versions(), "created_at": now(), "n": config.n, "chunk_len": chunk_len(config),
-            "n_shards": shards, "features": feats, "reach_m": reach, "base_m": base.tolist()}
+            "n_shards": shards, "features": feats, "reach_m": reach, "base_m": base.tolist(),
+            **robot_attrs(robot)}  # the record and the model file: the store rebuilds its robot (Robot.from_attrs)
 
 
 def probe_babble(config: DatagenConfig, robot: Robot, ranges: np.ndarray) -> None:
@@ -256,6 +259,7 @@ def generate(config: DatagenConfig, progress: bool = True) -> Path:
         if not config.kinematic:
             probe_babble(config, robot, ranges)
         if config.images:
+            check_view(robot, ranges)  # a camera that hardly sees the ee: the house error, before any write
             probe_render(robot)  # an unusable MUJOCO_GL fails here, not as a store full of NaN
     finally:
         robot.close()

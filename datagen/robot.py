@@ -1,4 +1,4 @@
-"""The `Robot` wrapper: a shipped MJCF arm with batched forward kinematics, Jacobians, camera and rendering.
+"""The `Robot` wrapper: an arm from a robot record, with batched forward kinematics, Jacobians, camera and rendering.
 
 All arrays are numpy float64 and batched over N poses; q is in rad, positions in m, pixels in px as
 (u = column, v = row) with pixel centres at integer coordinates and the origin at the top-left pixel.
@@ -7,14 +7,16 @@ dynamics on `robot.data` keeps its state. The renderer is created lazily (first 
 cheap to build in a worker process and its GL context belongs to the process that renders.
 `fk`/`jacobian` call MuJoCo per pose (the reference); `observe` and the analytic model use the same hinge
 recursion vectorized over the batch (`chain.HingeChain`, equal to 1e-12) when the batch is large.
-Each robot names its workspaces (joint boxes, `robot.workspaces`); `sampling_ranges` is the one it was loaded with.
+What the model file does not say (ee, joints used, camera, image size, workspaces, actuators, gains) comes from
+the robot's record (`robot_record.RobotRecord`); `robot_build.build_model` compiles the arm it describes. Each
+robot names its workspaces (joint boxes, `robot.workspaces`); `sampling_ranges` is the one it was loaded with.
 """
 
 from __future__ import annotations
 
-import hashlib
+import dataclasses
 import os
-from importlib import resources
+from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")   # headless rendering; must be set before mujoco is imported
 
@@ -24,75 +26,65 @@ import numpy as np  # noqa: E402
 
 from bodyschema.datagen.camera import project  # noqa: E402
 from bodyschema.datagen.chain import HingeChain  # noqa: E402
+from bodyschema.datagen.robot_build import ACTUATOR_KINDS, Built, build_model  # noqa: E402
+from bodyschema.datagen.robot_record import SHIPPED, RobotRecord, load_record  # noqa: E402
 from bodyschema.errors import must_be  # noqa: E402
 
-ROBOT_NAMES = ("planar2", "nao_arm", "panda")
-ACTUATOR_KINDS = ("position", "torque")
+ROBOT_NAMES = SHIPPED          # the shipped robots (datagen/robots/<name>.toml); any other is a file path
 IMAGE_SIZE_RANGE = (8, 1024)   # px, per side; the MJCF offscreen buffers are 1024 × 1024
 LIMIT_TOLERANCE = 0.05         # rad; the simulator's soft joint limits let recorded q overshoot a little
 GRAVITY = 9.81                 # m/s², default magnitude (downward, −z)
 VECTORIZE_FROM = 256           # poses; smaller batches call MuJoCo per pose (numpy's per-op cost dominates)
-
-# Per robot: camera, default image (H, W) and named workspaces: joint boxes in rad (inside the MJCF limits) that
-# sampling draws from. "full" is the kinematic workspace; "camera" the poses the camera sees (= "full" when it
-# sees nearly all: the ee is in view for 100 % of planar2's, 99 % of panda's). Robot.load picks one
-# (DEFAULT_WORKSPACE unless told); datagen picks "camera" with images, "full" with --no-images.
-_PANDA_LIMITS = np.array([[-2.8973, 2.8973], [-1.7628, 1.7628], [-2.8973, 2.8973], [-3.0718, -0.0698],
-                          [-2.8973, 2.8973], [-0.0175, 3.7525], [-2.8973, 2.8973]])
-_PANDA_RANGES = _PANDA_LIMITS + np.array([1.0, -1.0]) * 0.05 * np.diff(_PANDA_LIMITS, axis=1)   # 5 % in
-_PLANAR2_RANGES = [[-2.5, 2.5], [-2.5, 2.5]]
-# nao_arm "full": the span of Pixel-AIF's data (Sancaktar et al. 2020). "camera": that box cut, face by face, to
-# where the ee stays inside CameraBottom's 56 x 80 image for ~91 % of uniform poses (bench/camera.py): the arm
-# pitched down > 0.58 rad leaves the bottom of the image, a bent elbow (< -0.88) brings the hand to the face.
-_NAO_FULL = [[-0.115, 1.146], [-0.314, 0.815], [-1.585, 1.094], [-1.411, -0.044]]
-_NAO_CAMERA = [[-0.115, 0.58], [0.07, 0.815], [-1.585, 1.07], [-0.88, -0.044]]
-ROBOT_DEFAULTS = {
-    "planar2": {"camera": "eye", "image_size": (64, 64),
-                "workspaces": {"full": _PLANAR2_RANGES, "camera": _PLANAR2_RANGES}},
-    "nao_arm": {"camera": "CameraBottom", "image_size": (56, 80),   # as Pixel-AIF (Sancaktar et al. 2020)
-                "workspaces": {"full": _NAO_FULL, "camera": _NAO_CAMERA}},
-    "panda": {"camera": "eye", "image_size": (128, 128),
-              "workspaces": {"full": _PANDA_RANGES.tolist(), "camera": _PANDA_RANGES.tolist()}},
-}
 DEFAULT_WORKSPACE = "camera"   # a Robot renders and projects: by default it samples the poses its camera sees
+OFFSCREEN = 1024               # px: the offscreen buffer a model gets when its file asks for less
 _OPENCV_FROM_MUJOCO_CAM = np.diag([1.0, -1.0, -1.0])   # MuJoCo camera: x right, y up, looks along −z
 
 
-def _mjcf_text(name: str) -> bytes:
-    return resources.files("bodyschema.datagen").joinpath(f"robots/{name}.xml").read_bytes()
+def robot_record(robot: str | Path | RobotRecord) -> RobotRecord:
+    """The record of a robot reference: a record as is, a shipped name or file with its record, else inferred."""
+    if isinstance(robot, RobotRecord):
+        return robot
+    record = load_record(robot)
+    if record is None:
+        from bodyschema.datagen.robot_infer import infer_record
+        record = infer_record(Path(robot))
+    return record
 
 
 class Robot:
     """One robot arm: model + data, named joints, a fixed camera, and batched kinematic queries."""
 
-    def __init__(self, name: str, model: mujoco.MjModel, mjcf_sha256: str, image_size: tuple[int, int],
-                 rgb: bool, workspaces: dict[str, np.ndarray], workspace: str, camera_name: str):
-        self.name = name
+    def __init__(self, record: RobotRecord, built: Built, image_size: tuple[int, int], rgb: bool, workspace: str):
+        model = built.model
+        self.record = record
+        self.name = record.name
         self.model = model
         self.data = mujoco.MjData(model)                  # for the caller's dynamics
         self._kin = mujoco.MjData(model)                  # private: kinematic queries
-        self.mjcf_sha256 = mjcf_sha256
+        self.source = built.source                        # the model file: path, text, sha256, mesh digests
+        self.mjcf_sha256 = built.source.sha256
         self.image_size = (int(image_size[0]), int(image_size[1]))
         self.channels = 3 if rgb else 1
-        self.camera_name = camera_name
+        self.camera_name = built.camera
+        self.ee_site = built.ee_site
         self.joint_names = tuple(model.joint(j).name for j in range(model.njnt))
         self.dq = len(self.joint_names)
         self.joint_limits = np.array(model.jnt_range, dtype=np.float64)            # (Dq, 2) rad
         hinges = (model.jnt_type == mujoco.mjtJoint.mjJNT_HINGE).all()
         if not (hinges and model.nq == model.nv == model.njnt):
-            raise ValueError(must_be(f"the MJCF of {name}", "an arm of hinge joints only (qpos = joint angles)",
+            raise ValueError(must_be(f"the model of {self.name}", "an arm of hinge joints only (qpos = joint angles)",
                                      f"nq={model.nq}, nv={model.nv}, njnt={model.njnt}"))
-        self._site = model.site("ee").id
+        self._site = model.site(self.ee_site).id
         self._qpos = self._kin.qpos                       # cached views into the private MjData (hot loops)
         self._ee = self._kin.site_xpos[self._site]
-        self._cam = model.camera(camera_name).id
+        self._cam = model.camera(self.camera_name).id
         touch = [s for s in range(model.nsensor) if model.sensor_type[s] == mujoco.mjtSensor.mjSENS_TOUCH]
         self._touch_adr = int(model.sensor_adr[touch[0]]) if touch else None
         self._position_actuated = bool(model.nu) and bool(np.all(model.actuator_biastype ==
                                                                  mujoco.mjtBias.mjBIAS_AFFINE))
-        for box in workspaces.values():
+        for box in record.workspaces.values():
             self.check_ranges(box)
-        self.workspaces = {k: np.array(box, dtype=np.float64) for k, box in workspaces.items()}  # name → (Dq, 2) rad
+        self.workspaces = {k: np.array(box, dtype=np.float64) for k, box in record.workspaces.items()}  # (Dq, 2) rad
         self.workspace = workspace                                                  # the one sampled from
         self.sampling_ranges = self.workspaces[workspace].copy()                    # (Dq, 2) rad
         self._renderer = None
@@ -101,45 +93,47 @@ class Robot:
 
     # ---- construction --------------------------------------------------------------------------------
     @classmethod
-    def load(cls, name: str, image_size: tuple[int, int] | None = None, rgb: bool = False,
+    def load(cls, robot: str | Path | RobotRecord, image_size: tuple[int, int] | None = None, rgb: bool = False,
              gravity: float | None = None, actuators: str = "position", workspace: str | None = None,
-             camera: str | None = None) -> "Robot":
-        """Build a shipped robot. gravity: m/s² magnitude pointing down (None = 9.81).
+             camera: str | None = None, text: str | None = None) -> "Robot":
+        """Build a robot: a shipped name, a path to an MJCF/URDF (its record beside it, else inferred values) or
+        to a record (.toml), or a RobotRecord. gravity: m/s² magnitude pointing down (None = 9.81).
 
-        workspace: which named joint box of `ROBOT_DEFAULTS[name]["workspaces"]` becomes `sampling_ranges`;
+        workspace: which named joint box of the record's workspaces becomes `sampling_ranges`;
         None = DEFAULT_WORKSPACE ("camera": the poses the camera sees, what rendering and ee_pixel need).
         Kinematics-only callers that want the whole reach pass "full" (datagen does with --no-images).
-        camera: an MJCF camera name; None = the robot's default camera (other cameras serve as baselines).
+        camera: a camera of the model file; None = the record's camera (other cameras serve as baselines).
+        text: the model file's content kept elsewhere (a store's attrs), read instead of the file.
         """
-        if name not in ROBOT_NAMES:
-            raise ValueError(must_be("robot", f"one of {ROBOT_NAMES}", name))
-        defaults = ROBOT_DEFAULTS[name]
+        record = robot_record(robot)
         workspace = DEFAULT_WORKSPACE if workspace is None else workspace
-        if workspace not in defaults["workspaces"]:
-            raise ValueError(must_be("workspace", f"one of {tuple(defaults['workspaces'])} for {name}", workspace,
+        if workspace not in record.workspaces:
+            raise ValueError(must_be("workspace", f"one of {tuple(record.workspaces)} for {record.name}", workspace,
                                      "Pass ranges explicitly for another joint box."))
-        image_size = _check_image_size(defaults["image_size"] if image_size is None else image_size)
+        image_size = _check_image_size(record.image_size if image_size is None else image_size)
         if actuators not in ACTUATOR_KINDS:
             raise ValueError(must_be("actuators", f"one of {ACTUATOR_KINDS}", actuators))
         gravity = GRAVITY if gravity is None else _finite_float(gravity)
         if not (gravity is not None and gravity >= 0):
             raise ValueError(must_be("gravity", "a finite magnitude >= 0 in m/s^2", gravity,
                                      "Pass 0 for no gravity; it always points down (-z)."))
-        text = _mjcf_text(name)
-        spec = mujoco.MjSpec.from_string(text.decode())
-        if actuators == "torque":
-            for act in spec.actuators:
-                force = np.array(act.forcerange, dtype=float)
-                act.set_to_motor()
-                act.forcelimited, act.ctrlrange = mujoco.mjtLimited.mjLIMITED_FALSE, force
-        model = spec.compile()
-        model.opt.gravity[:] = (0.0, 0.0, -float(gravity))
-        cameras = tuple(model.camera(c).name for c in range(model.ncam))
-        camera = defaults["camera"] if camera is None else camera
-        if camera not in cameras:
-            raise ValueError(must_be("camera", f"one of {cameras} for {name}", camera))
-        return cls(name, model, hashlib.sha256(text).hexdigest(), image_size, rgb, defaults["workspaces"],
-                   workspace, camera)
+        if camera is not None and camera != record.camera_name:
+            record = _with_camera(record, camera)
+        built = build_model(record, actuators, text)
+        built.model.opt.gravity[:] = (0.0, 0.0, -float(gravity))
+        _fit_offscreen(built.model, image_size)
+        return cls(record, built, image_size, rgb, workspace)
+
+    @classmethod
+    def from_attrs(cls, attrs: dict, **kwargs) -> "Robot":
+        """The robot a store was made with, from its attrs alone (record and model text; see `robot_attrs`)."""
+        from bodyschema.datagen.robot_attrs import check_meshes, record_of_attrs
+        record, text = record_of_attrs(attrs)
+        kwargs.setdefault("image_size", tuple(attrs["image_size"]))
+        kwargs.setdefault("rgb", attrs.get("channels") == 3)
+        robot = cls.load(record, text=text, **kwargs)
+        check_meshes(robot, attrs)
+        return robot
 
     def check_ranges(self, ranges) -> None:
         """Raise the house ValueError unless `ranges` (Dq, 2) rad are ordered and inside the joint limits."""
@@ -155,7 +149,7 @@ class Robot:
             if not (jlo <= lo < hi <= jhi):
                 raise ValueError(must_be(f"sampling range of {self.joint_names[j]}",
                                          f"ordered and inside the joint limits [{jlo:.4f}, {jhi:.4f}] rad",
-                                         [float(lo), float(hi)], f"Fix the range in the config of {self.name}."))
+                                         [float(lo), float(hi)], f"Fix the range in the record of {self.name}."))
 
     # ---- camera --------------------------------------------------------------------------------------
     def _camera_pose(self) -> None:
@@ -380,3 +374,14 @@ def _check_image_size(size) -> tuple[int, int]:
     if not ok:
         raise ValueError(must_be("image_size", f"(H, W) with each side an integer in [{lo}, {hi}] px", size))
     return h, w
+
+
+def _with_camera(record: RobotRecord, camera: str) -> RobotRecord:
+    """The record looking through another camera of the model file."""
+    return dataclasses.replace(record, camera={"name": camera})
+
+
+def _fit_offscreen(model: mujoco.MjModel, image_size: tuple[int, int]) -> None:
+    """A model file that asks for a small offscreen buffer (URDF: none) gets one the image fits in."""
+    model.vis.global_.offwidth = max(int(model.vis.global_.offwidth), OFFSCREEN, image_size[1])
+    model.vis.global_.offheight = max(int(model.vis.global_.offheight), OFFSCREEN, image_size[0])

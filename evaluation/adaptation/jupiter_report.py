@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from bodyschema.datagen.robot import GRAVITY
+from bodyschema.datagen.robot_record import load_record
 from bodyschema.evaluation.core.tables import markdown_table, write_csv
 
 SUMMARY_COLUMNS = ("joint_err_before_deg", "joint_err_after_deg", "joint_peak_after_deg", "settle_s",
@@ -43,6 +44,7 @@ def summarize(runs: Sequence[ControllerRun]) -> list[dict]:
 def markdown(table: Sequence[dict], config) -> str:
     lines = markdown_table(table, (*SUMMARY_COLUMNS, "settled", "failed"), "controller", digits=3).splitlines()
     aic, pd = config.aic, config.pd
+    kp = pd.kp if pd.kp is not None else load_record("panda").pd["kp"]   # None: the Panda record's [pd]
     return "\n".join([
         f"# Jupiter: gravity {GRAVITY} → {config.jupiter_gravity} m/s² at t = {config.switch_time} s (torque panda)",
         "", *lines, "",
@@ -51,7 +53,7 @@ def markdown(table: Sequence[dict], config) -> str:
         f"last {config.steady_window} s before the switch / of the run; peak: after the switch.",
         f"settle_s: time after the switch until the joint error stays below {config.settle_deg}° (mean over the "
         "episodes that settled, `settled` = their fraction).",
-        f"Gains: PD K_p = {'/'.join(f'{k:g}' for k in pd.kp)} N·m/rad plus Earth-gravity compensation; AIC "
+        f"Gains: PD K_p = {'/'.join(f'{k:g}' for k in kp)} N·m/rad plus Earth-gravity compensation; AIC "
         f"κ_a Π_q̇ = {aic.k_a * aic.pi_qd:g} N·m/rad (acts as P) and κ_a Π_q = {aic.k_a * aic.pi_q:g} N·m/(rad·s) "
         "(integral).", ""])
 

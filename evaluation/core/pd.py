@@ -5,6 +5,8 @@ g_⊕(q) is the gravity torque of the same MJCF under Earth gravity (9.81 m/s²,
 a private copy of the model, so changing the simulated gravity (the Jupiter experiment) leaves the compensation
 wrong, as it would be on a real robot whose dynamic model was identified on Earth. Same interface as
 `aif.aic.AICController` (reset / act / failed / reasons), so benchmarks drive both through one loop.
+The gains are the robot record's [pd] (the Panda's: libfranka's joint impedance example), else inferred from the
+joints' inertia (`robot_infer.inertia_gains`), unless PDConfig gives them.
 """
 
 from __future__ import annotations
@@ -18,39 +20,39 @@ import numpy as np
 from bodyschema.datagen.robot import GRAVITY, Robot
 from bodyschema.errors import must_be
 
-# libfranka's joint_impedance_control example gains (N·m/rad, N·m·s/rad): the Panda's own stiff joint PD.
-FRANKA_KP = (600.0, 600.0, 600.0, 600.0, 250.0, 150.0, 50.0)
-FRANKA_KD = (50.0, 50.0, 50.0, 50.0, 30.0, 25.0, 15.0)
-
 
 @dataclass(frozen=True)
 class PDConfig:
-    kp: tuple[float, ...] = FRANKA_KP      # N·m/rad per joint
-    kd: tuple[float, ...] = FRANKA_KD      # N·m·s/rad per joint
+    kp: tuple[float, ...] | None = None    # N·m/rad per joint; None: the robot record's [pd] (else inferred)
+    kd: tuple[float, ...] | None = None    # N·m·s/rad per joint; None: as kp
     gravity: float = GRAVITY               # m/s², the gravity the compensation model was identified under
 
     def __post_init__(self):
-        for name in ("kp", "kd"):
+        if (self.kp is None) != (self.kd is None):
+            raise ValueError(must_be("kp and kd", "both given or both None (the robot's gains)", (self.kp, self.kd)))
+        for name in ("kp", "kd") if self.kp is not None else ():
             gains = np.asarray(getattr(self, name), dtype=float)
             if gains.ndim != 1 or not np.isfinite(gains).all() or (gains < 0).any():
                 raise ValueError(must_be(name, "a tuple of finite gains ≥ 0, one per joint", getattr(self, name)))
-        if len(self.kp) != len(self.kd):
+        if self.kp is not None and len(self.kp) != len(self.kd):
             raise ValueError(must_be("kd", f"as long as kp ({len(self.kp)} joints)", len(self.kd)))
         if not (np.isfinite(self.gravity) and self.gravity >= 0):
             raise ValueError(must_be("gravity", "a finite magnitude ≥ 0 in m/s²", self.gravity))
 
 
 class PDController:
-    """PD + Earth-gravity compensation for a shipped torque-driven robot, batched over B episodes."""
+    """PD + Earth-gravity compensation for a torque-driven robot (a name, path or record), batched over B episodes."""
 
-    def __init__(self, robot: str, config: PDConfig = PDConfig()):
+    def __init__(self, robot, config: PDConfig = PDConfig()):
         self._robot = Robot.load(robot, actuators="torque", gravity=config.gravity)   # private model: g_⊕ only
         self._data = mujoco.MjData(self._robot.model)
         self.dq = self._robot.dq
-        if len(config.kp) != self.dq:
-            raise ValueError(must_be("PDConfig.kp", f"{self.dq} gains, one per joint of {robot}", len(config.kp)))
+        kp, kd = (config.kp, config.kd) if config.kp is not None else robot_gains(self._robot)
+        if len(kp) != self.dq or len(kd) != self.dq:
+            raise ValueError(must_be("the PD gains kp and kd", f"{self.dq} gains each, one per joint of "
+                                     f"{self._robot.name}", (len(kp), len(kd)), "Fix [pd] in its record."))
         self.config = config
-        self._kp, self._kd = np.asarray(config.kp, dtype=float), np.asarray(config.kd, dtype=float)
+        self._kp, self._kd = np.asarray(kp, dtype=float), np.asarray(kd, dtype=float)
         self.torque_limits = self._robot.model.actuator_ctrlrange.copy()          # (Dq, 2) N·m
         self._goal = None
         self.failed, self.reasons = np.zeros(0, dtype=bool), []
@@ -98,3 +100,12 @@ class PDController:
             raise ValueError(must_be(name, f"an array of shape ({'B' if batch is None else batch}, {self.dq})",
                                      arr.shape))
         return arr
+
+
+def robot_gains(robot: Robot) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """(kp, kd) of the robot's record [pd], else inferred from its joints' inertia."""
+    if robot.record.pd:
+        return tuple(robot.record.pd["kp"]), tuple(robot.record.pd["kd"])
+    from bodyschema.datagen.robot_infer import inertia_gains
+    kp, kd = inertia_gains(robot.model, robot.workspaces["full"], sag=False)
+    return tuple(kp), tuple(kd)

@@ -5,13 +5,13 @@ from datagen and from the levels benchmark); the goal is what the goal sensor wo
 is reachable by construction): an image (nao_arm with an image model, rendered at the target pose and scaled
 as training images), an ee pixel, an ee position (panda) or joint angles. Every episode starts at rest at
 another random pose, with the belief at that pose.
-The controllers follow what the robot's actuators take (`robot.actuation`, set per robot in ROBOTS):
+The controllers follow what the robot's actuators take (`robot.actuation`, its record's [reaching] actuators):
   position (nao_arm, planar2)  AIF: `aif.action.VelocityController` velocity commands integrated into the servo
                       targets; baseline: the servos commanded to the target's joint pose (its true inverse kinematics).
   torque (panda)      AIF: the same velocity controller on the arm's joint impedance servo (setpoint + velocity
                       reference, the baseline's PD + gravity compensation; `--panda-controller aic`: the torque AIC,
                       `aif.aic.AICController`); baseline: PD + gravity compensation on the target pose.
-The velocity controller's gains are per robot (ROBOTS["action"]) unless --action.* is given: K = k_a·Δt·Π_joints
+The velocity controller's gains are per robot (record [reaching.action]) unless --action.* is given: K = k_a·Δt·Π_joints
 must stay below what the servo can follow (planar2's soft servos lag ≈ 0.1 s).
 Metrics per episode (report.py): success (simulator ee within `success_mm` of the target's ee at the
 end), final ee error, final joint error, time to reach (first time within success_mm and staying), the error
@@ -39,6 +39,7 @@ from bodyschema.aif.action import ActionConfig, VelocityController
 from bodyschema.aif.aic import AICConfig, AICController
 from bodyschema.aif.goal_inference import goal_precision
 from bodyschema.aif.perception import PerceptionConfig
+from bodyschema.datagen.robot_record import check_robot_ref
 from bodyschema.datagen.samplers import uniform
 from bodyschema.errors import must_be
 from bodyschema.evaluation.core.config import TrialsConfig
@@ -50,20 +51,11 @@ from bodyschema.evaluation.core.sim import control_substeps
 from bodyschema.evaluation.core.specs import load_robot, models_field, resolve_encoder, resolve_models
 from bodyschema.evaluation.reaching import goal_pose
 from bodyschema.evaluation.reaching import report as reaching_report
+from bodyschema.evaluation.reaching.robot_defaults import reaching_defaults
 from bodyschema.evaluation.reaching.loop import ImpedancePolicy, ServoPolicy, TorquePolicy, VelocityPolicy, rollout
 
 REACHING_STREAM = 0x4EAC_4100          # second entropy word: reaching targets are their own stream
 PURPOSE = {"targets": 0, "starts": 1, "noise": 2, "cue": 3, "imagined": 4}
-ROBOTS = {   # default models, control rate (Hz), duration (s), what the actuators take
-    "planar2": {"models": ("analytic:planar2:ee_xyz", "analytic:planar2:joints"), "hz": 50.0, "duration": 3.0,
-                "actuators": "position",    # soft servos (kp 5, lag ≈ 0.1 s): K = k_a·Δt·Π_joints ≈ 16 s⁻², λ ≈ 2√K
-                "action": ActionConfig(k_a=0.25, leak=8.0)},
-    "nao_arm": {"models": ("analytic:nao_arm:ee_pixel", "analytic:nao_arm:joints"), "hz": 50.0, "duration": 3.0,
-                "actuators": "position"},
-    "panda": {"models": ("analytic:panda:ee_xyz", "analytic:panda:joints"), "hz": 500.0, "duration": 3.0,
-              "actuators": "torque",        # K = k_a·Δt·Π_joints ≈ 100 s⁻² at 500 Hz, λ = 20 ≈ 2√K
-              "action": ActionConfig(k_a=15.0)},
-}
 PANDA_CONTROLLERS = ("velocity", "aic")
 GOAL_PREFERENCE = ("image", "ee_xyz", "ee_pixel", "joints")   # "auto": the first modality among the models
 
@@ -74,13 +66,13 @@ class ReachingRunConfig(TrialsConfig):
 
     out: Path = Path("results/reaching")             # runs go to <out>/<run-id>/, <out>/latest
     experiment: str = "bodyschema-reaching"          # the MLflow experiment
-    robot: str = "nao_arm"                 # "nao_arm" | "planar2" (servos) | "panda" (torques): ROBOTS
+    robot: str = "nao_arm"                 # "nao_arm" | "planar2" (servos) | "panda" (torques) | a model file
     models: models_field("the robot's analytic defaults (nao_arm: ee_pixel + joints; panda: ee_xyz)") = ()
     goal: str = "auto"                     # goal modality; auto: image > ee_xyz > ee_pixel > joints among the models
     trials: int = 100                      # random reachable targets (episodes per controller)
     duration: float | None = None          # s per episode; None: 3 (nao_arm), 10 (panda)
     control_hz: float | None = None        # must divide into whole MuJoCo steps; None: 50 (nao_arm), 500 (panda)
-    action: ActionConfig = ActionConfig()  # the velocity controller; left at its default: the robot's (ROBOTS)
+    action: ActionConfig = ActionConfig()  # the velocity controller; left at its default: the robot record's
     perception: PerceptionConfig = PerceptionConfig(step_control="none")   # servo robots: per tick (attractor prior)
     aic: AICConfig = AICConfig()           # torque robots: the AIC's gains and precisions
     panda_controller: str = "velocity"     # torque robots: "velocity" (the velocity controller on the arm's joint
@@ -100,8 +92,8 @@ class ReachingRunConfig(TrialsConfig):
 
     def __post_init__(self):
         super().__post_init__()
-        if self.robot not in ROBOTS:
-            raise ValueError(must_be("robot", f"one of {tuple(ROBOTS)}", self.robot))
+        if check_robot_ref(self.robot):
+            raise ValueError(check_robot_ref(self.robot))
         if not (np.isfinite(self.depth_cue_deg) and self.depth_cue_deg >= 0):
             raise ValueError(must_be("depth_cue_deg", "a finite σ ≥ 0 in degrees (0: no cue)", self.depth_cue_deg))
         if not 0 < self.spread <= 1:
@@ -119,20 +111,21 @@ class ReachingRunConfig(TrialsConfig):
 
     @property
     def default_models(self) -> tuple[str, ...]:
-        return ROBOTS[self.robot]["models"]
+        return reaching_defaults(self.robot).models
 
     @property
     def action_config(self) -> ActionConfig:
         """config.action, or the robot's tuned one when config.action is left at the default."""
-        return ROBOTS[self.robot].get("action", self.action) if self.action == ActionConfig() else self.action
+        tuned = reaching_defaults(self.robot).action
+        return tuned if self.action == ActionConfig() and tuned is not None else self.action
 
     @property
     def rate(self) -> float:
-        return ROBOTS[self.robot]["hz"] if self.control_hz is None else self.control_hz
+        return reaching_defaults(self.robot).control_hz if self.control_hz is None else self.control_hz
 
     @property
     def seconds(self) -> float:
-        return ROBOTS[self.robot]["duration"] if self.duration is None else self.duration
+        return reaching_defaults(self.robot).duration_s if self.duration is None else self.duration
 
 
 @dataclass(frozen=True)
@@ -343,7 +336,7 @@ def prepare(config: ReachingConfig, models=None):
         bad = next(m for m in models if m.body.robot != config.robot)
         raise ValueError(must_be(f"{bad.modality} model body", f"of robot {config.robot!r}", bad.body.robot,
                                  "Pass models of the benchmark's robot (or change --robot)."))
-    robot = load_robot(models, config.image_size, actuators=ROBOTS[config.robot]["actuators"])
+    robot = load_robot(models, config.image_size, actuators=reaching_defaults(config.robot).actuators)
     names = [m.modality for m in models]
     for what in ("broken", "frozen"):
         unknown = sorted(set(getattr(config, what)) - set(names) - set(builtin_sensors(robot)))

@@ -20,8 +20,9 @@ from bodyschema.evaluation.core.runs import new_run
 from bodyschema.evaluation.core.specs import resolve_models
 from bodyschema.evaluation.core.tables import markdown_table, write_csv
 from bodyschema.evaluation.reaching import report as reaching_report
-from bodyschema.evaluation.reaching.benchmark import (ROBOTS, ReachingConfig, ReachingRunConfig, builtin_sensors,
+from bodyschema.evaluation.reaching.benchmark import (ReachingConfig, ReachingRunConfig, builtin_sensors,
                                                       simulate)
+from bodyschema.evaluation.reaching.robot_defaults import reaching_defaults
 from bodyschema.evaluation.robustness.units import NOISE_UNITS, noise_label
 
 COLUMNS = ("success", "goal_success", "ee_err_mm", "ee_err_median_mm", "time_to_reach_s", "failed")
@@ -53,7 +54,7 @@ def run_loop_robustness(config: LoopRobustnessConfig = LoopRobustnessConfig(), m
     base = config.reaching()
     models = resolve_models(base.models, base.default_models, base.tracking_uri, models)
     from bodyschema.datagen.robot import Robot
-    robot = Robot.load(base.robot, actuators=ROBOTS[base.robot]["actuators"])
+    robot = Robot.load(base.robot, actuators=reaching_defaults(base.robot).actuators)
     names = [m.modality for m in models] + builtin_sensors(robot)
     if config.modality not in names:
         raise ValueError(must_be("modality", f"one of the sensed modalities {names}", config.modality))

@@ -8,7 +8,7 @@ import zarr
 
 from bodyschema.datagen.config import WORKSPACES, DatagenConfig
 from bodyschema.datagen.generate import generate
-from bodyschema.datagen.robot import DEFAULT_WORKSPACE, ROBOT_DEFAULTS, ROBOT_NAMES, Robot
+from bodyschema.datagen.robot import DEFAULT_WORKSPACE, ROBOT_NAMES, Robot
 
 
 @pytest.fixture(scope="module")
@@ -29,7 +29,7 @@ def box_grid(box: np.ndarray, per_side: int) -> np.ndarray:
 def test_every_robot_names_the_config_workspaces_and_each_box_lies_in_full():
     for name in ROBOT_NAMES:
         r = Robot.load(name)
-        assert tuple(ROBOT_DEFAULTS[name]["workspaces"]) == WORKSPACES == tuple(r.workspaces)
+        assert tuple(r.record.workspaces) == WORKSPACES == tuple(r.workspaces)
         full = r.workspaces["full"]
         for ws, box in r.workspaces.items():
             assert box.shape == (r.dq, 2) and box.dtype == np.float64, ws
@@ -50,7 +50,7 @@ def test_load_samples_the_chosen_workspace_and_defaults_to_the_camera_one(nao):
 def test_unknown_workspace_or_camera_is_named_with_the_valid_ones():
     with pytest.raises(ValueError, match=r"workspace must be one of \('full', 'camera'\) for nao_arm. Got 'reach'"):
         Robot.load("nao_arm", workspace="reach")
-    with pytest.raises(ValueError, match=r"camera must be one of \(.*'CameraBottom'.*\) for nao_arm. Got 'top'"):
+    with pytest.raises(ValueError, match=r"camera must be one of the model's cameras \[.*'CameraBottom'.*\] for nao"):
         Robot.load("nao_arm", camera="top")
     with pytest.raises(ValueError, match=r"workspace must be one of \('full', 'camera'\) or None. Got 'reach'"):
         DatagenConfig(workspace="reach")

@@ -1,0 +1,194 @@
+"""`infer_record`: the robot record of a bare MJCF/URDF, every value the file does not hold inferred.
+
+- ee: the model's site `ee`; else the deepest body of the longest hinge chain (its first site, else the body
+  itself with a zero offset).
+- joints: the hinges from the world to that body; every other joint is held at its reference pose.
+- workspaces: each joint's limits ("full" = "camera"); a continuous joint gets ±π, a range wider than a turn the
+  turn around its middle.
+- actuators: the model's own when every chosen joint has one; else position servos, critically damped, stiff
+  enough for the joint's inertia (ω = SERVO_RAD_S) and to sag at most SAG_RAD under gravity.
+- PD gains (the torque baseline, with gravity compensation): the same inertia rule without the gravity term.
+- camera: a camera of the model that sees the ee in ≥ GOOD_VIEW of the poses, else one placed to frame the ee's
+  workspace (`place_camera`, from sampled forward kinematics), written into the record.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import mujoco
+import numpy as np
+
+from bodyschema.datagen.robot_build import build_model, read_source
+from bodyschema.datagen.robot_record import AUTO_CAMERA, RobotRecord
+from bodyschema.errors import must_be
+
+IMAGE_SIZE = (64, 64)       # px: the default image of an inferred robot (small, quick to render and learn from)
+FOVY_DEG = 45.0             # the placed camera's vertical field of view
+FRAME_MARGIN = 0.85         # the ee workspace fills this fraction of the placed camera's half-image
+SERVO_RAD_S = 20.0          # servo and PD natural frequency ω (rad/s): kp = I·ω², critically damped
+SAG_RAD = 0.05              # a servo sags at most this far under gravity: kp ≥ max gravity torque / SAG_RAD
+GOOD_VIEW = 0.9             # a model camera is kept when the ee is in view for this fraction of poses
+MIN_VIEW = 0.2              # below: the camera does not see the arm (house error)
+VIEW_SAMPLES = 512          # poses drawn (seed 0) to measure a camera's view and to place one
+_PLACEHOLDER_CAMERA = {"name": AUTO_CAMERA, "pos": [0.0, 0.0, 1.0], "xyaxes": [1.0, 0, 0, 0, 1.0, 0], "fovy": FOVY_DEG}
+
+
+def infer_record(path: Path, mesh_dir: Path | None = None, visual: str = "mesh",
+                 image_size: tuple[int, int] = IMAGE_SIZE) -> RobotRecord:
+    """A record of the model file at `path` with every value inferred (see the module docstring)."""
+    path = Path(path).resolve()
+    mesh = str(Path(mesh_dir).resolve()) if mesh_dir else ""
+    box = ((-1.0, 1.0),)
+    draft = RobotRecord(name=path.stem, model=path.name, image_size=tuple(image_size), base=path.parent,
+                        workspaces={"full": box, "camera": box}, camera=_PLACEHOLDER_CAMERA, mesh_dir=mesh,
+                        visual=visual)
+    spec, _ = read_source(draft)
+    model = spec.compile()
+    ee, body = _infer_ee(model)
+    joints = _chain_hinges(model, body)
+    if not joints:
+        raise ValueError(must_be(f"the model {path}", "an arm with hinge joints up to its end effector",
+                                 f"no hinge between the world and body {model.body(body).name!r}"))
+    draft = dataclasses.replace(draft, ee=ee, joints=tuple(joints))
+    built = build_model(draft)                            # the arm of the chosen hinges, welded, with its ee site
+    ranges = _workspace(built.model)
+    gains = inertia_gains(built.model, ranges, sag=True)
+    actuated = {built.model.actuator(a).trnid[0] for a in range(built.model.nu)
+                if built.model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT}
+    actuators = {"kind": "model"} if actuated >= set(range(built.model.njnt)) else \
+        {"kind": "servos", "kp": gains[0], "kv": gains[1]}
+    kp, kd = inertia_gains(built.model, ranges, sag=False)
+    box = tuple(map(tuple, ranges.tolist()))
+    draft = dataclasses.replace(draft, workspaces={"full": box, "camera": box}, actuators=actuators,
+                                pd={"kp": kp, "kd": kd})
+    return dataclasses.replace(draft, camera=_infer_camera(draft, spec, ranges))
+
+
+# ---- ee and joints ----------------------------------------------------------------------------------------
+def _infer_ee(model: mujoco.MjModel) -> tuple[dict, int]:
+    """({site} | {body, offset}, the ee's body id)."""
+    sites = [model.site(s).name for s in range(model.nsite)]
+    if "ee" in sites:
+        return {"site": "ee"}, int(model.site("ee").bodyid[0])
+    hinges = [len(_chain_hinges(model, b)) for b in range(model.nbody)]
+    depth = [_depth(model, b) for b in range(model.nbody)]
+    body = max(range(model.nbody), key=lambda b: (hinges[b], depth[b]))
+    own = [s for s in range(model.nsite) if model.site_bodyid[s] == body and model.site(s).name]
+    if own:
+        return {"site": model.site(own[0]).name}, body
+    return {"body": model.body(body).name, "offset": [0.0, 0.0, 0.0]}, body
+
+
+def _path(model: mujoco.MjModel, body: int) -> list[int]:
+    bodies = []
+    while body != 0:
+        bodies.append(body)
+        body = int(model.body_parentid[body])
+    return bodies[::-1]
+
+
+def _depth(model: mujoco.MjModel, body: int) -> int:
+    return len(_path(model, body))
+
+
+def _chain_hinges(model: mujoco.MjModel, body: int) -> list[str]:
+    """The hinge joints from the world to `body`, world first."""
+    return [model.joint(j).name for b in _path(model, body) for j in np.flatnonzero(model.jnt_bodyid == b)
+            if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE]
+
+
+def _workspace(model: mujoco.MjModel) -> np.ndarray:
+    """(Dq, 2) rad: the joint limits, at most one turn wide (around their middle)."""
+    ranges = np.array(model.jnt_range, dtype=float)
+    middle = ranges.mean(axis=1)
+    return np.stack([np.maximum(ranges[:, 0], middle - np.pi), np.minimum(ranges[:, 1], middle + np.pi)], axis=1)
+
+
+def inertia_gains(model: mujoco.MjModel, ranges: np.ndarray, sag: bool) -> tuple[list[float], list[float]]:
+    """(kp N·m/rad, kd N·m·s/rad) per joint: kp = I·ω² (with `sag`: at least the largest gravity torque over
+    sampled poses / SAG_RAD), kd = 2·√(kp·I) (critical damping); I the joint's largest diagonal inertia."""
+    data, rng = mujoco.MjData(model), np.random.default_rng(0)
+    inertia, gravity = np.zeros(model.nv), np.zeros(model.nv)
+    full = np.zeros((model.nv, model.nv))
+    for q in rng.uniform(ranges[:, 0], ranges[:, 1], (32, model.nq)):
+        data.qpos[:], data.qvel[:] = q, 0.0
+        mujoco.mj_forward(model, data)
+        mujoco.mj_fullM(model, full, data.qM)
+        inertia = np.maximum(inertia, np.diag(full))                 # kg·m², armature included
+        gravity = np.maximum(gravity, np.abs(data.qfrc_bias))        # N·m at rest
+    inertia = np.maximum(inertia, 1e-6)
+    kp = inertia * SERVO_RAD_S ** 2
+    if sag:
+        kp = np.maximum(kp, gravity / SAG_RAD)
+    kd = 2.0 * np.sqrt(kp * inertia)
+    return [float(round(k, 6)) for k in kp], [float(round(k, 6)) for k in kd]
+
+
+# ---- the camera -------------------------------------------------------------------------------------------
+def _infer_camera(draft: RobotRecord, spec: mujoco.MjSpec, ranges: np.ndarray) -> dict:
+    from bodyschema.datagen.robot import Robot
+    best, name = 0.0, None
+    for camera in (c.name for c in spec.cameras if c.name):
+        with Robot.load(dataclasses.replace(draft, camera={"name": camera})) as robot:
+            fraction = view_fraction(robot, ranges)
+        if fraction > best:
+            best, name = fraction, camera
+    if name is not None and best >= GOOD_VIEW:
+        return {"name": name}
+    with Robot.load(draft) as robot:
+        return place_camera(ee_samples(robot, ranges), draft.image_size)
+
+
+def ee_samples(robot, ranges: np.ndarray, n: int = VIEW_SAMPLES) -> np.ndarray:
+    """(n, 3) m: the ee at n poses uniform in `ranges` (seed 0)."""
+    q = np.random.default_rng(0).uniform(ranges[:, 0], ranges[:, 1], (n, len(ranges)))
+    return robot.fk(q, check=False)
+
+
+def view_fraction(robot, ranges: np.ndarray, n: int = VIEW_SAMPLES) -> float:
+    """The fraction of n poses uniform in `ranges` (seed 0) whose ee the robot's camera sees."""
+    q = np.random.default_rng(0).uniform(ranges[:, 0], ranges[:, 1], (n, len(ranges)))
+    return float(robot.in_view(q).mean())
+
+
+def check_view(robot, ranges: np.ndarray) -> float:
+    """The view fraction; the house error when the camera sees the ee in fewer than MIN_VIEW of the poses."""
+    fraction = view_fraction(robot, ranges)
+    if fraction < MIN_VIEW:
+        raise ValueError(must_be(f"camera {robot.camera_name!r} of robot {robot.name!r}",
+                                 f"able to see the ee in at least {MIN_VIEW:.0%} of the sampled poses",
+                                 f"{fraction:.1%}", "Choose another camera in the record, or let `bodyschema robot "
+                                 f"init` place one ([camera] name = {AUTO_CAMERA!r} with its pose)."))
+    return fraction
+
+
+def place_camera(points: np.ndarray, image_size: tuple[int, int], fovy: float = FOVY_DEG) -> dict:
+    """A camera pose framing `points` (N, 3) m: it looks along their direction of least spread (principal axes),
+    from the side above them, with the widest spread along the image's longer side, far enough that every point
+    falls inside FRAME_MARGIN of the image. Returns the record's [camera] values."""
+    centre = (points.max(axis=0) + points.min(axis=0)) / 2
+    spread = points - centre
+    _, axes = np.linalg.eigh(spread.T @ spread)                  # columns by increasing variance
+    view, widest = axes[:, 0], axes[:, 2]
+    if view[2] < 0 or (view[2] == 0 and view[0] < 0):            # come from above (else from +x)
+        view = -view
+    h, w = image_size
+    if w >= h:                                                   # x (right) × y (up) = view (toward the camera)
+        x = widest
+        y = np.cross(view, x)
+    else:
+        y = widest
+        x = np.cross(y, view)
+    tan_y = np.tan(np.deg2rad(fovy) / 2) * FRAME_MARGIN
+    tan_x = tan_y * w / h
+    along = spread @ view                                        # (N,) m toward the camera
+    reach = np.maximum(np.abs(spread @ x) / tan_x, np.abs(spread @ y) / tan_y)
+    distance = float(np.max(along + reach)) + 0.05
+    pos = centre + distance * view
+    return {"name": AUTO_CAMERA, "pos": _rounded(pos), "xyaxes": _rounded(np.concatenate([x, y])), "fovy": fovy}
+
+
+def _rounded(v: np.ndarray) -> list[float]:
+    return [float(round(x, 6)) for x in v]
