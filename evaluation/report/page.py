@@ -116,10 +116,9 @@ def _demote_headings(text: str, by: int) -> str:
     return "\n".join(out)
 
 
-
-
 def _relink(text: str, folder: Path, page_dir: Path) -> tuple[str, set[Path]]:
-    """Links and images of a summary.md, relative to its folder, rewritten relative to the page; the images found."""
+    """Links and images of a summary.md, relative to its folder, rewritten relative to the page; the images found.
+    An image outside the folder (absolute, `../`, a symlink elsewhere, a URL) becomes a note: never read."""
     images = set()
 
     def fix(m: re.Match) -> str:
