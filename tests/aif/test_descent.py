@@ -73,11 +73,12 @@ def test_batched_rows_equal_the_per_trial_loop_in_float64(make, config):
     batched = perception.infer(obs, mu0)
     for i in range(len(q)):
         single = perception.infer({modality: obs[modality][i:i + 1]}, mu0[i:i + 1])
-        # bit for bit on kinematics; a convolution sums in another order for another batch size (≈1e-16 apart)
-        assert torch.allclose(single.mu[0], batched.mu[i], rtol=0, atol=1e-10), (i, single.mu[0] - batched.mu[i])
+        # Rows are independent, but not bit for bit: a batch of 12 and of 1 take other SIMD/BLAS paths (and a
+        # convolution another summation order), ≈1e-16 apart per operation, seen up to 1e-15 rad after the descent
+        # on kinematics. 1e-12 rad on kinematics, 1e-10 rad through a decoder, far below any effect of coupling.
+        atol = 1e-10 if modality == "image" else 1e-12
+        assert torch.allclose(single.mu[0], batched.mu[i], rtol=0, atol=atol), (i, single.mu[0] - batched.mu[i])
         assert single.steps[0] == batched.steps[i]
-        if modality != "image":
-            assert torch.equal(single.mu[0], batched.mu[i])
 
 
 @pytest.mark.parametrize("level", [1, 2])
