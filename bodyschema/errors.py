@@ -108,13 +108,29 @@ def _explain_os_error(error: OSError) -> str:
     if error.filename is None and isinstance(error, (ConnectionError, TimeoutError)):
         return must_be("the connection", "answered", _first_line(_text(error)),
                        "Check the server address (--tracking-uri, $RAY_ADDRESS) and that it is running.")
+    if error.errno in WRITE_FAILURES:
+        return _explain_write_failure(error)
     expected = {errno.ENOENT: "an existing file or directory", errno.EACCES: "readable and writable by you",
-                errno.EPERM: "readable and writable by you", errno.ENOSPC: "on a disk with free space",
+                errno.EPERM: "readable and writable by you",
                 errno.EISDIR: "a file, not a directory", errno.ENOTDIR: "a directory"}.get(error.errno, "usable")
     got = error.strerror or _first_line(_text(error))
     what = str(Path(error.filename)) if error.filename is not None else "a file or device"
     return must_be(what, expected, got,
                    "Check the path given on the command line and its permissions.")
+
+
+# A write that ran out of room: the disk (or quota) is full, or the file hit the file-size limit (`ulimit -f`).
+# Not a damaged input: the hint says where to free space.
+WRITE_FAILURES = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+
+
+def _explain_write_failure(error: OSError) -> str:
+    target = Path(error.filename) if error.filename is not None else None
+    folder = target.parent if target is not None else Path.cwd()
+    return must_be(str(target) if target is not None else "a file being written", "written to a disk with free space",
+                   error.strerror or _first_line(_text(error)),
+                   f"Disk full (or the file-size limit `ulimit -f` reached): free space on the disk holding {folder} "
+                   f"(`df -h {folder}`), then run the same command again.")
 
 
 def _reader(error: BaseException) -> str | None:

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import copy
 import math
-import os
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -27,6 +26,7 @@ from tqdm.auto import tqdm
 
 from bodyschema.errors import must_be
 from bodyschema.models.device import check_device
+from bodyschema.models.files import torch_bytes, write_atomically
 from bodyschema.models.scaling import IMAGE_SCALE
 
 _INIT_LAYERS = (nn.Linear, nn.Conv2d, nn.ConvTranspose2d)
@@ -214,10 +214,9 @@ def _clone(weights: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
 
 def _save_checkpoint(path: Path, state: dict, module, opt, gen, fingerprint) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save({**state, "weights": module.state_dict(), "optimizer": opt.state_dict(),
-                "rng": gen.get_state(), "fingerprint": fingerprint}, tmp)
-    os.replace(tmp, path)   # atomic: a kill mid-write leaves the previous checkpoint intact
+    # Atomic: a kill or a full disk mid-write leaves the previous checkpoint intact and no temporary behind.
+    write_atomically({path: torch_bytes({**state, "weights": module.state_dict(), "optimizer": opt.state_dict(),
+                                         "rng": gen.get_state(), "fingerprint": fingerprint})})
 
 
 def _resume(path: Path, module, opt, gen, fingerprint, device: torch.device) -> dict:

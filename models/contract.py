@@ -2,12 +2,17 @@
 
 Every model (analytic FK, GPR, MDN, pixel decoder, multimodal member) subclasses `BaseSensoryModel`, which
 validates inputs at the edge, keeps the output dtype equal to the input dtype, and saves/loads the model
-as `meta.json` (kind, body, config) + `state.pt` (tensors only, loaded with `weights_only=True`: no code
-runs when a saved model is read). Subclasses implement the underscore hooks only.
+as `meta.json` (kind, body, config, the sha256 of state.pt) + `state.pt` (tensors only, loaded with
+`weights_only=True`: no code runs when a saved model is read). Subclasses implement the underscore hooks only.
+
+The sha256 in meta.json is an integrity check against corruption (a flipped byte, a partial copy, a state.pt of
+another save), not authenticity: whoever can edit state.pt can edit meta.json too. Authenticity is the tracking
+database's digest, checked by `bodyschema.training.registry.load` (see training/digest.py).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import pickle
 from pathlib import Path
@@ -18,10 +23,12 @@ import torch
 
 from bodyschema.errors import NotFittedError, must_be
 from bodyschema.models import kinds
+from bodyschema.models.files import torch_bytes, write_atomically
 from bodyschema.models.scaling import BodySpec
 
 FLOAT_DTYPES = (torch.float32, torch.float64)
 FORMAT_VERSION = 1
+STATE_SHA256 = "state_sha256"   # meta.json key; models saved before it have none and load unchecked
 
 
 @runtime_checkable
@@ -124,14 +131,15 @@ class BaseSensoryModel:
 
     # ---- persistence --------------------------------------------------------------------------------
     def save(self, path: str | Path) -> None:
-        """Write `path/meta.json` and `path/state.pt` (a directory, created if missing)."""
+        """Write `path/meta.json` and `path/state.pt` (a directory, created if missing), both or neither."""
         self._require_fitted()
         path = Path(path)
         path.mkdir(parents=True, exist_ok=True)
+        state = torch_bytes({k: v.detach().cpu() for k, v in self._state().items()})
         meta = {"format_version": FORMAT_VERSION, "kind": self.kind, "modality": self.modality,
-                "output_shape": list(self.output_shape), "body": self.body.to_dict(), "config": self._config()}
-        torch.save({k: v.detach().cpu() for k, v in self._state().items()}, path / "state.pt")
-        (path / "meta.json").write_text(json.dumps(meta, indent=2))
+                "output_shape": list(self.output_shape), "body": self.body.to_dict(), "config": self._config(),
+                STATE_SHA256: hashlib.sha256(state).hexdigest()}
+        write_atomically({path / "state.pt": state, path / "meta.json": json.dumps(meta, indent=2).encode()})
 
     @classmethod
     def load(cls, path: str | Path) -> "BaseSensoryModel":
@@ -185,6 +193,7 @@ def load_model(path: str | Path) -> BaseSensoryModel:
         cls = kinds.saved_class(meta["kind"])      # imports only that kind's module; old spellings are aliases
     except ValueError:
         raise ValueError(must_be("model kind", f"one of {sorted(kinds.KINDS)}", meta["kind"])) from None
+    _check_state_sha256(path / "state.pt", meta.get(STATE_SHA256))
     try:
         state = torch.load(path / "state.pt", weights_only=True)
     except pickle.UnpicklingError:
@@ -198,3 +207,14 @@ def load_model(path: str | Path) -> BaseSensoryModel:
                                  "The file is damaged or partial: copy or train the model again.")) from None
     return cls._from_saved(BodySpec.from_dict(meta["body"]), meta["modality"], tuple(meta["output_shape"]),
                            meta["config"], state)
+
+
+def _check_state_sha256(state_file: Path, recorded: str | None) -> None:
+    """Refuse a state.pt whose bytes differ from the sha256 its save recorded in meta.json (corruption)."""
+    if recorded is None:
+        return
+    actual = hashlib.sha256(state_file.read_bytes()).hexdigest()
+    if actual != recorded:
+        raise ValueError(must_be(f"the sha256 of {state_file}", f"{str(recorded)[:16]}… (recorded in meta.json "
+                                 "when it was saved)", f"{actual[:16]}…", "The file is corrupt or partial, or "
+                                 "meta.json belongs to another save: copy or train the model again."))

@@ -11,11 +11,13 @@ directory sidecar) is ever used as the reference: whoever can edit the weights c
 from __future__ import annotations
 
 import hashlib
+import re
 from pathlib import Path
 
 from bodyschema.errors import must_be
 
 DIGEST_TAG = "bodyschema.model_sha256"
+MODEL_ID = re.compile(r"^m-[0-9a-f]{32}$")      # an MLflow 3 logged model id
 NO_DIGEST_HINT = "Only models logged by `bodyschema train` (which records their digest) can be loaded."
 
 
@@ -40,8 +42,28 @@ def verify_directory(path: str | Path, expected: str | None, where: str) -> None
                                  "no recorded digest", NO_DIGEST_HINT))
     actual = directory_sha256(path)
     if actual != expected:
-        raise ValueError(f"Model artifacts of {where} must have sha256 {expected}. Got {actual}. "
-                         "The files changed after logging (tampering or a partial copy); refusing to load them.")
+        raise ValueError(must_be(f"the sha256 of the files of {where}",
+                                 f"{expected[:16]}…, the digest the tracking database recorded for it",
+                                 f"{actual[:16]}…", "Its artifact store was edited, holds another model's files or a "
+                                 "partial copy: refusing to load them. Restore the artifacts, or train and register "
+                                 "the model again (`bodyschema train`)."))
+
+
+def version_digest(client, version) -> str:
+    """The digest recorded at registration for registered `version` (a ModelVersion read from the tracking database),
+    which its logged model, named by the version's own record (never by an MLmodel file), must repeat."""
+    where = f"models:/{version.name}/{version.version}"
+    recorded = version.tags.get(DIGEST_TAG)
+    if not recorded:
+        raise ValueError(must_be(where, f"recorded with a {DIGEST_TAG} in the tracking database",
+                                 "no recorded digest", NO_DIGEST_HINT))
+    model_id = getattr(version, "model_id", None) or str(version.source or "").removeprefix("models:/")
+    if MODEL_ID.match(model_id):
+        logged = logged_model_digest(client, model_id)
+        if logged != recorded:
+            raise ValueError(must_be(f"recorded digests of {where}", "one value", [recorded, logged],
+                                     "The tracking database disagrees with itself; refusing to load."))
+    return recorded
 
 
 def logged_model_digest(client, model_id: str) -> str:

@@ -3,11 +3,19 @@
 Logged with `mlflow.pyfunc.log_model(loader_module="bodyschema.training.pyfunc_loader", data_path=<model dir>)`:
 the artifacts hold the model directory (`meta.json` + `state.pt`, tensors only) and MLflow's MLmodel file, and no
 Python code. `mlflow.pyfunc.load_model("models:/<name>@champion")` imports this module from the installed
-package and calls `_load_pyfunc(data_path)`, which recomputes the directory digest and compares it with the one
-the tracking database records for that logged model (and its registered versions) before reading a tensor.
+package and calls `_load_pyfunc(data_path)`, which recomputes the directory digest and compares it, before reading
+a tensor, with the digest the tracking database records for the model that was asked for: MLflow passes only the
+downloaded path, so the URI is read from `mlflow.pyfunc.load_model`'s own frame.
+- `models:/<name>@<alias>`, `models:/<name>/<version>`: the version → its logged model → the digest recorded at
+  registration (`digest.version_digest`); `models:/<model id>`: that logged model's; `runs:/<run>/<name>`: the
+  one logged model of that name in that run. Never an id read from the MLmodel file, which the artifact store holds.
+- A path or another artifact URI (or a call not through `mlflow.pyfunc.load_model`): the version cannot be known,
+  so the files need only be *some* model this tracking store recorded (as `--model <dir>`), not a particular one.
 
-The MLmodel file is still read by MLflow itself before this module runs: a consumer who cannot trust the
-artifact store with its MLmodel file uses `bodyschema.training.registry.load`, which reads it as data only.
+This check runs only when MLflow calls this module, which is what the MLmodel file says to do: whoever can edit it
+can name other code (`loader_module:`, `code:`) and `mlflow.pyfunc.load_model` imports and runs that instead, by
+MLflow's design. Use `bodyschema.load_registered` (`registry.load`) where the artifact store is not trusted: it
+reads the MLmodel file as data only and never imports what it names.
 
 pyfunc `predict(z)`: z (B, Dz) rad, float32 or float64 (numpy, list or DataFrame) → g(z) (B, *output_shape) in
 the input's dtype; `params={"output": "jacobian"}` → ∂g/∂z (B, prod(output_shape), Dz) per rad; "precision" →
@@ -18,6 +26,7 @@ from images (B, H, W[, C]) uint8 or float in [0, 1], and has no Jacobian output.
 from __future__ import annotations
 
 import re
+import sys
 import warnings
 from pathlib import Path
 
@@ -28,11 +37,12 @@ from mlflow.models import ModelSignature
 from mlflow.types import ParamSchema, ParamSpec
 
 from bodyschema.errors import must_be
-from bodyschema.training.digest import DIGEST_TAG, directory_sha256, logged_model_digest, verify_directory
+from bodyschema.training.digest import (DIGEST_TAG, MODEL_ID, digest_is_recorded, directory_sha256,
+                                        logged_model_digest, verify_directory, version_digest)
 
 LOADER_MODULE = __name__      # "bodyschema.training.pyfunc_loader"
 OUTPUTS = ("predict", "jacobian", "precision")
-_MODEL_ID = re.compile(r"^m-[0-9a-f]{32}$")
+_RUN_URI = re.compile(r"^runs:/(?P<run_id>[^/]+)/(?P<name>[^/]+?)/?$")
 
 
 def log_sensory_model(model_dir: str | Path, model, *, name: str = "model"):
@@ -64,30 +74,75 @@ def log_sensory_model(model_dir: str | Path, model, *, name: str = "model"):
 
 
 def _load_pyfunc(data_path: str, model_config: dict | None = None) -> "SensoryPyfunc":
-    """Called by `mlflow.pyfunc.load_model`: verify the model directory against the tracking database, load it."""
+    """Called by `mlflow.pyfunc.load_model`: verify the model directory against the tracking database's record of
+    the model asked for (see the module doc), then load it."""
     from bodyschema.models import load_model
 
     data_path = Path(data_path)
-    model_id = _logged_model_id(data_path)
     client = mlflow.MlflowClient()        # the tracking/registry URIs the caller resolved the model with
-    verify_directory(data_path, logged_model_digest(client, model_id), f"models:/{model_id}")
+    uri = _requested_uri()
+    recorded = _recorded_digest(client, uri) if uri is not None else None
+    if recorded is None:
+        _check_recorded_somewhere(client, data_path)
+    else:
+        verify_directory(data_path, *recorded)
     return SensoryPyfunc(load_model(data_path))
 
 
-def _logged_model_id(data_path: Path) -> str:
-    """The logged model id named in the MLmodel file above `data_path` (a hint to find the digest in the tracking
-    database; a wrong id can only point at another model's digest, which these files will not match)."""
-    from mlflow.models import Model
+def _requested_uri() -> str | None:
+    """The `model_uri` given to `mlflow.pyfunc.load_model` (MLflow 3 calls `_load_pyfunc` from it with only the
+    local path), read from its frame; None when this loader was reached another way."""
+    frame = sys._getframe(1)
+    while frame is not None:
+        if frame.f_code.co_name == "load_model" and frame.f_globals.get("__name__") == "mlflow.pyfunc":
+            uri = frame.f_locals.get("model_uri")
+            return None if uri is None else str(uri)
+        frame = frame.f_back
+    return None
 
-    for root in (data_path.parent.parent, data_path.parent):         # MLmodel sits at <root>/data/<dir>
-        if (root / "MLmodel").is_file():
-            model_id = Model.load(str(root / "MLmodel")).model_id
-            if isinstance(model_id, str) and _MODEL_ID.match(model_id):
-                return model_id
-            raise ValueError(must_be("model_id in the MLmodel file", "an MLflow logged model id (m-<32 hex>)",
-                                     model_id, "Load models logged by `bodyschema train` with MLflow 3."))
-    raise ValueError(must_be("pyfunc data path", "inside an MLflow model directory (with an MLmodel file)",
-                             str(data_path)))
+
+def _recorded_digest(client, uri: str) -> tuple[str, str] | None:
+    """(digest, where) the tracking database records for the model `uri` names; None for a path or any other
+    artifact URI, which names no model of the registry."""
+    from bodyschema.training.registry import resolve_version
+
+    if uri.startswith("models:/"):
+        target = uri.removeprefix("models:/").rstrip("/")
+        if MODEL_ID.match(target):
+            return logged_model_digest(client, target), uri
+        version = resolve_version(client, uri)        # a stage or other form: the house error naming the two forms
+        return version_digest(client, version), f"models:/{version.name}/{version.version}"
+    run = _RUN_URI.match(uri)
+    if run is None:
+        return None
+    digests = {logged_model_digest(client, m.model_id) for m in _logged_models_of_run(client, *run.groups())}
+    if len(digests) != 1:
+        raise ValueError(must_be(f"the logged models named {run['name']!r} in run {run['run_id']}",
+                                 "one model (one recorded digest)", f"{len(digests)} digests",
+                                 "Load it as models:/<name>@<alias> or models:/<model id> instead."))
+    return digests.pop(), uri
+
+
+def _logged_models_of_run(client, run_id: str, name: str) -> list:
+    from mlflow.exceptions import MlflowException
+
+    try:
+        experiment_id = client.get_run(run_id).info.experiment_id
+    except MlflowException:
+        return []
+    return [m for m in client.search_logged_models([experiment_id], filter_string=f"name = '{name}'")
+            if m.source_run_id == run_id]
+
+
+def _check_recorded_somewhere(client, data_path: Path) -> None:
+    """A model directory reached by path: its digest must be one the tracking database records (any model)."""
+    digest = directory_sha256(data_path)
+    if digest_is_recorded(client, digest) is None:
+        raise ValueError(must_be(f"model directory {str(data_path)!r}", "a model logged by `bodyschema train` in "
+                                 f"{client.tracking_uri} (its sha256 recorded there)",
+                                 f"sha256 {digest[:16]}… recorded nowhere", "Load it by its registry URI "
+                                 "(models:/<name>@champion), or set MLFLOW_TRACKING_URI to the store it was logged "
+                                 "in."))
 
 
 class SensoryPyfunc:

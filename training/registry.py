@@ -18,7 +18,11 @@ the same lock is a file in the temp directory: it serializes the processes of on
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import hashlib
+import io
+import logging
 import os
 import re
 import tempfile
@@ -34,8 +38,9 @@ from mlflow.exceptions import MlflowException
 
 from bodyschema.errors import must_be
 from bodyschema.models.scaling import BodySpec
-from bodyschema.training.digest import DIGEST_TAG, verify_directory
+from bodyschema.training.digest import DIGEST_TAG, verify_directory, version_digest
 from bodyschema.training.locks import exclusive
+from bodyschema.training.store_checks import check_database_driver, check_sqlite_store
 
 CHAMPION = "champion"
 METRIC = "val_rmse"          # decides the champion; lower is better
@@ -45,6 +50,7 @@ _URI = re.compile(r"^models:/(?P<name>[^/@]+)(?:@(?P<alias>[^/]+)|/(?P<version>\
 SCHEMES = ("", "file", "sqlite", "postgresql", "mysql", "mssql", "http", "https", "databricks", "databricks-uc", "uc")
 OLD_ARTIFACT_KEY = "sensory_model"     # models logged "from code" before the loader module kept their directory here
 _initialized: set[str] = set()         # sqlite URIs whose tables this process created or checked under the lock
+_log = logging.getLogger(__name__)
 
 
 class TrackingUnreachable(ConnectionError):
@@ -79,19 +85,43 @@ def use_tracking(explicit: str | None = None) -> MlflowClient:
 
 def _create_sqlite(db: Path) -> None:
     """Create a fresh store beside `db` and rename it into place: a kill while MLflow creates its ~40 tables then
-    leaves no half-built database (the next process would die on "table ... already exists")."""
-    db.parent.mkdir(parents=True, exist_ok=True)
+    leaves no half-built database (the next process would die on "table ... already exists"), and a failure (a
+    full disk) leaves no `.creating` file either."""
     partial = db.with_name(db.name + ".creating")
-    for leftover in ("", "-journal", "-wal", "-shm"):     # of a creation killed before (a stale journal would be
-        partial.with_name(partial.name + leftover).unlink(missing_ok=True)   # rolled back into the new file)
-    fresh = MlflowClient(f"sqlite:///{partial}", f"sqlite:///{partial}")
-    fresh.search_experiments(max_results=1)
-    fresh.search_registered_models(max_results=1)
-    os.replace(partial, db)
+    _remove_sqlite_files(partial)                         # of a creation killed before (a stale journal would be
+    try:                                                  # rolled back into the new file)
+        fresh = MlflowClient(f"sqlite:///{partial}", f"sqlite:///{partial}")
+        fresh.search_experiments(max_results=1)
+        fresh.search_registered_models(max_results=1)
+        os.replace(partial, db)
+    except BaseException as error:
+        _remove_sqlite_files(partial)
+        if _sqlite_write_failed(error):
+            raise OSError(errno.ENOSPC, f"SQLite could not write: {_sqlite_reason(error)}", str(db)) from error
+        raise
+
+
+def _remove_sqlite_files(db: Path) -> None:
+    for suffix in ("", "-journal", "-wal", "-shm"):
+        db.with_name(db.name + suffix).unlink(missing_ok=True)
+
+
+def _sqlite_write_failed(error: BaseException) -> bool:
+    """A full disk or the file-size limit, as SQLite reports it (SQLITE_FULL, or an I/O error while writing)."""
+    reason = _sqlite_reason(error)
+    return "disk is full" in reason or "disk I/O error" in reason
+
+
+def _sqlite_reason(error: BaseException) -> str:
+    cause = error
+    while cause is not None and type(cause).__module__ != "sqlite3":
+        cause = cause.__cause__ or cause.__context__
+    return str(cause if cause is not None else error).splitlines()[0]
 
 
 def check_tracking(uri: str, timeout_s: float = 5.0) -> None:
-    """Refuse a tracking URI MLflow cannot use: an unknown scheme (ValueError), or a http(s) server that does not
+    """Refuse a tracking URI MLflow cannot use: an unknown scheme, a sqlite path that is a folder, a non-SQLite file
+    or in a missing folder, a database URL without its driver (ValueError), or a http(s) server that does not
     answer within `timeout_s` seconds (TrackingUnreachable, a ConnectionError). Any HTTP answer counts as up."""
     if not isinstance(uri, str) or not uri:
         raise ValueError(must_be("tracking URI", "a non-empty string", uri))
@@ -102,6 +132,10 @@ def check_tracking(uri: str, timeout_s: float = 5.0) -> None:
         raise ValueError(must_be("tracking URI", "sqlite:///<file>.db, http(s)://<host>:<port>, file:<dir> or a "
                                  "database URL", uri, "Fix --tracking-uri or $MLFLOW_TRACKING_URI (unset it for the "
                                  "default sqlite:///<cwd>/mlflow.db)."))
+    if sqlite_path(uri) is not None:
+        check_sqlite_store(sqlite_path(uri), uri)
+    elif scheme in ("postgresql", "mysql", "mssql"):
+        check_database_driver(uri)
     if scheme not in ("http", "https"):
         return
     try:
@@ -169,8 +203,19 @@ def register_version(client: MlflowClient, name: str, model_uri: str, tags: dict
         if same:
             version = str(min(int(v.version) for v in same))
         else:
-            version = str(mlflow.register_model(model_uri, name, tags=tags, await_registration_for=60).version)
+            version = _register_quietly(model_uri, name, tags)
         return version, _champion_if_better(client, name, version, metric)
+
+
+def _register_quietly(model_uri: str, name: str, tags: dict[str, str]) -> str:
+    """`mlflow.register_model`, whose own prints on stderr ("Created version '1' of model ...") become INFO lines
+    of our logger: shown by default, silent with --quiet like every other INFO line. → the new version"""
+    printed = io.StringIO()
+    with contextlib.redirect_stderr(printed):            # MLflow's eprint writes to the current sys.stderr
+        version = mlflow.register_model(model_uri, name, tags=tags, await_registration_for=60).version
+    for line in filter(str.strip, printed.getvalue().splitlines()):
+        _log.info(line)
+    return str(version)
 
 
 def update_champion(client: MlflowClient, name: str, version: str, metric: float) -> bool:
@@ -252,24 +297,15 @@ def load(uri: str, *, expect_body: BodySpec | None = None, expect_modality: str 
     """The registered SensoryModel at `models:/<name>@<alias>` or `models:/<name>/<version>`, digest-checked."""
     from bodyschema.models import load_model
 
-    match = _URI.match(uri) if isinstance(uri, str) else None
-    if match is None:
-        raise ValueError(must_be("uri", "'models:/<name>@<alias>' or 'models:/<name>/<version>'", uri,
-                                 "List registered models with `bodyschema registry list`."))
+    check_registered_uri(uri)
     client = use_tracking(tracking)
-    name, alias = match["name"], match["alias"]
-    try:
-        version = (client.get_model_version_by_alias(name, alias) if alias
-                   else client.get_model_version(name, match["version"]))
-    except MlflowException as error:
-        raise ValueError(must_be("uri", f"a registered model version in {mlflow.get_tracking_uri()}", uri,
-                                 "List registered models with `bodyschema registry list`.")) from error
-    where = f"models:/{name}/{version.version}"
+    version = resolve_version(client, uri)
+    where = f"models:/{version.name}/{version.version}"
     with tempfile.TemporaryDirectory(prefix="bodyschema-load-") as tmp:
         local = Path(mlflow.artifacts.download_artifacts(artifact_uri=where, dst_path=tmp,
                                                          tracking_uri=mlflow.get_tracking_uri()))
         model_dir = _artifact_dir(local)
-        verify_directory(model_dir, version.tags.get(DIGEST_TAG), where)
+        verify_directory(model_dir, version_digest(client, version), where)   # the record, never the MLmodel
         model = load_model(model_dir)
     if expect_body is not None:
         expect_body.check_compatible(model.body, f"registered model {where}")
@@ -279,16 +315,36 @@ def load(uri: str, *, expect_body: BodySpec | None = None, expect_modality: str 
     return model
 
 
+def check_registered_uri(uri) -> None:
+    """`uri` is `models:/<name>@<alias>` or `models:/<name>/<version>`."""
+    if not (isinstance(uri, str) and _URI.match(uri)):
+        raise ValueError(must_be("uri", "'models:/<name>@<alias>' or 'models:/<name>/<version>'", uri,
+                                 "List registered models with `bodyschema registry list`."))
+
+
+def resolve_version(client: MlflowClient, uri: str):
+    """The ModelVersion that `models:/<name>@<alias>` or `models:/<name>/<version>` names in the tracking database."""
+    check_registered_uri(uri)
+    match = _URI.match(uri)
+    try:
+        return (client.get_model_version_by_alias(match["name"], match["alias"]) if match["alias"]
+                else client.get_model_version(match["name"], match["version"]))
+    except MlflowException as error:
+        raise ValueError(must_be("uri", f"a registered model version in {client.tracking_uri}", uri,
+                                 "List registered models with `bodyschema registry list`.")) from error
+
+
 def _artifact_dir(local: Path) -> Path:
     """Where the logged model keeps the SensoryModel directory, inside `local`: the pyfunc `data` of the loader
     module (or, for models logged from code before it, the artifact `sensory_model`). The MLmodel file is only
-    read here, as YAML data; the digest check that follows is what makes the directory trusted."""
-    from mlflow.models import Model
+    parsed here, as YAML data (what it names as `code` or `loader_module` is never imported); the digest check
+    that follows, against the registry's record, is what makes the directory trusted."""
+    import yaml
 
     try:
-        flavor = Model.load(str(local / "MLmodel")).flavors["python_function"]
+        flavor = yaml.safe_load((local / "MLmodel").read_text())["flavors"]["python_function"]
         relative = flavor["data"] if flavor.get("data") else flavor["artifacts"][OLD_ARTIFACT_KEY]["path"]
-    except (OSError, KeyError, TypeError) as error:
+    except (OSError, KeyError, TypeError, yaml.YAMLError) as error:
         raise ValueError(must_be("registered model", "a bodyschema pyfunc (logged by `bodyschema train`)",
                                  str(local), "Only models logged by `bodyschema train` can be loaded.")) from error
     path = (local / str(relative)).resolve()

@@ -1,6 +1,7 @@
 """`--model <dir>` specs: a model directory loads when the tracking database records its digest, is refused when
 nothing vouches for it (unless the user says `trusted:`), and a state.pt holding a code pickle is the house error."""
 
+import json
 import os
 import shutil
 
@@ -28,10 +29,10 @@ def test_a_directory_logged_by_train_loads_and_a_changed_copy_is_refused(workdir
         torch.testing.assert_close(resolve_model(str(result.model_dir)).predict(z),
                                    load_model(result.model_dir).predict(z), rtol=0, atol=0)
 
-    copy = shutil.copytree(result.model_dir, workdir / "edited")
-    state = copy / "state.pt"
-    saved = torch.load(state, weights_only=True)
-    torch.save({k: v * 1.01 for k, v in saved.items()}, state)      # a well-formed model nobody logged
+    copy = workdir / "edited"
+    edited = load_model(result.model_dir)
+    edited.weight_ = edited.weight_ * 1.01
+    edited.save(copy)                                                # a well-formed model nobody logged
     with pytest.raises(ValueError, match=r"model directory .* must be a model logged by `bodyschema train` in "
                                          r"sqlite:///.*recorded nowhere.*pass trusted:"):
         resolve_model(str(copy))
@@ -57,6 +58,9 @@ def test_a_pickle_payload_as_state_pt_is_the_house_error_and_runs_nothing(workdi
     copy = shutil.copytree(result.model_dir, tmp_path / "payload")
     marker = tmp_path / "payload-ran"
     torch.save({"weight": _Payload(marker)}, copy / "state.pt")        # what a tampered checkpoint looks like
+    meta = json.loads((copy / "meta.json").read_text())
+    del meta["state_sha256"]       # whoever writes state.pt edits meta.json too: integrity, not authenticity
+    (copy / "meta.json").write_text(json.dumps(meta))
     for spec in (f"trusted:{copy}",):
         with pytest.raises(ValueError, match=r"state.pt must be tensors only .* Refusing to run it") as info:
             resolve_model(spec)

@@ -86,7 +86,7 @@ def test_load_refuses_artifacts_that_changed_after_logging(registered):
     original = state.read_bytes()
     try:
         state.write_bytes(original[:-1] + bytes([original[-1] ^ 1]))
-        with pytest.raises(ValueError, match="must have sha256 .* refusing to load"):
+        with pytest.raises(ValueError, match="sha256 of the files of .* must be .* refusing to load"):
             load(f"models:/{NAME}/1", tracking=registered)
     finally:
         state.write_bytes(original)

@@ -1,0 +1,61 @@
+"""Checks of a tracking URI's local side, before MLflow touches it: the sqlite file, the database driver.
+
+Without them MLflow fails late and loudly: a `sqlite:///` path naming a folder retries for minutes ("unable to open
+database file") and then raises; a text file raises sqlite's "file is not a database" from deep in a migration;
+`mysql://` or `postgresql://` without the driver raises ModuleNotFoundError mid-connection. Each becomes the house
+error here, in milliseconds, and nothing is created (not even the lock file beside the database).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from bodyschema.errors import must_be
+
+SQLITE_HEADER = b"SQLite format 3\x00"      # the first 16 bytes of every SQLite database file
+# Python module SQLAlchemy imports for a database URL → the pip package that provides it
+DRIVER_PACKAGES = {"MySQLdb": "mysqlclient", "pymysql": "PyMySQL", "psycopg": "psycopg[binary]",
+                   "psycopg2": "psycopg2-binary", "pyodbc": "pyodbc", "pymssql": "pymssql",
+                   "mysql": "mysql-connector-python", "asyncpg": "asyncpg", "pg8000": "pg8000"}
+HINT = "Fix --tracking-uri or $MLFLOW_TRACKING_URI (unset it for the default sqlite:///<cwd>/mlflow.db)."
+
+
+def check_sqlite_store(db: Path, uri: str) -> None:
+    """`db` (the file of a sqlite:/// URI) is an SQLite database, an empty file, or absent in an existing folder."""
+    if db.is_dir():
+        raise ValueError(must_be("tracking URI", "sqlite:///<a database file>", uri, f"{db} is a folder. {HINT}"))
+    if db.exists():
+        if not db.is_file():
+            raise ValueError(must_be("tracking URI", "sqlite:///<a database file>", uri,
+                                     f"{db} is not a regular file. {HINT}"))
+        with open(db, "rb") as file:
+            head = file.read(len(SQLITE_HEADER))
+        if head and head != SQLITE_HEADER:       # an empty file is an empty database to SQLite
+            raise ValueError(must_be("tracking URI", "sqlite:///<an SQLite database file>", uri,
+                                     f"{db} exists and is not an SQLite database (it starts with {head[:8]!r}); "
+                                     f"refusing to write MLflow's tables into it. {HINT}"))
+        return
+    if not db.parent.is_dir():
+        raise ValueError(must_be("tracking URI", "sqlite:///<file> in an existing folder", uri,
+                                 f"The folder {db.parent} does not exist: create it, or fix the path (an absolute "
+                                 "path takes four slashes, sqlite:////home/me/mlflow.db)."))
+
+
+def check_database_driver(uri: str) -> None:
+    """The Python driver SQLAlchemy needs for a database URL (mysql://, postgresql://, mssql://) is installed."""
+    from sqlalchemy.engine import make_url
+    from sqlalchemy.exc import ArgumentError, NoSuchModuleError
+
+    try:
+        url = make_url(uri)
+        shown = url.render_as_string(hide_password=True)          # the message must not print a password
+        url.get_dialect().import_dbapi()
+    except (ArgumentError, NoSuchModuleError, ValueError) as error:
+        raise ValueError(must_be("tracking URI", "a database URL SQLAlchemy knows (dialect[+driver]://...)",
+                                 uri.split("://")[0] + "://…", f"{error}. {HINT}")) from None
+    except ImportError as error:
+        module = (error.name or "").split(".")[0] or str(error)
+        package = DRIVER_PACKAGES.get(module, module)
+        raise ValueError(must_be(f"the database driver of tracking URI {shown}", "installed", f"no module {module}",
+                                 f"Install it (`pip install {package}`), or use the default sqlite store "
+                                 "(unset MLFLOW_TRACKING_URI).")) from None
