@@ -29,11 +29,10 @@ from bodyschema.aif.perception import Perception, PerceptionConfig
 from bodyschema.evaluation.core.seeds import eval_rng
 from bodyschema.evaluation.core.specs import load_robot, resolve_model
 from bodyschema.evaluation.levels.benchmark import LevelsConfig, levels_update, run_levels
+from bodyschema.evaluation.levels.plain import PLAIN_STEPS, plain_infer
 from bodyschema.evaluation.levels.report import markdown
 from bodyschema.evaluation.levels.targets import initial_beliefs, make_targets
 
-PLAIN = PerceptionConfig(integrator="euler", dt=0.1, k_z=1.0, max_steps=5000, tol=0.0, max_step=None, record=True,
-                         step_control="none")
 SIGMA = {"ee_xyz": 1e-3, "ee_pixel": 1.0, "joints": math.radians(2.0)}   # m, px, rad: noise = 1/√precision
 COLUMNS = ("joint_err_deg", "joint_err_median_deg", "ee_err_mm", "success", "steps", "evaluations_per_trial",
            "diverged", "wall_s")
@@ -72,31 +71,6 @@ def batched_vs_loop(models, n, precisions=None, noise=None):
     print(f"[1] {label(models)}, {n} trials (level 2): batched {t_batch:.3f} s, per-trial loop {t_loop:.3f} s "
           f"→ ×{t_loop / t_batch:.1f}; |Δμ| batched vs loop max {diff.max():.2e} rad, median {diff.median():.2e} rad "
           f"(float32 networks round differently at batch 1 and N); mean steps {batched.steps.float().mean():.1f}")
-
-
-def pixel_aif_plain(level: int) -> PerceptionConfig:
-    """Pixel-AIF's own update (Sancaktar et al. 2020): Euler Δt 0.1 on F with its visual precision 1/Σ_v,
-    Σ_v = 2·10⁴ at levels 1–2 and 2·10³ at level 3 (÷10 precision once the image MSE ≤ 0.01: `plain_infer`)."""
-    sigma_v = 2e3 if level == 3 else 2e4
-    return replace(PLAIN, precisions=(("image", 1.0 / sigma_v),), record=False, divergence_ratio=None)
-
-
-def plain_infer(models, obs, mu0, level, steps, chunk=100):
-    """The plain protocol in chunks of `chunk` Euler steps (the state is μ alone, so chunking is exact); at level 3
-    a trial's precision drops ×10 once its image MSE ≤ 0.01, as in Pixel-AIF."""
-    image = next(m for m in models if m.modality == "image")
-    mu, evaluations = mu0.clone(), 0
-    pi = torch.full((len(mu0),), dict(pixel_aif_plain(level).precisions)["image"], dtype=torch.float64)
-    for _ in range(0, steps, chunk):
-        if level == 3:
-            with torch.no_grad():
-                mse = (image.predict(mu.float()).double() - obs["image"]).pow(2).mean(dim=(1, 2))
-            pi = torch.where(mse <= 0.01, dict(pixel_aif_plain(2).precisions)["image"], pi)
-        cfg = replace(pixel_aif_plain(level), max_steps=chunk, precisions=())
-        res = Perception(models, cfg, {"image": pi[:, None, None].expand(-1, *image.output_shape)}).infer(obs, mu)
-        mu, evaluations = res.mu, evaluations + res.evaluations
-    res.mu, res.evaluations = mu, evaluations
-    return res
 
 
 def updates(models):
@@ -201,9 +175,7 @@ def main():
     args = parser.parse_args()
     n, runs = (100, 1) if args.quick else (500, 5)
     n = args.trials or n
-    global PLAIN
-    if args.quick:
-        PLAIN = replace(PLAIN, max_steps=1000)
+    plain_steps = 1000 if args.quick else PLAIN_STEPS
     torch.set_num_threads(1)
     nao = ("ee_xyz", "ee_pixel", "joints")
     oracles = [analytic("planar2", ("ee_xyz",)), analytic("nao_arm", ("ee_xyz", "joints")), analytic("nao_arm", nao)]
@@ -215,7 +187,7 @@ def main():
             batched_vs_loop(extra, n)
     if 2 not in args.skip:
         if any(m.modality == "image" for m in extra):   # 5000 plain steps per trial: a subset of the trials
-            compare_updates(extra, n, plain_n=min(n, args.plain_trials), plain_steps=PLAIN.max_steps)
+            compare_updates(extra, n, plain_n=min(n, args.plain_trials), plain_steps=plain_steps)
         else:
             print("[2] skipped: give an image decoder with --model (e.g. models:/bodyschema-nao_arm-image-pixel@champion)")
     if 3 not in args.skip:

@@ -52,15 +52,15 @@ def table_metrics(table: Iterable[Mapping], label: Callable | str) -> dict[str, 
 
 
 def log_benchmark(config, run_name: str, metrics: Mapping[str, float], paths: Iterable[Path],
-                  models: Sequence = ()) -> str:
-    """Log one run to `config.experiment` at `config.tracking_uri`; returns its run id."""
+                  models: Sequence = (), tags: Mapping[str, str] | None = None) -> str:
+    """Log one run to `config.experiment` at `config.tracking_uri` (its models' tags, plus `tags`); → its run id."""
     import mlflow
 
     from bodyschema.training.registry import ensure_experiment, use_tracking
     use_tracking(config.tracking_uri)
     with mlflow.start_run(experiment_id=ensure_experiment(config.experiment), run_name=run_name) as run:
         mlflow.log_params(config_params(config, models))
-        mlflow.set_tags(model_tags(models))
+        mlflow.set_tags({**model_tags(models), **(tags or {})})
         mlflow.log_metrics(dict(metrics))
         for path in paths:
             mlflow.log_artifact(str(path))

@@ -14,6 +14,7 @@ Models come as objects (`run_levels(config, models=[...])`) or as specs: "analyt
 
 from __future__ import annotations
 
+import json
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field, fields, replace
@@ -34,6 +35,8 @@ from bodyschema.evaluation.core.seeds import eval_rng
 from bodyschema.evaluation.core.specs import (load_robot, models_field, on_device, resolve_encoder,
                                               resolve_models)
 from bodyschema.evaluation.levels import report as level_report
+from bodyschema.evaluation.levels.plain import PLAIN_LABEL, PLAIN_STEPS, PlainPixelAIF
+from bodyschema.evaluation.levels.recorded import RecordedTargets, plain_verdict
 from bodyschema.evaluation.levels.targets import initial_beliefs, make_targets
 
 
@@ -76,6 +79,9 @@ class LevelsConfig(PerceptionRunConfig):
     screen_steps: int = 5              # multi-start: updates before pruning (a descent trial converges in ~15)
     keep: int = 2                      # multi-start: starts per trial refined to convergence
     encoder: str | None = None         # an image encoder spec (kind "encoder"): extra "+enc" rows start from its guess
+    targets: Path | None = None        # a dataset store (e.g. `bodyschema import`ed): score its recorded frames
+    # instead of simulator renders (recorded.py); no simulator needed
+    plain_steps: int = PLAIN_STEPS     # --targets with an image model: Euler steps of the plain Pixel-AIF row (0: off)
 
     def __post_init__(self):
         super().__post_init__()
@@ -92,6 +98,7 @@ class LevelsSummary:
     per_trial: dict[str, np.ndarray] = field(default_factory=dict)   # level → (runs·trials,) mean error, deg
     paths: dict[str, Path] = field(default_factory=dict)
     run_id: str | None = None
+    targets: dict | None = None                 # recorded targets: store path, digest, frames (None: simulator)
 
 
 # ---- models ------------------------------------------------------------------------------------------
@@ -168,16 +175,26 @@ def run_levels(config: LevelsConfig = LevelsConfig(), models: Sequence | None = 
     models = resolve_models(config.models, DEFAULT_MODELS, config.tracking_uri, models)
     summary, curves = measure_levels(config, models)
     folder = new_run(config)
-    summary.paths = level_report.write_all(summary, curves, folder, plots=config.plots)
+    summary.paths = level_report.write_all(summary, curves, folder, plots=config.plots,
+                                           notes=plain_verdict(summary.table))
+    tags = {}
+    if summary.targets is not None:                       # lineage: which recorded frames were scored
+        summary.paths["targets_json"] = folder / "targets.json"
+        summary.paths["targets_json"].write_text(json.dumps(summary.targets, indent=2, default=str))
+        tags = {"bodyschema.targets.path": summary.targets["path"], "bodyschema.targets.sha256":
+                summary.targets["sha256"]}
     summary.run_id = publish(config, folder, "levels", table_metrics(summary.table, lambda r: f"L{r['level']}"),
-                             summary.paths, models)
+                             summary.paths, models, tags=tags)
     return summary
 
 
 def measure_levels(config: LevelsConfig, models: Sequence) -> tuple[LevelsSummary, dict[str, np.ndarray]]:
     """The levels × runs of config on resolved models, nothing written: (summary, F(t) curves per level)."""
     from tqdm import tqdm
-    robot = load_robot(models, config.image_size)
+    recorded = None if config.targets is None else RecordedTargets(config.targets, models, config.encoder is not None)
+    robot = load_robot(models, config.image_size) if recorded is None else recorded.body
+    if recorded is not None:
+        recorded.check_enough(config.trials, config.runs)
     encoder = resolve_encoder(config.encoder, robot, config.tracking_uri)
     on_device(models + ([encoder] if encoder else []), config.device)
     perception = Perception(models, levels_update(config, models))
@@ -189,8 +206,10 @@ def measure_levels(config: LevelsConfig, models: Sequence) -> tuple[LevelsSummar
     targets = None
     for run, level, ms, enc in tqdm(jobs, desc="levels", disable=not config.progress or len(jobs) < 2):
         if targets is None or targets[0] != run:
+            noise_rng = eval_rng(config.seed, run, "noise")
             targets = (run, make_targets(robot, config.trials, eval_rng(config.seed, run, "targets"), has_image,
-                                         dict(config.noise), eval_rng(config.seed, run, "noise")))
+                                         dict(config.noise), noise_rng) if recorded is None else
+                       recorded.run(run, config.trials, dict(config.noise), noise_rng))
         rng = eval_rng(config.seed, run, "beliefs", level)                 # same μ0 with and without multi-start
         row, trial, result = evaluate_level(perception, robot, targets[1], level, rng, config.success_deg, ms,
                                             config.screen_steps, config.keep, encoder if enc else None)
@@ -198,7 +217,14 @@ def measure_levels(config: LevelsConfig, models: Sequence) -> tuple[LevelsSummar
         per_trial.setdefault(row["level"], []).append(trial["mean_err_deg"])
         if result.trajectory is not None and not ms and row["level"] not in curves:   # ms: refinement only
             curves[row["level"]] = result.trajectory["F"].numpy()          # (T, N), first run
-    summary = LevelsSummary(rows, level_report.aggregate(rows), {k: np.concatenate(v) for k, v in per_trial.items()})
+        if recorded is not None and not ms and not enc and config.plain_steps and \
+                any(m.modality == "image" for m in models):              # the reference row, same frames and μ0
+            plain, trial, _ = evaluate_level(PlainPixelAIF(models, level, config.plain_steps), robot, targets[1],
+                                             level, eval_rng(config.seed, run, "beliefs", level), config.success_deg)
+            rows.append({"run": run, **plain, "level": f"{level} {PLAIN_LABEL}"})
+            per_trial.setdefault(rows[-1]["level"], []).append(trial["mean_err_deg"])
+    summary = LevelsSummary(rows, level_report.aggregate(rows), {k: np.concatenate(v) for k, v in per_trial.items()},
+                            targets=None if recorded is None else recorded.lineage())
     return summary, curves
 
 

@@ -86,12 +86,14 @@ def plot_sweep(rows: Sequence[Mapping], x: str, path: Path, y: str = "joint_err_
     return save_figure(fig, path, dpi=120)
 
 
-def write_all(summary, curves: Mapping[str, np.ndarray], out: Path, plots: bool = True) -> dict[str, Path]:
+def write_all(summary, curves: Mapping[str, np.ndarray], out: Path, plots: bool = True,
+              notes: str = "") -> dict[str, Path]:
+    """CSVs, summary.md (the table, then `notes`) and the plots of a levels run in `out`."""
     out.mkdir(parents=True, exist_ok=True)
     paths = {"runs_csv": write_csv(summary.rows, out / "runs.csv"),
              "summary_csv": write_csv(summary.table, out / "summary.csv")}
     paths["summary_md"] = out / "summary.md"
-    paths["summary_md"].write_text(markdown(summary.table))
+    paths["summary_md"].write_text(markdown(summary.table) + (f"\n{notes}\n" if notes else ""))
     if plots:
         paths["boxplot"] = plot_boxes(summary.per_trial, out / "levels_boxplot.png")
         if curves:

@@ -47,17 +47,22 @@ def make_targets(robot, n: int, rng: np.random.Generator, image: bool = False,
            "joints": q.copy()}
     if image:
         obs["image"] = sensed["image"].astype(np.float64) / IMAGE_SCALE
+    return Targets(q, add_noise(obs, noise, noise_rng if noise_rng is not None else rng))
+
+
+def add_noise(obs: dict[str, np.ndarray], noise: Mapping[str, float] | None,
+              rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """`obs` with Gaussian noise of standard deviation `noise[modality]` (in its units) added; images stay in [0, 1]."""
     for modality, sigma in (noise or {}).items():
         if modality not in obs:
             raise ValueError(must_be("noise modality", f"one of {sorted(obs)}", modality))
         if not sigma >= 0:
             raise ValueError(must_be(f"noise[{modality!r}]", "a standard deviation ≥ 0", sigma))
         if sigma > 0:
-            gen = noise_rng if noise_rng is not None else rng
-            obs[modality] = obs[modality] + sigma * gen.standard_normal(obs[modality].shape)
+            obs[modality] = obs[modality] + sigma * rng.standard_normal(obs[modality].shape)
             if modality == "image":
                 obs[modality] = np.clip(obs[modality], 0.0, 1.0)
-    return Targets(q, obs)
+    return obs
 
 
 def initial_beliefs(level: int, q: np.ndarray, ranges: np.ndarray, rng: np.random.Generator) -> np.ndarray:

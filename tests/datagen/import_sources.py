@@ -21,17 +21,18 @@ def planar2_frames(n: int, seed: int = 0, rgb: bool = False) -> tuple[np.ndarray
         return q, robot.observe(q)["image"]
 
 
-def write_folder(folder: Path, q: np.ndarray, images: np.ndarray, columns=("shoulder", "elbow"),
-                 deg: bool = True, header: bool = True) -> Path:
-    """img0.png … and angles.csv (one row per image, columns in the order given, angles in deg or rad)."""
+def write_folder(folder: Path, q: np.ndarray, images: np.ndarray | None, names=("shoulder", "elbow"),
+                 order=None, deg: bool = True, header: bool = True) -> Path:
+    """img0.png … and angles.csv: one row per image, q's columns (joints `names`) written in `order` (indices;
+    None: as they are), in deg or rad. images None: the CSV alone."""
     import cv2
 
     folder.mkdir(parents=True)
-    for i, image in enumerate(images):
+    for i, image in enumerate(images if images is not None else []):
         cv2.imwrite(str(folder / f"img{i}.png"), image if image.ndim == 2 else cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
-    order = [("shoulder", "elbow").index(c) for c in columns]
+    order = list(range(q.shape[1])) if order is None else list(order)
     values = np.rad2deg(q) if deg else q
-    lines = [",".join(columns)] if header else []
+    lines = [",".join(names[i] for i in order)] if header else []
     lines += [",".join(repr(float(v)) for v in row[order]) for row in values]
     (folder / "angles.csv").write_text("\n".join(lines) + "\n")
     return folder

@@ -22,7 +22,7 @@ def _read(store):
 
 def test_degrees_named_columns_in_another_order_and_natural_image_order(tmp_path):
     q, images = planar2_frames(12)                       # img10, img11 sort after img9 only in natural order
-    folder = write_folder(tmp_path / "rec", q, images, columns=("elbow", "shoulder"), deg=True)
+    folder = write_folder(tmp_path / "rec", q, images, order=(1, 0), deg=True)
     store = import_recording(ImportConfig(source=folder, out=tmp_path / "rec.zarr", angles="deg", robot="planar2",
                                           fk=True))
     assert validate_store(store) == []
@@ -80,7 +80,7 @@ def test_a_body_from_joint_names_and_ranges_trains(tmp_path):
     from bodyschema.training.data import load_dataset
 
     q, images = planar2_frames(10)
-    folder = write_folder(tmp_path / "rec", q, images, columns=("shoulder", "elbow"), deg=True)
+    folder = write_folder(tmp_path / "rec", q, images, deg=True)
     store = import_recording(ImportConfig(source=folder, out=tmp_path / "rec.zarr", angles="deg",
                                           joints=("shoulder", "elbow"), ranges=((-150, 150), (-150, 150)),
                                           name="my_arm"))
