@@ -7,8 +7,9 @@ the current champion's, or when a user `promote`s a version by hand.
 
 Consumers call `load("models:/<name>@champion")` (or `models:/<name>/<version>`) and get the SensoryModel
 itself. Trust boundary: the artifacts are downloaded, their sha256 is compared with the digest recorded on the
-registered version (in the tracking database, never a file beside the weights), and only then are the tensors
-read (`torch.load(weights_only=True)`); the MLmodel file is read as data, no code of the artifacts runs.
+registered version named by the URI (and on its logged model, which must agree; in the tracking database, never a
+file beside the weights or an id in the MLmodel file), and only then are the tensors read
+(`torch.load(weights_only=True)`); the MLmodel file is parsed as YAML data, no code it names is imported.
 
 Concurrency: with the default sqlite store, creating its tables, registering a version (with its tags, in one
 transaction) and moving `champion` (a compare-and-set) happen under an flock on `<db>.lock`, so two `train`
