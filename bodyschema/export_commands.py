@@ -32,20 +32,20 @@ class ExportDatasetArgs:
     to: Literal["hdf5", "lerobot"]     # the format
     store: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="STORE")]   # the .zarr store (it must validate)
     out: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="OUT")]   # .h5 file (hdf5), a directory (lerobot)
-    overwrite: bool = False            # replace OUT if it exists
+    overwrite: bool = False            # replace OUT if it is a previous export in this format (never anything else)
 
 
 @dataclass(frozen=True)
 class ExportOnnxArgs:
     """Export a fitted model to ONNX: joint angles in rad in, its prediction out (scaling inside), checked with
-    onnxruntime against the model before it is reported."""
+    onnxruntime against the model before it is written."""
 
     model: Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="MODEL_SPEC")]
     """models:/<name>@<alias>, a `bodyschema train` run or model directory, or trusted:<dir>"""
     out: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="OUT")]   # the .onnx file
-    opset: int = 18                    # ONNX opset (recorded in the file's metadata)
+    opset: int = 18                    # ONNX opset, in the installed exporter's range (the file's is in its metadata)
     tracking_uri: str | None = None    # None: $MLFLOW_TRACKING_URI, else sqlite:///<cwd>/mlflow.db
-    overwrite: bool = False            # replace OUT if it exists
+    overwrite: bool = False            # replace OUT if it is a previous ONNX export (never anything else)
 
 
 def run_show(args: ShowArgs) -> int:
@@ -68,22 +68,15 @@ def run_export_dataset(args: ExportDatasetArgs) -> int:
 
 
 def run_export_onnx(args: ExportOnnxArgs) -> int:
-    from bodyschema.errors import must_be
-    from bodyschema.models.onnx_export import TOLERANCE, export_onnx, read_metadata, verify_onnx
+    from bodyschema.datagen.outputs import check_out
+    from bodyschema.models.onnx_export import FORMAT, check_opset, export_onnx, read_metadata
 
-    if args.out.exists() and not args.overwrite:
-        raise FileExistsError(must_be("OUT", "a path that does not exist yet", str(args.out),
-                                      "Pass --overwrite to replace it, or choose another path."))
-    model = _load(args.model, args.tracking_uri)
-    path = export_onnx(model, args.out, opset=args.opset)
-    error = verify_onnx(model, path)
+    check_opset(args.opset)                            # both before loading the model: a bad flag fails at once
+    check_out(args.out, FORMAT, args.overwrite)
+    path = export_onnx(_load(args.model, args.tracking_uri), args.out, opset=args.opset, overwrite=args.overwrite)
     meta = read_metadata(path)
     print(f"onnx: {path} (opset {meta['opset']}, {meta['bodyschema.dtype']})\n"
-          f"  in:  {meta['bodyschema.input']}\n  out: {meta['bodyschema.output']}\n"
-          f"  onnxruntime vs the model: max |error| {error:.3g} over 64 inputs (tolerance {TOLERANCE:g})")
-    if not error <= TOLERANCE:
-        raise FloatingPointError(must_be("the exported graph", f"equal to the model within {TOLERANCE:g}",
-                                         f"max |error| {error:.3g}", f"{path} is kept for inspection; report it."))
+          f"  in:  {meta['bodyschema.input']}\n  out: {meta['bodyschema.output']}\n  {meta['bodyschema.check']}")
     return 0
 
 

@@ -11,6 +11,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from bodyschema.datagen.outputs import replace_atomically
 from bodyschema.datagen.store import open_store
 from bodyschema.errors import must_be
 
@@ -25,6 +26,7 @@ def write_contact_sheet(path: str | Path, out_png: str | Path, n: int = 16) -> P
     """
     if not isinstance(n, int) or n < 1:
         raise ValueError(must_be("n", "an integer >= 1", n))
+    out_png = check_png_path(out_png)
     root = open_store(Path(path))
     if "image" not in root.array_keys():
         raise ValueError(must_be("store", "one with images", f"{path} without an `image` array",
@@ -49,8 +51,20 @@ def write_contact_sheet(path: str | Path, out_png: str | Path, n: int = 16) -> P
     blank = np.zeros_like(tiles[0])
     tiles += [blank] * (-len(tiles) % cols)
     grid = np.vstack([np.hstack(tiles[r:r + cols]) for r in range(0, len(tiles), cols)])
-    out_png = Path(out_png)
+    ok, png = cv2.imencode(".png", grid)
+    if not ok:
+        raise ValueError(must_be("the contact sheet", "encodable as PNG", f"array {grid.shape} {grid.dtype}"))
     out_png.parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(out_png), grid):
-        raise OSError(must_be("out_png", "a writable .png path", str(out_png)))
+    replace_atomically(out_png.resolve(), lambda tmp: tmp.write_bytes(png.tobytes()), png.nbytes)   # never half a PNG
+    return out_png
+
+
+def check_png_path(out_png: str | Path) -> Path:
+    """`out_png` as a Path, refused unless it names a .png file (the sheet's only format) and is not a directory."""
+    out_png = Path(out_png)
+    if out_png.suffix.lower() != ".png" or out_png.is_dir():
+        hint = ("It is a directory: name a file in it" if out_png.is_dir()
+                else f"For example {out_png.with_suffix('.png').name}")
+        raise ValueError(must_be("--out", "a .png file path (the contact sheet is a PNG)", str(out_png),
+                                 f"{hint}; nothing was written."))
     return out_png

@@ -4,22 +4,22 @@ What every format gets from here, so the writers only lay it out: the store vali
 store is refused with every problem listed, as `bodyschema validate` would), its data arrays with their
 per-sample shape, unit and axis names, the body (robot, joint names, the sampled joint ranges the models scale
 by: `training.data.body_from_attrs`'s values), the root attrs as JSON, and a writer that builds the output
-beside its final path and renames it into place, so a killed export never leaves a half-written OUT.
+beside its final path and renames it into place (datagen/outputs.py): a killed export never leaves a half-written
+OUT, and --overwrite replaces only a previous export of the same format, never the store itself.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
-import os
-import shutil
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import zarr
 
-from bodyschema.datagen.store import DONE, open_store
+from bodyschema.datagen.outputs import check_out, write_atomically
+from bodyschema.datagen.store import DONE, open_store, shard_digests
 from bodyschema.errors import must_be
 
 FORMATS = ("hdf5", "lerobot")
@@ -31,12 +31,15 @@ def export_dataset(store: str | Path, out: str | Path, to: str, *, overwrite: bo
     if to not in FORMATS:
         raise ValueError(must_be("--to", f"one of {FORMATS}", to))
     store, out = Path(store), Path(out)
-    root = checked_store(store)
     if to == "hdf5":
-        from bodyschema.datagen.export_hdf5 import write_hdf5 as write
+        from bodyschema.datagen.export_hdf5 import FORMAT, SIZE_FACTOR, write_hdf5 as write
     else:
-        from bodyschema.datagen.export_lerobot import write_lerobot as write
-    return write_atomically(out, lambda tmp: write(root, tmp), overwrite)
+        from bodyschema.datagen.export_lerobot import FORMAT, SIZE_FACTOR, write_lerobot as write
+    check_out(out, FORMAT, overwrite, [store])         # before the validation, which reads every chunk
+    root = checked_store(store)
+    source = {"store": str(store.resolve()), "digest": source_digest(root)}
+    return write_atomically(out, lambda tmp: write(root, tmp), overwrite, kind=FORMAT, inputs=[store],
+                            need_bytes=int(SIZE_FACTOR * stored_bytes(root)), source=source)
 
 
 def checked_store(path: Path) -> zarr.Group:
@@ -54,28 +57,16 @@ def checked_store(path: Path) -> zarr.Group:
     return root
 
 
-def write_atomically(out: Path, write: Callable[[Path], None], overwrite: bool) -> Path:
-    """Run `write(tmp)` on a temporary path beside `out`, then move it to `out` (replacing it only if asked)."""
-    if out.exists() and not overwrite:
-        raise FileExistsError(must_be("OUT", "a path that does not exist yet", str(out),
-                                      "Pass --overwrite to replace it, or choose another path."))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.partial-{os.getpid()}")
-    _remove(tmp)
-    try:
-        write(tmp)
-        _remove(out)
-        os.replace(tmp, out)
-    finally:
-        _remove(tmp)
-    return out
+def source_digest(root: zarr.Group) -> str:
+    """sha256 of the store's root attrs and its shards' checksums (which `validate_store` checked against the rows)."""
+    h = hashlib.sha256(attrs_json(root).encode())
+    h.update(shard_digests(root).tobytes())
+    return h.hexdigest()
 
 
-def _remove(path: Path) -> None:
-    if path.is_dir() and not path.is_symlink():
-        shutil.rmtree(path)
-    elif path.exists() or path.is_symlink():
-        path.unlink()
+def stored_bytes(root: zarr.Group) -> int:
+    """Bytes the data arrays take in the store (compressed): the base of an export's size estimate."""
+    return sum(int(root[name].nbytes_stored()) for name in data_arrays(root))
 
 
 # ---- what the writers share ---------------------------------------------------------------------------------

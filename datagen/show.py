@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from bodyschema.datagen.contact_sheet import write_contact_sheet
+from bodyschema.datagen.contact_sheet import check_png_path, write_contact_sheet
 from bodyschema.datagen.store import open_store
 from bodyschema.datagen.validate import summarize_store
 from bodyschema.errors import must_be
@@ -27,6 +27,8 @@ class Shown:
 
 def show_store(path: str | Path, out: str | Path | None = None, n: int = 16) -> Shown:
     path = Path(path)
+    if out is not None:
+        check_png_path(out)                 # before the summary: a bad --out fails at once
     if not path.exists():
         raise FileNotFoundError(must_be("STORE", "an existing .zarr store", str(path),
                                         "Create one with `bodyschema datagen --out PATH`."))

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import json
 import logging
-import os
 import warnings
 from pathlib import Path
 
@@ -32,6 +31,8 @@ from bodyschema.errors import must_be
 
 OPSET = 18                              # onnxruntime ≥ 1.14 runs it; torch's exporter targets ≥ 18
 TOLERANCE = 1e-5                        # max |onnxruntime − model| accepted (output units; rad for an encoder)
+CHECK_INPUTS = 64                       # seeded inputs of that check
+FORMAT = "bodyschema-onnx"              # the kind of output its marker names (datagen/outputs.py)
 NETWORK_KINDS = ("mdn", "pixel", "multimodal")     # models/kinds.py spellings
 EXPORTABLE = (*NETWORK_KINDS, "encoder", "gpr")
 CONV_KINDS = ("pixel", "encoder")       # float32 graphs (see the module doc)
@@ -84,29 +85,70 @@ def check_exportable(model) -> None:
         raise ValueError(must_be("model", "fitted", "a model without learned state", "Call `fit` first."))
 
 
-def export_onnx(model, out: str | Path, *, opset: int = OPSET) -> Path:
+def export_onnx(model, out: str | Path, *, opset: int = OPSET, overwrite: bool = False) -> Path:
     """Write `out` (.onnx, one file): input "q" (B, Dz) rad ("image" for an encoder), output "x" ("q"), a dynamic
-    batch axis, and metadata (opset, kind, modality, body, shapes, units) in the file's `metadata_props`."""
+    batch axis, and metadata (opset, kind, modality, body, shapes, units, the check) in the file's `metadata_props`.
+
+    The graph is run in onnxruntime against the model before anything is written; `out` appears only once that
+    check passed (datagen/outputs.py: beside it, then renamed; --overwrite replaces only a previous ONNX export)."""
     import onnx
 
+    from bodyschema.datagen.outputs import write_atomically
+
     check_exportable(model)
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
+    check_opset(opset)
+    proto = _export_proto(model, opset)
+    written = model_opset(proto)
+    if written != opset:        # torch builds opset 18 and converts down; the conversion can fail (then stays 18)
+        raise ValueError(must_be("--opset", "an opset this graph converts to", opset,
+                                 f"The exporter could not convert it and gave opset {written}: pass --opset "
+                                 f"{written}. Nothing was written."))
+    error = verify_onnx(model, proto.SerializeToString())
+    if not error <= TOLERANCE:
+        raise FloatingPointError(must_be("the exported graph", f"equal to the model within {TOLERANCE:g}",
+                                         f"max |error| {error:.3g}", "Nothing was written; report it."))
+    onnx.helper.set_model_props(proto, metadata(model, written, error))
+    onnx.checker.check_model(proto)
+    source = getattr(model, "provenance", None) or {"kind": model.kind, "modality": model.modality}
+    return write_atomically(out, lambda tmp: onnx.save_model(proto, str(tmp)), overwrite, kind=FORMAT,
+                            need_bytes=proto.ByteSize(), source=source)
+
+
+def supported_opsets() -> range:
+    """The opsets the installed exporter accepts: torch's ONNX range, capped by what the installed onnx knows."""
+    import onnx
+    from torch.onnx import _constants          # torch's own bounds of `opset_version` (no public name for them)
+
+    return range(_constants.ONNX_MIN_OPSET, min(_constants.ONNX_MAX_OPSET, onnx.defs.onnx_opset_version()) + 1)
+
+
+def check_opset(opset: int) -> None:
+    opsets = supported_opsets()
+    if not isinstance(opset, int) or opset not in opsets:
+        raise ValueError(must_be("--opset", f"an integer in [{opsets.start}, {opsets.stop - 1}] (the installed "
+                                 "exporter's range)", opset, f"The default, {OPSET}, is what torch builds."))
+
+
+def _export_proto(model, opset: int):
+    """The model's graph as an in-memory ONNX ModelProto (torch's dynamo exporter)."""
     graph, example, names = _graph(model)
-    # torch's exporter warns once per torchvision operator it cannot register (torchvision is not a dependency)
-    logging.getLogger("torch.onnx._internal.exporter._registration").setLevel(logging.ERROR)
+    # torch's exporter warns once per torchvision operator it cannot register (torchvision is not a dependency);
+    # below opset 18 it and onnxscript warn of the down-conversion, with a traceback when it fails: `export_onnx`
+    # compares the opset it got with the one asked and says so in one line
+    for name in ("torch.onnx._internal.exporter._registration", "torch.onnx._internal.exporter._compat",
+                 "onnxscript.version_converter"):
+        logging.getLogger(name).setLevel(logging.ERROR)
     with torch.no_grad(), warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=".*LeafSpec.*", category=FutureWarning)   # torch.export's own
         program = torch.onnx.export(graph, (example,), dynamo=True, opset_version=opset, verbose=False,
                                     input_names=[names[0]], output_names=[names[1]], optimize=True,
                                     dynamic_shapes=({0: torch.export.Dim("batch", min=1)},), external_data=False)
-    proto = program.model_proto
-    onnx.helper.set_model_props(proto, metadata(model, opset))
-    onnx.checker.check_model(proto)
-    tmp = out.with_name(f".{out.name}.partial")
-    onnx.save_model(proto, str(tmp))
-    os.replace(tmp, out)                                # a killed export leaves no half-written OUT
-    return out
+    return program.model_proto
+
+
+def model_opset(proto) -> int:
+    """The default-domain opset a ModelProto really imports."""
+    return next(o.version for o in proto.opset_import if o.domain in ("", "ai.onnx"))
 
 
 def _graph(model) -> tuple[nn.Module, torch.Tensor, tuple[str, str]]:
@@ -118,8 +160,9 @@ def _graph(model) -> tuple[nn.Module, torch.Tensor, tuple[str, str]]:
     return PredictGraph(model, dtype).eval(), z, ("q", "x")
 
 
-def metadata(model, opset: int) -> dict[str, str]:
-    """What a consumer needs beside the graph: units, shapes, joint order and where the numbers came from."""
+def metadata(model, opset: int, error: float) -> dict[str, str]:
+    """What a consumer needs beside the graph: units, shapes, joint order, where the numbers came from, and the
+    check it passed (`error`: max |onnxruntime − model| over CHECK_INPUTS inputs)."""
     encoder = model.kind == "encoder"
     dtype = "float32" if encoder else str(graph_dtype(model)).removeprefix("torch.")
     return {"bodyschema.opset": str(opset), "bodyschema.kind": model.kind, "bodyschema.modality": model.modality,
@@ -129,7 +172,9 @@ def metadata(model, opset: int) -> dict[str, str]:
             "bodyschema.output": (f"q (B, {model.latent_dim}) rad" if encoder
                                   else f"x (B, {', '.join(map(str, model.output_shape))}) {model.modality} in "
                                        f"{unit(model.modality)}"),
-            "bodyschema.source": json.dumps(getattr(model, "provenance", None) or {})}   # registry name, version, sha
+            "bodyschema.source": json.dumps(getattr(model, "provenance", None) or {}),   # registry name, version, sha
+            "bodyschema.check": f"onnxruntime vs the model: max |error| {error:.3g} over {CHECK_INPUTS} inputs "
+                                f"(tolerance {TOLERANCE:g})"}
 
 
 def unit(modality: str) -> str:
@@ -147,16 +192,18 @@ def read_metadata(path: str | Path) -> dict[str, str]:
 
     proto = onnx.load(str(path), load_external_data=False)
     props = {p.key: p.value for p in proto.metadata_props}
-    props["opset"] = str(next(o.version for o in proto.opset_import if o.domain in ("", "ai.onnx")))
+    props["opset"] = str(model_opset(proto))
     return props
 
 
-def verify_onnx(model, path: str | Path, *, n: int = 64, seed: int = 0) -> float:
-    """Max |onnxruntime(path) − model| over n seeded inputs: joint angles spread over (and 10 % beyond) the scaled
-    range against `predict` in float64; images in [0, 1] against `encode` for an encoder."""
+def verify_onnx(model, graph: str | Path | bytes, *, n: int = CHECK_INPUTS, seed: int = 0) -> float:
+    """Max |onnxruntime(graph) − model| over n seeded inputs: joint angles spread over (and 10 % beyond) the scaled
+    range against `predict` in float64; images in [0, 1] against `encode` for an encoder. `graph`: a file or the
+    serialized model."""
     import onnxruntime as ort
 
-    session = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    session = ort.InferenceSession(graph if isinstance(graph, bytes) else str(graph),
+                                   providers=["CPUExecutionProvider"])
     gen = torch.Generator().manual_seed(seed)
     if model.kind == "encoder":
         x = torch.rand(n, *model.image_shape, generator=gen)                        # (n, H, W[, C]) float32

@@ -59,14 +59,23 @@ def _assert_body_is_the_models(store, body):
 
 def test_an_existing_output_is_kept_unless_overwrite(stores, tmp_path):
     out = tmp_path / "d.h5"
-    out.write_text("keep me")
+    export_dataset(stores["babble"], out, "hdf5")
     with pytest.raises(FileExistsError, match="OUT must be a path that does not exist yet.*--overwrite"):
         export_dataset(stores["uniform"], out, "hdf5")
-    assert out.read_text() == "keep me"
+    with h5py.File(out, "r") as f:
+        assert f["q"].shape[0] == 150
     export_dataset(stores["uniform"], out, "hdf5", overwrite=True)
     with h5py.File(out, "r") as f:
         assert f["q"].shape[0] == 40
-    assert [p.name for p in tmp_path.iterdir()] == ["d.h5"]          # no partial file left beside it
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".d.h5.bodyschema-output.json", "d.h5"]   # no partial
+
+
+def test_overwrite_keeps_a_file_it_did_not_write(stores, tmp_path):
+    out = tmp_path / "d.h5"
+    out.write_text("keep me")
+    with pytest.raises(FileExistsError, match="OUT must be a previous bodyschema-hdf5 output.*not written by"):
+        export_dataset(stores["uniform"], out, "hdf5", overwrite=True)
+    assert out.read_text() == "keep me"
 
 
 def test_an_incomplete_store_is_refused_with_its_problems(stores, tmp_path):
