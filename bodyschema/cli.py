@@ -2,6 +2,7 @@
 
     bodyschema datagen --robot nao_arm --n 2000 --sampler babble --workers 2 --out data/nao.zarr
     bodyschema validate data/nao.zarr | bodyschema show data/nao.zarr   (summary + contact sheet PNG)
+    bodyschema robot init arm.urdf | bodyschema robot show arm.urdf   (a robot from a file: its record, a look)
     bodyschema import recording/ --angles deg --robot nao_arm --out data/real.zarr   (images + CSV, HDF5, LeRobot)
     bodyschema export dataset --to lerobot|hdf5 data/nao.zarr OUT | bodyschema export onnx MODEL_SPEC OUT.onnx
     bodyschema train gpr --data data/nao.zarr --modality ee_xyz --noise-floor 1e-6   (train KIND --help: its flags)
@@ -49,6 +50,7 @@ import tyro
 
 from bodyschema import log
 from bodyschema.datagen.config import DatagenConfig
+from bodyschema.datagen.robot_commands import RUNNERS as ROBOT_RUNNERS, RobotInitArgs, RobotShowArgs
 from bodyschema.datagen.importers.config import ImportConfig
 from bodyschema.demo import DemoConfig
 from bodyschema.evaluation import registry
@@ -184,6 +186,9 @@ def commands(words: list[str] | None = None):
         _command("datagen", DatagenConfig, "Generate a motor-babbling dataset (Zarr v3)."),
         _command("validate", ValidateArgs, "Check a dataset store; exit 0 when valid, else list every problem."),
         _command("show", ShowArgs, "Summarize a dataset store and draw a contact sheet of its images (PNG)."),
+        _group("robot", "A robot from a model file: write its record, look at it.",
+               ("init", RobotInitArgs, "Write the robot record of an MJCF/URDF file with inferred values, to edit."),
+               ("show", RobotShowArgs, "A robot's joints, sites, cameras, record and view of its ee, and a sheet.")),
         _command("import", ImportConfig, "Import recordings (images + CSV of angles, HDF5, LeRobot v3.0) into a "
                                          "dataset store."),
         _group("train", "Fit one sensory model on a dataset, log it to MLflow and register it. "
@@ -255,6 +260,8 @@ def run(config) -> int:
         print("\n".join(f"{k}: {v}" for k, v in paths.items()))
     elif type(config) in EXPORT_RUNNERS:
         return EXPORT_RUNNERS[type(config)](config)
+    elif type(config) in ROBOT_RUNNERS:
+        return ROBOT_RUNNERS[type(config)](config)
     elif isinstance(config, DemoConfig):
         from bodyschema.demo import run_demo
 

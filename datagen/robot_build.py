@@ -7,7 +7,7 @@ From the model file (MJCF, or URDF through `urdf.load_urdf`) the spec is edited 
   chosen arm babbles on a fixed body, and qpos is exactly the chosen joint angles;
 - a continuous hinge (no limits) gets the limits ±π;
 - the ee becomes a site (an ee given as a body plus an offset adds one, `robot_record.EE_SITE`);
-- a camera placed by the record is added to the world;
+- a camera placed by the record is added to the world (with a light beside it when the model has none);
 - with [actuators] kind = "servos" the chosen joints get position servos with the record's gains;
 - `actuators="torque"` turns every actuator into a motor (ctrlrange = its force range, N·m).
 """
@@ -196,11 +196,12 @@ def _mat(quat: np.ndarray) -> np.ndarray:
 
 
 def _limit_continuous(spec: mujoco.MjSpec, joints: list[str]) -> None:
+    half_turn = 180.0 if spec.compiler.degree else np.pi       # the MJCF's angle unit
     for name in joints:
         joint = spec.joint(name)
         if joint.limited == mujoco.mjtLimited.mjLIMITED_FALSE or (
                 joint.limited == mujoco.mjtLimited.mjLIMITED_AUTO and joint.range[0] == joint.range[1] == 0):
-            joint.limited, joint.range = mujoco.mjtLimited.mjLIMITED_TRUE, [-np.pi, np.pi]
+            joint.limited, joint.range = mujoco.mjtLimited.mjLIMITED_TRUE, [-half_turn, half_turn]
 
 
 def _ee_site(spec: mujoco.MjSpec, ee: dict, robot: str) -> str:
@@ -234,6 +235,9 @@ def _camera(spec: mujoco.MjSpec, camera: dict, robot: str) -> str:
     quat = np.empty(4)
     mujoco.mju_mat2Quat(quat, np.stack([x, y, np.cross(x, y)], axis=1).ravel())   # columns: camera axes in world
     spec.worldbody.add_camera(name=name, pos=list(camera["pos"]), quat=quat, fovy=float(camera["fovy"]))
+    if not spec.lights:                           # a model without lights (URDF) would render near black
+        spec.worldbody.add_light(name=f"{name}_light", pos=list(camera["pos"]), dir=list(-np.cross(x, y)),
+                                 diffuse=[0.8, 0.8, 0.8], ambient=[0.3, 0.3, 0.3])
     return name
 
 
@@ -248,8 +252,7 @@ def _add_servos(spec: mujoco.MjSpec, joints: list[str], gains: dict) -> None:
     for name, kp, kv in zip(joints, gains["kp"], gains["kv"]):
         joint = spec.joint(name)
         act = spec.add_actuator(name=f"servo_{name}", target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
-        act.set_to_position(kp=float(kp), kv=float(kv))
-        act.ctrllimited, act.ctrlrange = mujoco.mjtLimited.mjLIMITED_TRUE, list(joint.range)
+        act.set_to_position(kp=float(kp), kv=float(kv), inheritrange=True)   # ctrlrange = the joint's range
         limit = float(kp) * np.pi              # what the servo pushes at half a turn of error, N·m
         if joint.actfrclimited == mujoco.mjtLimited.mjLIMITED_TRUE:
             limit = float(max(abs(joint.actfrcrange[0]), abs(joint.actfrcrange[1])))

@@ -115,7 +115,7 @@ def inertia_gains(model: mujoco.MjModel, ranges: np.ndarray, sag: bool) -> tuple
     for q in rng.uniform(ranges[:, 0], ranges[:, 1], (32, model.nq)):
         data.qpos[:], data.qvel[:] = q, 0.0
         mujoco.mj_forward(model, data)
-        mujoco.mj_fullM(model, full, data.qM)
+        mujoco.mj_fullM(model, data, full)
         inertia = np.maximum(inertia, np.diag(full))                 # kg·m², armature included
         gravity = np.maximum(gravity, np.abs(data.qfrc_bias))        # N·m at rest
     inertia = np.maximum(inertia, 1e-6)
@@ -181,6 +181,8 @@ def place_camera(points: np.ndarray, image_size: tuple[int, int], fovy: float = 
     else:
         y = widest
         x = np.cross(y, view)
+    if y[2] < 0:                                                 # keep the world's up upward in the image
+        x, y = -x, -y
     tan_y = np.tan(np.deg2rad(fovy) / 2) * FRAME_MARGIN
     tan_x = tan_y * w / h
     along = spread @ view                                        # (N,) m toward the camera

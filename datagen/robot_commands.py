@@ -1,0 +1,123 @@
+"""`bodyschema robot init FILE` and `bodyschema robot show FILE|NAME`: a robot record written, a robot looked at.
+
+    bodyschema robot init arm.urdf --mesh-dir meshes/     writes arm.toml beside it with the inferred values
+    bodyschema robot show arm.urdf                        joints, limits, sites, bodies, cameras, the record, the
+                                                          fraction of poses whose ee is in view, a contact sheet
+
+The configs are light (the CLI imports them at start-up); the runners import MuJoCo when they run.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Literal
+
+import tyro
+
+from bodyschema.errors import must_be
+
+
+@dataclass(frozen=True)
+class RobotInitArgs:
+    """Write the robot record of an MJCF/URDF file (values inferred from the file) for you to edit."""
+
+    model: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="FILE")]   # the .xml or .urdf
+    out: Path | None = None            # the record; None: <FILE stem>.toml beside the file (what --robot FILE reads)
+    mesh_dir: Path | None = None       # URDF: where package:// meshes are, besides the file's folder and its parents
+    visual: Literal["mesh", "collision"] = "mesh"   # URDF: collision renders the collision geometry (e.g. .dae visuals)
+    image_size: tuple[int, int] = (64, 64)          # (H, W) px of the camera image
+    overwrite: bool = False            # replace an existing record
+
+
+@dataclass(frozen=True)
+class RobotShowArgs:
+    """Print a robot's joints, limits, sites, bodies, cameras and record, how often its camera sees the ee, and
+    write a contact sheet of rendered poses (PNG) with the ee pixel on each."""
+
+    robot: Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="FILE|NAME")]   # shipped name or model file
+    out: Path | None = None            # the PNG; None: <robot>_robot_sheet.png in the current folder
+    n: int = 16                        # poses on the sheet (uniform in the camera workspace, seed 0)
+    mesh_dir: Path | None = None       # URDF without a record: as `robot init --mesh-dir`
+    visual: Literal["mesh", "collision"] = "mesh"   # URDF without a record: as `robot init --visual`
+
+
+def run_init(args: RobotInitArgs) -> int:
+    from bodyschema.datagen.robot_infer import infer_record
+    from bodyschema.datagen.robot_record import MODEL_SUFFIXES, dumps_toml, write_record
+
+    if args.model.suffix.lower() not in MODEL_SUFFIXES or not args.model.is_file():
+        raise ValueError(must_be("FILE", "an existing MJCF (.xml) or URDF (.urdf) file", str(args.model)))
+    out = args.out or args.model.with_suffix(".toml")
+    if out.exists() and not args.overwrite:
+        raise FileExistsError(must_be("--out", "a new path", str(out), "Pass --overwrite to replace the record."))
+    record = infer_record(args.model, args.mesh_dir, args.visual, args.image_size)
+    if out.resolve().parent != record.base:                       # the record names the model relative to itself
+        record = _rebased(record, out.resolve().parent)
+    write_record(record, out, f"Robot record of {args.model.name}, written by `bodyschema robot init` with inferred "
+                              "values: edit them (see datagen/robot_record.py).")
+    print(dumps_toml(record.to_toml_dict()))
+    print(f"record: {out}")
+    return 0
+
+
+def _rebased(record, folder: Path):
+    import dataclasses
+    import os
+    model = os.path.relpath(record.model_path, folder)
+    mesh = os.path.relpath(record.mesh_path, folder) if record.mesh_path else ""
+    return dataclasses.replace(record, model=model, mesh_dir=mesh, base=folder)
+
+
+def run_show(args: RobotShowArgs) -> int:
+    from bodyschema.datagen.robot import Robot
+    from bodyschema.datagen.robot_infer import check_view, infer_record
+    from bodyschema.datagen.robot_record import dumps_toml, load_record, robot_label
+
+    if not isinstance(args.n, int) or args.n < 1:
+        raise ValueError(must_be("--n", "an integer >= 1", args.n))
+    record = load_record(args.robot)
+    note = ""
+    if record is None:
+        record = infer_record(Path(args.robot), args.mesh_dir, args.visual)
+        note = f"  (inferred: no record beside the file; `bodyschema robot init {args.robot}` writes one)"
+    with Robot.load(record) as robot:
+        print(describe(robot))
+        print(f"record{note}:\n{dumps_toml(record.to_toml_dict())}")
+        fraction = check_view(robot, robot.sampling_ranges)
+        print(f"ee in view: {fraction:.1%} of uniform poses in workspace {robot.workspace!r}")
+        out = args.out or Path(f"{robot_label(args.robot)}_robot_sheet.png")
+        print(f"contact sheet: {robot_sheet(robot, out, args.n)}")
+    return 0
+
+
+def describe(robot) -> str:
+    """Joints with limits (rad), sites, bodies and cameras of the robot's compiled model."""
+    m = robot.model
+    joints = [f"  {name}: [{lo:.4f}, {hi:.4f}] rad" for name, (lo, hi) in zip(robot.joint_names, robot.joint_limits)]
+    names = {kind: [getattr(m, kind)(i).name for i in range(count)]
+             for kind, count in (("site", m.nsite), ("body", m.nbody), ("camera", m.ncam))}
+    return "\n".join([f"robot {robot.name}: {robot.source.path} (sha256 {robot.mjcf_sha256[:12]}…)",
+                      f"joints ({robot.dq}, the ee {robot.ee_site!r}, camera {robot.camera_name!r}):", *joints,
+                      *(f"{kind}s: {', '.join(n for n in found if n)}" for kind, found in names.items())])
+
+
+def robot_sheet(robot, out: Path, n: int) -> Path:
+    """A contact sheet (datagen/contact_sheet.py) of n rendered poses uniform in the sampling ranges (seed 0)."""
+    import numpy as np
+    import zarr
+
+    from bodyschema.datagen.contact_sheet import write_contact_sheet
+
+    ranges = robot.sampling_ranges
+    q = np.random.default_rng(0).uniform(ranges[:, 0], ranges[:, 1], (n, robot.dq))
+    observed = robot.observe(q)
+    with tempfile.TemporaryDirectory(prefix="bodyschema-robot-sheet-") as tmp:
+        root = zarr.open_group(Path(tmp) / "poses.zarr", mode="w")
+        for key in ("image", "ee_pixel"):
+            root.create_array(key, data=observed[key])
+        return write_contact_sheet(Path(tmp) / "poses.zarr", out, n=n)
+
+
+RUNNERS = {RobotInitArgs: run_init, RobotShowArgs: run_show}
