@@ -27,26 +27,23 @@ class ImportConfig:
     or per episode `<episode>/obs/<joint key>` + `<episode>/obs/<image key>`) or a LeRobot v3.0 dataset folder."""
 
     source: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="SOURCE")]
-    out: Path                              # the .zarr store to write (written beside it, renamed into place)
-    format: Literal["auto", "folder", "hdf5", "lerobot"] = "auto"   # auto: .h5/.hdf5 file, meta/info.json, else folder
-    angles: Literal["deg", "rad"] | None = None   # unit of the recorded angles (and of --ranges); required unless
-    # the source states it (this project's exports: rad)
-    robot: str | None = None               # the body: a shipped robot (planar2, nao_arm, panda); gives joints, limits,
-    # camera and --fk. Neither --robot nor --joints: the body a bodyschema export records
-    joints: tuple[str, ...] | None = None  # the body without a robot: joint names, in the order of the store's q
-    ranges: tuple[tuple[float, float], ...] | None = None   # (lo, hi) per joint in the --angles unit: the joint box
-    # (required with --joints); None with --robot: the box the recording covers
+    """a folder of images + a CSV of angles, an .h5/.hdf5 file, or a LeRobot v3.0 dataset folder"""
+    out: Path                              # the .zarr store to write (built beside it, then renamed into place)
+    format: Literal["auto", "folder", "hdf5", "lerobot"] = "auto"   # auto: .h5 file, meta/info.json, else folder
+    angles: Literal["deg", "rad"] | None = None   # unit of the angles and --ranges; required unless the source says
+    robot: str | None = None               # the body: a shipped robot (joints, limits, camera, --fk); or --joints
+    joints: tuple[str, ...] | None = None  # the body without a robot: joint names in q's order (needs --ranges)
+    ranges: tuple[tuple[float, float], ...] | None = None   # (lo, hi) per joint, --angles unit; None: the data's box
     name: str = "recorded"                 # the body's name with --joints (models trained on the store carry it)
     csv: Path | None = None                # folder: the CSV of angles; None: the one *.csv in SOURCE
-    joint_key: tuple[str, ...] = ()        # hdf5 demo: obs key(s) of the joint angles, concatenated; lerobot: the
-    # state feature (default observation.state)
+    joint_key: tuple[str, ...] = ()        # hdf5 demo: obs key(s) of the angles; lerobot: default observation.state
     image_key: str | None = None           # hdf5 demo / lerobot: the image key; None: the only image there is
     ee_key: str | None = None              # hdf5 demo: obs key of the ee position (m), imported as ee_xyz
     images: bool = True                    # --no-images: joint angles (and ee readings) only
     crop: tuple[int, int, int, int] | None = None   # (top, left, height, width) px, applied before --resize
     resize: tuple[int, int] | None = None  # (H, W) px for every image; required when the sizes differ
     gray: bool = False                     # convert colour frames to grayscale (ITU-R BT.601, as datagen renders)
-    fk: bool = False                       # compute ee_xyz, ee_pixel and jacobian from --robot (replaces recorded ones)
+    fk: bool = False                       # ee_xyz, ee_pixel, jacobian from --robot's kinematics (replace recorded)
     overwrite: bool = False                # replace OUT if it exists
 
     def __post_init__(self) -> None:

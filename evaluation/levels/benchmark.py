@@ -79,8 +79,7 @@ class LevelsConfig(PerceptionRunConfig):
     screen_steps: int = 5              # multi-start: updates before pruning (a descent trial converges in ~15)
     keep: int = 2                      # multi-start: starts per trial refined to convergence
     encoder: str | None = None         # an image encoder spec (kind "encoder"): extra "+enc" rows start from its guess
-    targets: Path | None = None        # a dataset store (e.g. `bodyschema import`ed): score its recorded frames
-    # instead of simulator renders (recorded.py); no simulator needed
+    targets: Path | None = None        # a store (e.g. imported): score its recorded frames instead of rendering
     plain_steps: int = PLAIN_STEPS     # --targets with an image model: Euler steps of the plain Pixel-AIF row (0: off)
 
     def __post_init__(self):
