@@ -11,8 +11,8 @@ The controllers follow what the robot's actuators take (`robot.actuation`, its r
   torque (panda)      AIF: the same velocity controller on the arm's joint impedance servo (setpoint + velocity
                       reference, the baseline's PD + gravity compensation; `--panda-controller aic`: the torque AIC,
                       `aif.aic.AICController`); baseline: PD + gravity compensation on the target pose.
-The velocity controller's gains are per robot (record [reaching.action]) unless --action.* is given: K = k_a·Δt·Π_joints
-must stay below what the servo can follow (planar2's soft servos lag ≈ 0.1 s).
+The velocity controller's gains are per robot (record [reaching.action]) unless --action.* is given:
+K = k_a·Δt·Π_joints must stay below what the servo can follow (planar2's soft servos lag ≈ 0.1 s).
 Metrics per episode (report.py): success (simulator ee within `success_mm` of the target's ee at the
 end), final ee error, final joint error, time to reach (first time within success_mm and staying), the error
 in the goal's own space (px, mm, deg or image MSE) and failures with their reasons.
