@@ -56,7 +56,10 @@ class RecordedTargets:
         from bodyschema.training.data import store_digest
 
         self.path = Path(path)
-        problems = validate_store(self.path) if self.path.exists() else [str(self.path) + " does not exist"]
+        if not self.path.exists():
+            raise FileNotFoundError(must_be("--targets", "an existing dataset store", str(self.path),
+                                            "Import recordings with `bodyschema import` or generate a store."))
+        problems = validate_store(self.path)
         if problems:
             raise ValueError(must_be("--targets", "a complete, valid dataset store", f"{len(problems)} problem(s) "
                                      f"in {self.path}", "See `bodyschema validate`:\n - " + "\n - ".join(problems)))

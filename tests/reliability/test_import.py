@@ -1,4 +1,4 @@
-"""Bad input to `bodyschema import` (the extended fuzz test beside tests/test_cli_fuzz.py, with its harness): every
+"""Bad input to `bodyschema import` and to `evaluate levels --targets` (the extended fuzz test beside tests/test_cli_fuzz.py, with its harness): every
 case exits 2 with the house message, no traceback, and the scratch folder unchanged — no store and no temporary
 sibling left behind, even when the failure comes after the store was written (an edited export that fails
 validation). Adding a case is one line in CASES."""
@@ -15,6 +15,7 @@ from tests.datagen.import_sources import planar2_frames, write_demo_hdf5, write_
 from tests.test_cli_fuzz import check_clear_failure, run_in_process, snapshot
 
 OUT = "--out {W}/new.zarr"
+LEVELS = "--trials 2 --runs 1 --no-mlflow --out {W}/res"
 CASES = [
     ("no-angles-unit", "import {W}/rec --robot planar2 " + OUT),
     ("rows-not-images", "import {W}/short --angles deg --robot planar2 " + OUT),
@@ -50,6 +51,11 @@ CASES = [
     ("own-export-read-as-deg", "import {W}/own.h5 --angles deg " + OUT),
     ("own-export-edited-fails-validation", "import {W}/edited.h5 " + OUT),
     ("lerobot-v2", "import {W}/lerobot_v2 --angles rad --robot planar2 " + OUT),
+    ("levels-targets-missing", "evaluate levels --targets {W}/missing.zarr " + LEVELS),
+    ("levels-targets-not-a-store", "evaluate levels --targets {W}/rec " + LEVELS),
+    ("levels-targets-other-robot", "evaluate levels --model analytic:nao_arm:ee_xyz --targets {W}/fk.zarr " + LEVELS),
+    ("levels-targets-without-ee", "evaluate levels --targets {W}/q_only.zarr " + LEVELS),
+    ("levels-targets-too-few", "evaluate levels --targets {W}/fk.zarr --trials 4 --runs 2 --no-mlflow --out {W}/res"),
 ]
 
 
@@ -81,10 +87,21 @@ def build_world(w):
     (w / "note.txt").write_text("not a recording")
     (w / "fake.h5").write_text("not HDF5")
     write_demo_hdf5(w / "demo.h5", q, images, episodes=2)
+    _stores(w)
     _own_exports(w)
     (w / "lerobot_v2" / "meta").mkdir(parents=True)
     (w / "lerobot_v2" / "meta" / "info.json").write_text(json.dumps({"codebase_version": "v2.1", "features": {}}))
     return w
+
+
+def _stores(w) -> None:
+    """Level targets: fk.zarr (the good recording with its forward kinematics), q_only.zarr (angles only)."""
+    from bodyschema.datagen.importers.config import ImportConfig
+    from bodyschema.datagen.importers.run import import_recording
+
+    import_recording(ImportConfig(source=w / "rec", out=w / "fk.zarr", angles="deg", robot="planar2", fk=True))
+    import_recording(ImportConfig(source=w / "rec", out=w / "q_only.zarr", angles="deg", robot="planar2",
+                                  images=False))
 
 
 def _set_cell(path, row: int, col: int, value: str) -> None:
