@@ -34,7 +34,8 @@ def write_contact_sheet(path: str | Path, out_png: str | Path, n: int = 16) -> P
     total = root["image"].shape[0]
     rows_idx = np.unique(np.linspace(0, total - 1, min(n, total)).round().astype(int))
     images = np.asarray(root["image"].get_orthogonal_selection((rows_idx,)))  # (k, H, W[, 3])
-    pixels = np.asarray(root["ee_pixel"].get_orthogonal_selection((rows_idx,)))  # (k, 2) px (u, v)
+    pixels = (np.asarray(root["ee_pixel"].get_orthogonal_selection((rows_idx,))) if "ee_pixel" in root.array_keys()
+              else np.full((len(rows_idx), 2), np.nan))  # (k, 2) px (u, v); imported recordings may have none
     h, w = images.shape[1:3]
     scale = max(1, math.ceil(MIN_TILE_WIDTH / w))
     tiles = []

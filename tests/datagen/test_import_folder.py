@@ -101,3 +101,13 @@ def test_overwrite_replaces_and_refusal_keeps_the_old_store(tmp_path):
         import_recording(config)
     from dataclasses import replace
     assert validate_store(import_recording(replace(config, overwrite=True))) == []
+
+
+def test_show_draws_the_contact_sheet_of_a_recording_without_ee_pixel(tmp_path):
+    from bodyschema.datagen.show import show_store
+
+    q, images = planar2_frames(4)
+    folder = write_folder(tmp_path / "rec", q, images)
+    store = import_recording(ImportConfig(source=folder, out=tmp_path / "rec.zarr", angles="deg", robot="planar2"))
+    shown = show_store(store, tmp_path / "sheet.png", n=4)
+    assert shown.sheet.is_file() and shown.sheet.stat().st_size > 0
