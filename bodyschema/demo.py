@@ -43,6 +43,7 @@ class DemoConfig:
 
 
 def run_demo(config: DemoConfig) -> None:
+    check_demo(config)
     stores = _datagen(config)
     champions = _train(config, stores["nao_arm"])
     _evaluate(config, champions["gpr"], "gpr")
@@ -60,20 +61,45 @@ def run_demo(config: DemoConfig) -> None:
     print(f"Everything else is under {config.out.resolve()}")
 
 
-def _datagen(config: DemoConfig) -> dict[str, Path]:
+def check_demo(config: DemoConfig) -> None:
+    """Build the config of every stage now, each checking its own flags: a bad flag fails before the first dataset
+    is made, not minutes in, naming the demo's flag behind the stage's. The models the benchmarks use are registered
+    on the way; a spec stands in for them."""
+    stand_in = "models:/bodyschema-nao_arm-ee_xyz-gpr@champion"
+    stages = (   # (stage, the demo's flags it takes, build its configs)
+        ("datagen", "--n-nao, --n-small, --workers, --seed", lambda: _datagen_jobs(config)),
+        ("train", "--pixel-epochs (the pixel decoder's --epochs), --seed",
+         lambda: _train_jobs(config, config.out / "data" / "nao_arm.zarr")),
+        ("levels", "--trials, --runs, --seed", lambda: [_levels_config(config, stand_in, k) for k in ("gpr", "pixel")]),
+        ("reaching and self-recognition", "--reach-targets (reaching's --trials), --episodes (self-recognition's "
+         "--trials), --seed", lambda: _act_configs(config, stand_in)),
+        ("rubber-hand and agency", "--seed", lambda: _body_and_agency_configs(config, stand_in)),
+    )
+    for stage, flags, build in stages:
+        try:
+            build()
+        except ValueError as error:
+            raise ValueError(f"the demo's {stage} stage (set by {flags}): {error}") from None
+
+
+def _datagen_jobs(config: DemoConfig) -> dict:
     from bodyschema.datagen.config import DatagenConfig
-    from bodyschema.datagen.contact_sheet import write_contact_sheet
-    from bodyschema.datagen.generate import generate
-    from bodyschema.datagen.validate import summarize_store, validate_store
 
     jobs = {"planar2": DatagenConfig(robot="planar2", n=config.n_small, sampler="uniform"),
             "nao_arm": DatagenConfig(robot="nao_arm", n=config.n_nao, sampler="uniform"),
             "panda": DatagenConfig(robot="panda", n=config.n_small, sampler="babble", shard_size=200)}
+    return {robot: replace(job, workers=config.workers, seed=config.seed, overwrite=True,
+                           out=config.out / "data" / f"{robot}.zarr") for robot, job in jobs.items()}
+
+
+def _datagen(config: DemoConfig) -> dict[str, Path]:
+    from bodyschema.datagen.contact_sheet import write_contact_sheet
+    from bodyschema.datagen.generate import generate
+    from bodyschema.datagen.validate import summarize_store, validate_store
+
     stores = {}
-    for robot, job in jobs.items():
+    for robot, job in _datagen_jobs(config).items():
         logger.info(f"== datagen {robot}: {job.n} samples, sampler {job.sampler}")
-        job = replace(job, workers=config.workers, seed=config.seed, overwrite=True,
-                      out=config.out / "data" / f"{robot}.zarr")
         stores[robot] = generate(progress_of(job))
         problems = validate_store(stores[robot])
         if problems:
@@ -84,19 +110,24 @@ def _datagen(config: DemoConfig) -> dict[str, Path]:
     return stores
 
 
-def _train(config: DemoConfig, nao_store: Path) -> dict[str, str]:
+def _train_jobs(config: DemoConfig, nao_store: Path) -> dict:
     from bodyschema.models.configs import GPRConfig, MDNConfig, PixelConfig
     from bodyschema.training.config import TrainConfig
-    from bodyschema.training.train import train
 
     jobs = {"gpr": TrainConfig(model=GPRConfig(), data=nao_store, modality="ee_xyz", max_train=1500),
             "mdn": TrainConfig(model=MDNConfig(epochs=60), data=nao_store, modality="ee_xyz"),
             "pixel": TrainConfig(model=PixelConfig(epochs=config.pixel_epochs), data=nao_store, modality="image")}
+    return {kind: replace(job, seed=config.seed, run_root=config.out / "runs", tracking_uri=config.tracking_uri)
+            for kind, job in jobs.items()}
+
+
+def _train(config: DemoConfig, nao_store: Path) -> dict[str, str]:
+    from bodyschema.training.train import train
+
     uris = {}
-    for kind, job in jobs.items():
+    for kind, job in _train_jobs(config, nao_store).items():
         logger.info(f"== train {kind} on nao_arm {job.modality}")
-        result = train(progress_of(replace(job, seed=config.seed, run_root=config.out / "runs",
-                                           tracking_uri=config.tracking_uri)))
+        result = train(progress_of(job))
         shown = ", ".join(f"{k}={v:.4g}" for k, v in result.metrics.items() if k.startswith("val_"))
         print(f"{result.registered_name} v{result.model_version} {shown}"
               f"{' (new champion)' if result.champion else ''}; plots: {list(map(str, result.plots.values()))}")
@@ -104,61 +135,83 @@ def _train(config: DemoConfig, nao_store: Path) -> dict[str, str]:
     return uris
 
 
-def _evaluate(config: DemoConfig, uri: str, kind: str) -> None:
-    from bodyschema.evaluation.levels import LevelsConfig, run_levels
+def _levels_config(config: DemoConfig, uri: str, kind: str):
+    from bodyschema.evaluation.levels import LevelsConfig
 
-    logger.info(f"== AIF perception, levels 1–3, with {uri} loaded from the registry")
     perception = LevelsConfig().perception
     if kind == "gpr":
         perception = replace(perception, precisions=EE_PRECISION)
-    levels = LevelsConfig(models=(uri,), trials=config.trials, runs=config.runs, seed=config.seed,
-                          out=config.out / "results" / f"levels_{kind}", tracking_uri=config.tracking_uri,
-                          perception=perception)
-    summary = run_levels(progress_of(levels))
+    return LevelsConfig(models=(uri,), trials=config.trials, runs=config.runs, seed=config.seed,
+                        out=config.out / "results" / f"levels_{kind}", tracking_uri=config.tracking_uri,
+                        perception=perception)
+
+
+def _evaluate(config: DemoConfig, uri: str, kind: str) -> None:
+    from bodyschema.evaluation.levels import run_levels
+
+    logger.info(f"== AIF perception, levels 1–3, with {uri} loaded from the registry")
+    summary = run_levels(progress_of(_levels_config(config, uri, kind)))
     print(summary.paths["summary_md"].read_text())
     print("plots:", ", ".join(str(p) for k, p in summary.paths.items() if str(p).endswith(".png")))
 
 
-def _act(config: DemoConfig, gpr_uri: str) -> None:
-    from bodyschema.evaluation.reaching import ReachingConfig, run_reaching
-    from bodyschema.evaluation.self_recognition import SelfRecognitionConfig, run_self_recognition
+def _act_configs(config: DemoConfig, gpr_uri: str) -> tuple:
+    """(nao_arm reaching with the GPR, panda reaching, self-recognition)."""
+    from bodyschema.evaluation.reaching import ReachingConfig
+    from bodyschema.evaluation.self_recognition import SelfRecognitionConfig
 
     results = config.out / "results"
-    logger.info(f"== closed-loop reaching on nao_arm: {config.reach_targets} ee_xyz goals, {gpr_uri} + joint "
-                "encoder")
     sensed = replace(ReachingConfig().perception, precisions=EE_PRECISION)
     reaching = ReachingConfig(robot="nao_arm", models=(gpr_uri, "analytic:nao_arm:joints"), goal="ee_xyz",
                               trials=config.reach_targets, seed=config.seed, out=results / "reaching",
                               tracking_uri=config.tracking_uri, perception=sensed)
-    print(run_reaching(progress_of(reaching))["summary_md"].read_text())
-    logger.info("== reaching on the 7-DOF torque panda: 10 ee_xyz goals in 3 s, the velocity controller on the joint "
-                "impedance servo vs PD on the true inverse kinematics (analytic models)")
     panda = ReachingConfig(robot="panda", trials=10, seed=config.seed, out=results / "reaching_panda",
                            tracking_uri=config.tracking_uri)
-    print(run_reaching(progress_of(panda))["summary_md"].read_text())
-    logger.info(f"== self-recognition: {config.episodes} babbling episodes per condition, is the ee stream mine "
-                f"or an imitator's? ({gpr_uri})")
     recognition = SelfRecognitionConfig(robot="nao_arm", models=(gpr_uri,), trials=config.episodes,
                                         seed=config.seed, out=results / "self_recognition",
                                         tracking_uri=config.tracking_uri)
+    return reaching, panda, recognition
+
+
+def _act(config: DemoConfig, gpr_uri: str) -> None:
+    from bodyschema.evaluation.reaching import run_reaching
+    from bodyschema.evaluation.self_recognition import run_self_recognition
+
+    reaching, panda, recognition = _act_configs(config, gpr_uri)
+    logger.info(f"== closed-loop reaching on nao_arm: {config.reach_targets} ee_xyz goals, {gpr_uri} + joint "
+                "encoder")
+    print(run_reaching(progress_of(reaching))["summary_md"].read_text())
+    logger.info("== reaching on the 7-DOF torque panda: 10 ee_xyz goals in 3 s, the velocity controller on the joint "
+                "impedance servo vs PD on the true inverse kinematics (analytic models)")
+    print(run_reaching(progress_of(panda))["summary_md"].read_text())
+    logger.info(f"== self-recognition: {config.episodes} babbling episodes per condition, is the ee stream mine "
+                f"or an imitator's? ({gpr_uri})")
     print(run_self_recognition(progress_of(recognition))["summary_md"].read_text())
 
 
-def _body_and_agency(config: DemoConfig, gpr_uri: str) -> None:
-    """Seconds-long runs of the rubber-hand and agency benchmarks with the registered GPR (nao_arm's camera keeps a
-    hand moved ≤ 10 cm in view)."""
-    from bodyschema.evaluation.agency import AgencyConfig, run_agency
-    from bodyschema.evaluation.rubber_hand import RubberHandConfig, run_rubber_hand
+def _body_and_agency_configs(config: DemoConfig, gpr_uri: str) -> tuple:
+    """(rubber hand, agency): seconds-long runs with the registered GPR (nao_arm's camera keeps a hand moved ≤ 10 cm
+    in view)."""
+    from bodyschema.evaluation.agency import AgencyConfig
+    from bodyschema.evaluation.rubber_hand import RubberHandConfig
 
     results = config.out / "results"
-    logger.info(f"== rubber hand: a seen hand 5–10 cm away, stroked in and out of sync; drift of the belief "
-                f"({gpr_uri})")
     rubber = RubberHandConfig(robot="nao_arm", models=(gpr_uri,), trials=4, displacements=(0.05, 0.10),
                               visual_sigmas=(0.005, 0.01, 0.02), duration=20.0, seed=config.seed,
                               out=results / "rubber_hand", tracking_uri=config.tracking_uri)
+    agency = AgencyConfig(robot="nao_arm", models=(gpr_uri,), trials=100, seed=config.seed, out=results / "agency",
+                          tracking_uri=config.tracking_uri)
+    return rubber, agency
+
+
+def _body_and_agency(config: DemoConfig, gpr_uri: str) -> None:
+    from bodyschema.evaluation.agency import run_agency
+    from bodyschema.evaluation.rubber_hand import run_rubber_hand
+
+    rubber, agency = _body_and_agency_configs(config, gpr_uri)
+    logger.info(f"== rubber hand: a seen hand 5–10 cm away, stroked in and out of sync; drift of the belief "
+                f"({gpr_uri})")
     print(run_rubber_hand(progress_of(rubber))["summary"].read_text())
     logger.info(f"== did I do it? own movements vs the same movements pushed or seen in a moved scene "
                 f"({gpr_uri})")
-    agency = AgencyConfig(robot="nao_arm", models=(gpr_uri,), trials=100, seed=config.seed, out=results / "agency",
-                          tracking_uri=config.tracking_uri)
     print(run_agency(progress_of(agency))["summary"].read_text())

@@ -5,7 +5,8 @@ with the same defaults; `tests/models/test_configs.py` compares them with the si
 The comment after each field is its help line in `bodyschema train <kind> --help` (tyro reads it).
 This module imports no model code (no torch, gpytorch or sklearn): the CLI builds its help from it cheaply.
 `ModelConfig.__post_init__` checks the values by their annotations (a finite number ≥ 0 where a float goes,
-an integer ≥ 0 where an int goes, a listed word where a Literal goes); the model refines the bounds it needs.
+an integer ≥ 0 where an int goes, ≥ 1 for the COUNTS every fit refuses at 0, a listed word where a Literal goes);
+the model refines the bounds it needs.
 """
 
 from __future__ import annotations
@@ -19,6 +20,10 @@ from typing import ClassVar, Literal
 
 from bodyschema.errors import must_be
 
+# Integer hyper-parameters that a fit refuses at 0 (the minibatch loop's TrainSettings, the MDN's mixture): refused
+# here already, when the command is parsed, not after the dataset has been loaded.
+COUNTS = ("epochs", "batch_size", "patience", "n_components")
+
 
 @dataclass(frozen=True)
 class ModelConfig:
@@ -30,8 +35,8 @@ class ModelConfig:
 
     def __post_init__(self) -> None:
         hints = typing.get_type_hints(type(self))
-        problems = [must_be(f"--{f.name.replace('_', '-')}", _describe(hints[f.name]), getattr(self, f.name))
-                    for f in dataclasses.fields(self) if not _fits(getattr(self, f.name), hints[f.name])]
+        problems = [must_be(f"--{f.name.replace('_', '-')}", _expected(f.name, hints[f.name]), getattr(self, f.name))
+                    for f in dataclasses.fields(self) if not _accepts(f.name, getattr(self, f.name), hints[f.name])]
         if problems:
             raise ValueError("\n".join(problems))
 
@@ -122,6 +127,11 @@ class EncoderConfig(ModelConfig):
 
 
 # ---- value checks by annotation --------------------------------------------------------------------------
+def _accepts(name: str, value, hint) -> bool:
+    too_few = name in COUNTS and isinstance(value, int) and value < 1
+    return _fits(value, hint) and not too_few
+
+
 def _fits(value, hint) -> bool:
     origin, args = typing.get_origin(hint), typing.get_args(hint)
     if origin in (typing.Union, types.UnionType):
@@ -143,6 +153,10 @@ def _fits(value, hint) -> bool:
     if origin is dict:                                  # dict[str, float]
         return isinstance(value, dict) and all(_fits(k, args[0]) and _fits(v, args[1]) for k, v in value.items())
     raise TypeError(f"no value check for the annotation {hint!r}: add one to models/configs.py _fits")
+
+
+def _expected(name: str, hint) -> str:
+    return "an integer ≥ 1" if name in COUNTS and hint is int else _describe(hint)
 
 
 def _describe(hint) -> str:

@@ -71,6 +71,9 @@ class TrainConfig(Generic[M]):
         elif "," in self.modality and kind is not None and kind.name != "multimodal":
             problems.append(must_be("modality", f"one array name for model kind {kind.name!r}", self.modality,
                                     "Several modalities (comma-separated) need `bodyschema train multimodal`."))
+        elif len(set(self.modalities)) != len(self.modalities):
+            problems.append(must_be("modality", "distinct array names", self.modality,
+                                    "Name each modality once (one decoder is trained per modality)."))
         problems += self._split_problems()
         if not isinstance(self.experiment, str) or not self.experiment:
             problems.append(must_be("experiment", "a non-empty name", self.experiment))

@@ -7,6 +7,11 @@ is the larger of the two phases:
   (autograd keeps the kernel, its Cholesky and their gradients; sklearn's gradient is (m, m, Dz + 2));
 - conditioning on n = min(max_points, training samples): gpr ≈ 2.7 · n² · O, sklearn ≈ 3.2 · n² values.
 A GP over images (O = H·W, 4480 for 56×80) needs terabytes at a few thousand samples; it is refused outright.
+
+A network (mdn, pixel, encoder, multimodal) is counted on PyTorch's meta device (no memory touched): P parameters
+and A activation values per sample. Peak of a fit with its checkpoint and float64 inference copy (bench: ru_maxrss,
+float32, 1 thread) in float32 values: 9.3–11.6 · P when the weights dominate (pixel fc 4096 and 8192, mdn
+2048×2048), 3.0–3.2 · A · batch when the activations do (lean pixel decoder, batch 512 and 1024).
 """
 
 from __future__ import annotations
@@ -21,6 +26,11 @@ GP_KINDS = ("gpr", "sklearn-gpr")
 FIT_COPIES = {"gpr": 12.0, "sklearn-gpr": 14.0}
 CONDITION_COPIES = {"gpr": 3.0, "sklearn-gpr": 3.5}
 PER_OUTPUT = {"gpr": True, "sklearn-gpr": False}      # gpr keeps one kernel per output dimension
+# Network fits (float32, Adam): measured copies, rounded up, of the weights at the peak (weights, gradients, Adam's
+# two moments, the best weights kept for early stopping, the checkpoint, the float64 inference copy) and of one
+# minibatch's activations (kept for the backward pass, their gradients): see the module doc.
+PARAM_COPIES = 12.0
+ACTIVATION_COPIES = 3.5
 LIMIT_FRACTION = 0.8      # of the available memory: leave room for the dataset, Python and the other processes
 
 
@@ -40,9 +50,11 @@ def gp_peak_bytes(kind: str, n: int, m: int, outputs: int) -> float:
 
 def check_memory(kind: str, model, n_train: int, output_shape: tuple[int, ...],
                  available: float | None = None) -> None:
-    """Refuse a GP fit whose estimated peak exceeds LIMIT_FRACTION of the available memory (`available` bytes;
-    None: read from the system). Other kinds are not estimated (mini-batch fits: memory bounded by the batch)."""
+    """Refuse a fit whose estimated peak exceeds LIMIT_FRACTION of the available memory (`available` bytes;
+    None: read from the system): a GP by its n×n matrices, a network by its size and one batch's activations."""
     if kind not in GP_KINDS:
+        if hasattr(model, "_factory") or hasattr(model, "members"):
+            check_net_memory(model, n_train, available)
         return
     outputs = math.prod(output_shape)
     n = min(n_train, int(getattr(model, "max_points", n_train)))
@@ -61,6 +73,64 @@ def check_memory(kind: str, model, n_train: int, output_shape: tuple[int, ...],
                              f"{available / 1e9:.3g} GB available)",
                              f"an estimated {need / 1e9:.3g} GB for n={n} samples × {outputs} outputs "
                              f"(hyper-parameters on m={m})", hint))
+
+
+def net_sizes(model) -> tuple[int, int]:
+    """(parameters, activation values per sample) of the network(s) `model` fits, counted on the meta device:
+    nothing is allocated, however large the layers asked for."""
+    import torch
+
+    params = activations = 0
+    for member in getattr(model, "members", {"": model}).values():
+        with torch.device("meta"):
+            net = member._factory()
+            params += sum(p.numel() for p in net.parameters())
+            activations += _activations_per_sample(getattr(net, "decoder", net), member)   # a member: its decoder
+    return params, activations
+
+
+def _activations_per_sample(net, member) -> int:
+    """Values every layer outputs for one sample (the forward pass autograd keeps for the backward one)."""
+    import torch
+
+    sizes = []
+    hooks = [m.register_forward_hook(lambda _m, _in, out: sizes.append(out.numel()))
+             for m in net.modules() if not list(m.children())]
+    try:
+        shape = getattr(member, "image_shape", None) or (member.latent_dim,)    # an encoder reads images
+        net(torch.zeros(1, *shape, device="meta"))
+    finally:
+        for hook in hooks:
+            hook.remove()
+    return sum(sizes)
+
+
+def net_peak_bytes(params: int, activations: int, batch: int) -> float:
+    """Estimated peak memory (bytes) of a float32 network fit with Adam on minibatches of `batch` samples."""
+    return 4.0 * (PARAM_COPIES * params + ACTIVATION_COPIES * batch * activations)
+
+
+def check_net_memory(model, n_train: int, available: float | None = None) -> None:
+    """Refuse a network whose weights (with their gradients, Adam's moments, the best weights and the inference
+    copies) and one minibatch's activations exceed LIMIT_FRACTION of the available memory."""
+    params, activations = net_sizes(model)
+    batch = min(n_train, _batch_size(model))
+    need = net_peak_bytes(params, activations, batch)
+    available = available_memory() if available is None else available
+    limit = LIMIT_FRACTION * available
+    if need <= limit:
+        return
+    raise ValueError(must_be("network fit memory", f"at most {limit / 1e9:.3g} GB ({LIMIT_FRACTION:.0%} of the "
+                             f"{available / 1e9:.3g} GB available)",
+                             f"an estimated {need / 1e9:.3g} GB for {params:,} parameters and {activations:,} "
+                             f"activations per sample × batch {batch}",
+                             "Ask for a smaller network (--channels, --fc-hidden, --hidden) or a smaller "
+                             "--batch-size."))
+
+
+def _batch_size(model) -> int:
+    members = list(getattr(model, "members", {"": model}).values())
+    return max(m.settings.batch_size for m in members)
 
 
 def available_memory() -> float:

@@ -58,13 +58,11 @@ class JupiterConfig(TrialsConfig):
 
     def __post_init__(self):
         super().__post_init__()
-        if not (0 < self.switch_time < self.duration) or not np.isfinite(self.duration):
+        if not 0 < self.switch_time < self.duration:
             raise ValueError(must_be("switch_time", f"inside (0, duration = {self.duration}) s", self.switch_time))
         if not (0 < self.steady_window <= min(self.switch_time, self.duration - self.switch_time) + 1e-9):
             raise ValueError(must_be("steady_window", "> 0 and no longer than the phases before and after the switch",
                                      self.steady_window))
-        if not (np.isfinite(self.jupiter_gravity) and self.jupiter_gravity >= 0):
-            raise ValueError(must_be("jupiter_gravity", "a finite magnitude ≥ 0 in m/s²", self.jupiter_gravity))
         if not (self.spread > 0 and self.settle_deg > 0):
             raise ValueError(must_be("spread and settle_deg", "> 0", (self.spread, self.settle_deg)))
         control_substeps(self.control_rate, TIMESTEP, "control_rate")

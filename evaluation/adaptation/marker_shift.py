@@ -72,15 +72,11 @@ class MarkerShiftConfig(TrialsConfig):
         if not self.shifts or bad:
             raise ValueError(must_be("shifts", f"a non-empty subset of {tuple(SHIFTS)}", self.shifts,
                                      f"Unknown: {bad}." if bad else ""))
-        if not (np.isfinite(self.offset) and self.offset >= 0):
-            raise ValueError(must_be("offset", "a finite size ≥ 0 in m", self.offset))
-        if not (np.isfinite(self.duration) and self.duration > 0):
-            raise ValueError(must_be("duration", "a positive time in s", self.duration))
         if not (0 <= self.shift_time < self.duration):
             raise ValueError(must_be("shift_time", f"in [0, duration = {self.duration}) s", self.shift_time))
-        if not (np.isfinite(self.control_rate) and self.control_rate > 0):
+        if not self.control_rate > 0:
             raise ValueError(must_be("control_rate", "a positive rate in Hz", self.control_rate))
-        if not self.visual_precisions or not all(np.isfinite(p) and p > 0 for p in self.visual_precisions):
+        if not self.visual_precisions or not all(p > 0 for p in self.visual_precisions):
             raise ValueError(must_be("visual_precisions", "one or more finite precisions > 0 in px⁻²",
                                      self.visual_precisions, "Use a small value (0.01) for 'barely trusted'."))
         if self.goal not in GOALS:

@@ -26,7 +26,7 @@ import torch
 from bodyschema.errors import must_be
 from bodyschema.evaluation.agency.report import roc_rows, write_report
 from bodyschema.evaluation.agency.streams import SOURCES, delayed, episode_rng, make_episodes, observe
-from bodyschema.evaluation.core.config import TrialsConfig, check_names
+from bodyschema.evaluation.core.config import TrialsConfig, check_names, within
 from bodyschema.evaluation.core.mlflow_log import table_metrics
 from bodyschema.evaluation.core.publish import publish
 from bodyschema.evaluation.core.runs import new_run
@@ -66,17 +66,15 @@ class AgencyConfig(TrialsConfig):
         if not self.period > 0:
             raise ValueError(must_be("period", "a positive duration in s", self.period))
         duration = self.steps * self.period
+        within("steps × period", duration, "duration")
         if not self.delays or not all(isinstance(d, (int, float)) and 0 <= d and round(d / self.period) < self.steps
                                       for d in self.delays):
             raise ValueError(must_be("delays", f"within the episode: 0 ≤ d < {duration:g} s (steps × period)",
                                      self.delays, "A delay beyond the episode leaves nothing to see."))
         if not 0 < self.hold_s[0] <= self.hold_s[1]:
             raise ValueError(must_be("hold_s", "(low, high) s with 0 < low ≤ high", self.hold_s))
-        noise = dict(self.visual_noise)
-        if set(noise) - set(VISUAL) or not all(math.isfinite(s) and s >= 0 for s in (*noise.values(),
-                                                                                      self.proprio_noise)):
-            raise ValueError(must_be("visual_noise and proprio_noise", f"σ ≥ 0 for modalities among {VISUAL}",
-                                     (self.visual_noise, self.proprio_noise)))
+        if set(dict(self.visual_noise)) - set(VISUAL):
+            raise ValueError(must_be("visual_noise", f"σ per modality among {VISUAL}", self.visual_noise))
 
     @property
     def default_models(self) -> tuple[str, ...]:

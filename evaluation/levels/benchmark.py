@@ -62,8 +62,6 @@ class PerceptionRunConfig(TrialsConfig):
 
     def __post_init__(self):
         super().__post_init__()
-        if self.runs < 1:
-            raise ValueError(must_be("runs", "at least 1", self.runs))
         if self.update not in ("auto", *METHODS):
             raise ValueError(must_be("update", f"'auto' or one of {METHODS}", self.update))
 

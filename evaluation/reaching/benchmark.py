@@ -94,18 +94,12 @@ class ReachingRunConfig(TrialsConfig):
         super().__post_init__()
         if check_robot_ref(self.robot):
             raise ValueError(check_robot_ref(self.robot))
-        if not (np.isfinite(self.depth_cue_deg) and self.depth_cue_deg >= 0):
-            raise ValueError(must_be("depth_cue_deg", "a finite σ ≥ 0 in degrees (0: no cue)", self.depth_cue_deg))
         if not 0 < self.spread <= 1:
             raise ValueError(must_be("spread", "in (0, 1] (a fraction of each joint's sampling range)", self.spread))
-        if self.duration is not None and not self.duration > 0:
-            raise ValueError(must_be("duration", "positive (s)", self.duration))
         if self.panda_controller not in PANDA_CONTROLLERS:
             raise ValueError(must_be("panda_controller", f"one of {PANDA_CONTROLLERS}", self.panda_controller))
         if self.goal_inference not in goal_pose.MODES:
             raise ValueError(must_be("goal_inference", f"one of {goal_pose.MODES}", self.goal_inference))
-        if self.goal_starts < 1:
-            raise ValueError(must_be("goal_starts", "at least 1 (the start pose)", self.goal_starts))
         if self.goal not in ("auto", *GOAL_PREFERENCE):
             raise ValueError(must_be("goal", f"'auto' or one of {GOAL_PREFERENCE}", self.goal))
 
@@ -137,12 +131,6 @@ class ReachingConfig(ReachingRunConfig):
     frozen: tuple[str, ...] = ()           # modalities whose stream is frozen at its first reading
     baseline: bool = True                  # also run the PD baseline
     path_plots: int = 6                    # targets drawn in the image-plane path plot
-
-    def __post_init__(self):
-        super().__post_init__()
-        for name, sigma in self.noise:
-            if not (isinstance(sigma, (int, float)) and sigma >= 0):
-                raise ValueError(must_be(f"noise[{name!r}]", "a standard deviation ≥ 0", sigma))
 
 
 def reaching_rng(seed: int, purpose: str) -> np.random.Generator:

@@ -23,7 +23,7 @@ import torch
 
 from bodyschema.aif.perception import Perception, PerceptionConfig
 from bodyschema.errors import must_be
-from bodyschema.evaluation.core.config import TrialsConfig, check_names
+from bodyschema.evaluation.core.config import TrialsConfig, check_names, within
 from bodyschema.evaluation.core.mlflow_log import table_metrics
 from bodyschema.evaluation.core.publish import publish
 from bodyschema.evaluation.core.runs import new_run
@@ -67,16 +67,18 @@ class RubberHandConfig(TrialsConfig):
         super().__post_init__()
         for name in ("displacements", "visual_sigmas"):
             values = getattr(self, name)
-            if not values or not all(isinstance(v, (int, float)) and math.isfinite(v) and v > 0 for v in values):
+            if not values or not all(v > 0 for v in values):
                 raise ValueError(must_be(name, "a non-empty tuple of distances > 0 in m", values))
         check_names("modes", self.modes, MODES)
-        for name in ("duration", "period", "stroke_rate_hz", "binding_sigma_s", "spatial_sigma", "spatial_range"):
+        for name in ("period", "stroke_rate_hz", "binding_sigma_s", "spatial_sigma", "spatial_range"):
             if not getattr(self, name) > 0:
                 raise ValueError(must_be(name, "positive", getattr(self, name)))
         if not 0 < self.final_window_s <= self.duration:
             raise ValueError(must_be("final_window_s", f"in (0, duration = {self.duration} s]", self.final_window_s))
         if self.period > self.duration:
             raise ValueError(must_be("period", f"at most the duration ({self.duration} s)", self.period))
+        within("frames (duration / period)", self.frames, "steps")
+        within("strokes (duration × stroke_rate_hz)", self.duration * self.stroke_rate_hz, "strokes")
         if not 0 <= self.async_lag_s < self.duration:
             raise ValueError(must_be("async_lag_s", f"within the episode: 0 ≤ lag < {self.duration:g} s",
                                      self.async_lag_s, "A lag beyond the episode leaves no stroke to compare."))
