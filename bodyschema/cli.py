@@ -385,6 +385,8 @@ def after_interrupt(command: str) -> str:
         return "Run the same command again to resume."
     if word in ATOMIC:
         return "Nothing was written; run the same command again."
+    if word == "demo":                      # its datasets are made with --overwrite; train reuses or resumes a fit
+        return "Run the same command again: it remakes the datasets, reuses or resumes the fits, reruns the rest."
     return "Run the same command again; it starts over."
 
 
