@@ -71,9 +71,9 @@ def marker_of(out: Path) -> dict[str, Any]:
     """The marker of an existing output, {} when it has none or it describes another file or folder."""
     try:
         found = json.loads(marker_path(out).read_text())
-    except (OSError, ValueError):
+        return found if isinstance(found, dict) and found.get("fingerprint") == fingerprint(out) else {}
+    except (OSError, ValueError):       # no marker, not JSON, or OUT unreadable (a dangling link inside)
         return {}
-    return found if isinstance(found, dict) and found.get("fingerprint") == fingerprint(out) else {}
 
 
 def marker_path(out: Path) -> Path:
