@@ -50,7 +50,8 @@ LIMITS = {
     "path_plots": Limit(0, 100, "Paths drawn in one plot (default 6)."),
     "strokes": Limit(0, 1_000, "Every felt stroke of an episode is compared with every seen one (default 30)."),
 }
-# Integer fields bounded by their own config's check (a listed value, or a library's own limit): not counts of work.
+# Integers that are no counts of work, each bounded by a check of its own: a value from a list (order, levels, level),
+# the robot's image size limits (image_size), max_steps (patience: steps without progress), ≥ 0 (seed).
 BOUNDED_ELSEWHERE = ("seed", "order", "levels", "level", "image_size", "patience")
 
 

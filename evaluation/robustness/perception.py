@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from bodyschema.errors import must_be
 from bodyschema.evaluation.core.mlflow_log import table_metrics
 from bodyschema.evaluation.core.publish import publish
 from bodyschema.evaluation.core.runs import new_run
@@ -30,6 +31,11 @@ class RobustnessConfig(PerceptionRunConfig):
     modality: str = "ee_xyz"                        # the modality the noise is added to
     sigmas: tuple[float, ...] = (0.0, 0.001, 0.003, 0.01, 0.03)   # noise std in that modality's unit (m for ee_xyz)
     level: int = 2                                  # strong deviation of all joints: the informative case
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.level not in (1, 2, 3):     # checked now, not after the models are loaded, and under its own name
+            raise ValueError(must_be("level", "1, 2 or 3 (an estimation level)", self.level))
 
 
 def run_robustness(config: RobustnessConfig = RobustnessConfig(), models=None) -> dict[str, Path]:

@@ -24,6 +24,8 @@ CASES = [   # (id, argv; {W} is the scratch folder of build_world: good.zarr kin
     ("robustness-noise-inf", "evaluate robustness --noise ee_pixel inf --out {W}/res"),
     ("robustness-sigmas-inf", "evaluate robustness --sigmas inf --out {W}/res"),
     ("robustness-runs-huge", "evaluate robustness --runs 1000000 --out {W}/res"),
+    ("robustness-level-7", "evaluate robustness --level 7 --out {W}/res"),
+    ("levels-image-size-huge", "evaluate levels --image-size 100000 100000 --trials 2 --runs 1 --out {W}/res"),
     ("reaching-duration-huge", "evaluate reaching --duration 1e9 --out {W}/res"),
     ("reaching-duration-nan", "evaluate reaching --duration nan --out {W}/res"),
     ("reaching-success-mm-negative", "evaluate reaching --success-mm -1 --out {W}/res"),
