@@ -27,8 +27,8 @@ COMPRESSION = {"compression": "gzip", "compression_opts": 1}   # fast; any HDF5 
 def write_hdf5(root: zarr.Group, out: Path) -> None:
     import h5py
 
-    with _FailedWritesDropped(out) as file:
-        with h5py.File(file, "w") as f:
+    with _FailedWritesDropped(out) as sink:
+        with h5py.File(sink, "w") as f:
             f.attrs.update({"format": FORMAT, "format_version": FORMAT_VERSION, "store_attrs": attrs_json(root)})
             for key, value in dict(root.attrs).items():
                 if isinstance(value, (str, int, float, bool)):     # nested ones are in store_attrs only
@@ -38,8 +38,8 @@ def write_hdf5(root: zarr.Group, out: Path) -> None:
             for key, value in spec.items():
                 group.attrs[key] = value
             for name in data_arrays(root):
-                _copy_array(f, root, name, file.raise_failure)
-        file.raise_failure()                                     # one in the writes of the close
+                _copy_array(f, root, name, sink.raise_failure)
+        sink.raise_failure()                                     # one in the writes of the close
 
 
 class _FailedWritesDropped:
