@@ -232,6 +232,14 @@ def test_a_zarr_json_that_is_not_an_object_is_named(copy):
     assert validate_store(path) == [problems_naming(path, "zarr.json must be a JSON object", "a JSON list")[0]]
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc and /sys are Linux pseudo file systems")
+@pytest.mark.parametrize("out", ["/proc/x.zarr", "/sys/bodyschema/x.zarr"])
+def test_an_out_on_a_pseudo_file_system_is_named_not_writable(out):
+    """`--out /proc/x.zarr` said "free space ... must be >= 0.0 MB"."""
+    with pytest.raises(PermissionError, match=r"the folder of --out .* must be writable. Got \S/(proc|sys)"):
+        generate(DatagenConfig(**KINEMATIC, out=Path(out)), progress=False)
+
+
 # ---- 4. conflicting flags ----------------------------------------------------------------------------------------
 @pytest.mark.parametrize("kwargs, words", [
     (dict(images=False, rgb=True), ("image flags with --no-images must be unset", "{'--rgb': True}")),
