@@ -20,7 +20,6 @@ the same lock is a file in the temp directory: it serializes the processes of on
 from __future__ import annotations
 
 import contextlib
-import errno
 import hashlib
 import io
 import logging
@@ -41,7 +40,7 @@ from bodyschema.errors import must_be
 from bodyschema.models.scaling import BodySpec
 from bodyschema.training.digest import DIGEST_TAG, verify_directory, version_digest
 from bodyschema.training.locks import exclusive
-from bodyschema.training.store_checks import check_database_driver, check_sqlite_store
+from bodyschema.training.tracking_store import check_database_driver, check_sqlite_store, create_sqlite
 
 CHAMPION = "champion"
 METRIC = "val_rmse"          # decides the champion; lower is better
@@ -76,48 +75,12 @@ def use_tracking(explicit: str | None = None) -> MlflowClient:
         return MlflowClient(uri, uri)
     with exclusive(registry_lock(uri)):
         if not sqlite_path(uri).exists():
-            _create_sqlite(sqlite_path(uri))
+            create_sqlite(sqlite_path(uri))
         client = MlflowClient(uri, uri)                       # creating the client creates or migrates the tables
         client.search_experiments(max_results=1)              # (and these make sure of it, for both stores)
         client.search_registered_models(max_results=1)
     _initialized.add(uri)
     return client
-
-
-def _create_sqlite(db: Path) -> None:
-    """Create a fresh store beside `db` and rename it into place: a kill while MLflow creates its ~40 tables then
-    leaves no half-built database (the next process would die on "table ... already exists"), and a failure (a
-    full disk) leaves no `.creating` file either."""
-    partial = db.with_name(db.name + ".creating")
-    _remove_sqlite_files(partial)                         # of a creation killed before (a stale journal would be
-    try:                                                  # rolled back into the new file)
-        fresh = MlflowClient(f"sqlite:///{partial}", f"sqlite:///{partial}")
-        fresh.search_experiments(max_results=1)
-        fresh.search_registered_models(max_results=1)
-        os.replace(partial, db)
-    except BaseException as error:
-        _remove_sqlite_files(partial)
-        if _sqlite_write_failed(error):
-            raise OSError(errno.ENOSPC, f"SQLite could not write: {_sqlite_reason(error)}", str(db)) from error
-        raise
-
-
-def _remove_sqlite_files(db: Path) -> None:
-    for suffix in ("", "-journal", "-wal", "-shm"):
-        db.with_name(db.name + suffix).unlink(missing_ok=True)
-
-
-def _sqlite_write_failed(error: BaseException) -> bool:
-    """A full disk or the file-size limit, as SQLite reports it (SQLITE_FULL, or an I/O error while writing)."""
-    reason = _sqlite_reason(error)
-    return "disk is full" in reason or "disk I/O error" in reason
-
-
-def _sqlite_reason(error: BaseException) -> str:
-    cause = error
-    while cause is not None and type(cause).__module__ != "sqlite3":
-        cause = cause.__cause__ or cause.__context__
-    return str(cause if cause is not None else error).splitlines()[0]
 
 
 def check_tracking(uri: str, timeout_s: float = 5.0) -> None:
@@ -369,6 +332,7 @@ def load_local(path: str | Path, *, tracking: str | None = None):
     if not ((path / "meta.json").is_file() and (path / "state.pt").is_file()):
         return load_model(path)             # the house error naming what a model directory holds
     uri = tracking_uri(tracking)
+    check_tracking(uri)                     # a folder or a text file as sqlite store: said so, not "recorded nowhere"
     with tempfile.TemporaryDirectory(prefix="bodyschema-local-") as tmp:
         copy = Path(shutil.copytree(path, Path(tmp) / "model", symlinks=False))
         digest = directory_sha256(copy)

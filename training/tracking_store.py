@@ -1,14 +1,19 @@
-"""Checks of a tracking URI's local side, before MLflow touches it: the sqlite file, the database driver.
+"""The tracking store's local side: a tracking URI checked before MLflow touches it (the sqlite file, the database
+driver), and a fresh sqlite store created whole or not at all.
 
-Without them MLflow fails late and loudly: a `sqlite:///` path naming a folder retries for minutes ("unable to open
-database file") and then raises; a text file raises sqlite's "file is not a database" from deep in a migration;
-`mysql://` or `postgresql://` without the driver raises ModuleNotFoundError mid-connection. Each becomes the house
-error here, in milliseconds, and nothing is created (not even the lock file beside the database).
+Without the checks MLflow fails late and loudly: a `sqlite:///` path naming a folder retries for minutes ("unable to
+open database file") and then raises; a text file raises sqlite's "file is not a database" from deep in a
+migration; `mysql://` or `postgresql://` without the driver raises ModuleNotFoundError mid-connection. Each becomes
+the house error here, in milliseconds, and nothing is created (not even the lock file beside the database).
 """
 
 from __future__ import annotations
 
+import errno
+import os
 from pathlib import Path
+
+from mlflow import MlflowClient
 
 from bodyschema.errors import must_be
 
@@ -59,3 +64,39 @@ def check_database_driver(uri: str) -> None:
         raise ValueError(must_be(f"the database driver of tracking URI {shown}", "installed", f"no module {module}",
                                  f"Install it (`pip install {package}`), or use the default sqlite store "
                                  "(unset MLFLOW_TRACKING_URI).")) from None
+
+
+def create_sqlite(db: Path) -> None:
+    """Create a fresh store beside `db` and rename it into place: a kill while MLflow creates its ~40 tables then
+    leaves no half-built database (the next process would die on "table ... already exists"), and a failure (a
+    full disk) leaves no `.creating` file either."""
+    partial = db.with_name(db.name + ".creating")
+    _remove_sqlite_files(partial)                         # of a creation killed before (a stale journal would be
+    try:                                                  # rolled back into the new file)
+        fresh = MlflowClient(f"sqlite:///{partial}", f"sqlite:///{partial}")
+        fresh.search_experiments(max_results=1)
+        fresh.search_registered_models(max_results=1)
+        os.replace(partial, db)
+    except BaseException as error:
+        _remove_sqlite_files(partial)
+        if _sqlite_write_failed(error):
+            raise OSError(errno.ENOSPC, f"SQLite could not write: {_sqlite_reason(error)}", str(db)) from error
+        raise
+
+
+def _remove_sqlite_files(db: Path) -> None:
+    for suffix in ("", "-journal", "-wal", "-shm"):
+        db.with_name(db.name + suffix).unlink(missing_ok=True)
+
+
+def _sqlite_write_failed(error: BaseException) -> bool:
+    """A full disk or the file-size limit, as SQLite reports it (SQLITE_FULL, or an I/O error while writing)."""
+    reason = _sqlite_reason(error)
+    return "disk is full" in reason or "disk I/O error" in reason
+
+
+def _sqlite_reason(error: BaseException) -> str:
+    cause = error
+    while cause is not None and type(cause).__module__ != "sqlite3":
+        cause = cause.__cause__ or cause.__context__
+    return str(cause if cause is not None else error).splitlines()[0]
