@@ -75,9 +75,10 @@ def _box(attrs: dict, key: str, dq: int, problems: list[str]) -> np.ndarray | No
     return box
 
 
-def _short(value) -> str:
+def _short(value):
+    """`value` as it came, or its repr cut to 80 characters (an edited attr can be huge)."""
     text = repr(value)
-    return text if len(text) <= 80 else text[:77] + "..."
+    return value if len(text) <= 80 else text[:77] + "..."
 
 
 def _check_attrs(attrs: dict, dq: int | None, problems: list[str]) -> np.ndarray | None:
