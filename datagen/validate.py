@@ -273,7 +273,7 @@ def _report_values(tally: _Tally, attrs: dict, problems: list[str]) -> None:
                                     f"{count} rows off by up to {worst:.3g} px, first at row {row}"))
 
 
-def _done_digests(root: zarr.Group, problems: list[str]) -> np.ndarray | None:
+def _done_digests(root: zarr.Group, n_shards, problems: list[str]) -> np.ndarray | None:
     """(n_shards,) uint64 recorded checksums (0: not done), reporting shards not done; None if unreadable."""
     if DONE not in root.array_keys():
         problems.append(must_be(DONE, "present (the per-shard checksums)", "missing: checksums missing",
@@ -284,6 +284,10 @@ def _done_digests(root: zarr.Group, problems: list[str]) -> np.ndarray | None:
     except Exception as e:  # noqa: BLE001
         problems.append(must_be(DONE, "readable", f"{type(e).__name__}: {e}",
                                 "A marker chunk is damaged: " + REPAIR_HINT))
+        return None
+    if isinstance(n_shards, int) and digests.shape != (n_shards,):
+        problems.append(must_be(f"{DONE} shape", f"({n_shards},): one checksum per shard of attrs n_shards",
+                                digests.shape, "It was replaced: " + REPAIR_HINT))
         return None
     if not digests.all():
         problems.append(must_be("every shard", "done", f"shards {np.flatnonzero(digests == 0).tolist()[:20]} not done",
@@ -348,7 +352,7 @@ def validate_store(path: str | Path) -> list[str]:
     if attrs.get("complete") is not True:
         problems.append(must_be("store", "complete (attr complete=True, written last)", "no completion marker",
                                 RESUME_HINT))
-    digests = _done_digests(root, problems)
+    digests = _done_digests(root, attrs.get("n_shards"), problems)
     usable = _check_layout(root, attrs, problems)
     limits = _check_attrs(attrs, usable["q"].shape[1] if "q" in usable else None, problems)
     _check_content(Path(path), root, usable, attrs, digests, limits, problems)

@@ -225,6 +225,17 @@ def test_a_store_without_its_checksums_is_reported_and_rerunning_datagen_rewrite
     assert validate_store(path) == [] and arrays(path) == before
 
 
+def test_a_replaced_shard_done_is_reported_and_rerunning_datagen_rewrites_it(copy):
+    path = copy("planar2")
+    before = arrays(path)
+    root = zarr.open_group(str(path), mode="r+")
+    del root[DONE]
+    root.create_array(DONE, data=np.ones(5, np.uint64), chunks=(1,))  # 5 "done" checksums for 3 shards
+    problems_naming(path, "shard_done shape must be (3,)")
+    generate(DatagenConfig(**KINEMATIC, out=path), progress=False)
+    assert validate_store(path) == [] and arrays(path) == before
+
+
 def test_a_zarr_json_that_is_not_an_object_is_named(copy):
     """`validate` on a zarr.json of `[]` said "pop expected at most 1 argument"."""
     path = copy("planar2")
