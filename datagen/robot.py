@@ -129,7 +129,8 @@ class Robot:
         """The robot a store was made with, from its attrs alone (record and model text; see `robot_attrs`)."""
         from bodyschema.datagen.robot_attrs import check_meshes, record_of_attrs
         record, text = record_of_attrs(attrs)
-        kwargs.setdefault("image_size", tuple(attrs["image_size"]))
+        if "image_size" not in kwargs:                   # a model's body has no camera size: its caller gives it
+            kwargs["image_size"] = tuple(attrs["image_size"])
         kwargs.setdefault("rgb", attrs.get("channels") == 3)
         robot = cls.load(record, text=text, **kwargs)
         check_meshes(robot, attrs)

@@ -4,19 +4,23 @@ x = g(z) for z = joint angles (rad): the `ee` site position (ee_xyz, m), its cam
 or the joints themselves (joints, rad, identity). The Jacobian is closed-form: mj_jacSite (its hinge
 recursion vectorized over the batch for large B, equal to 1e-12), chained with
 the pinhole projection Jacobian for ee_pixel. Precision is fixed. Nothing is learned, so saving stores the
-config only and loading rebuilds the robot from the shipped MJCF (a changed MJCF is reported on load).
+config and the body only, and loading rebuilds the robot as every stage does (`body_robot`): a shipped robot from
+its shipped MJCF (a changed MJCF is reported on load), a robot from a file from the record and model text its body
+carries.
 The FK is evaluated for any finite z, also outside the joint limits, since inference may probe there.
 """
 
 from __future__ import annotations
 
 import warnings
+from pathlib import Path
 
 import numpy as np
 import torch
 
 from bodyschema.datagen.robot import Robot
 from bodyschema.errors import must_be
+from bodyschema.models.body_robot import body_robot, robot_source
 from bodyschema.models.contract import BaseSensoryModel, register_kind
 from bodyschema.models.scaling import BodySpec
 
@@ -29,11 +33,14 @@ DEFAULT_PRECISION = {"ee_xyz": 1.0 / 1e-3 ** 2,                  # m⁻²
 
 @register_kind
 class AnalyticModel(BaseSensoryModel):
-    """Exact FK of a shipped robot: ee_xyz (3,) m, ee_pixel (2,) px or joints (Dq,) rad, fixed precision."""
+    """Exact FK of a robot: ee_xyz (3,) m, ee_pixel (2,) px or joints (Dq,) rad, fixed precision.
+
+    robot: a shipped name, a path to an MJCF/URDF/record, or another model's BodySpec (its robot: `body_robot`;
+    the latent scaling is the robot's camera workspace either way)."""
 
     kind = "analytic"
 
-    def __init__(self, robot: str, modality: str, image_size: tuple[int, int] | None = None,
+    def __init__(self, robot: str | Path | BodySpec, modality: str, image_size: tuple[int, int] | None = None,
                  precision: float | None = None):
         if modality not in MODALITIES:
             raise ValueError(must_be("modality", f"one of {MODALITIES}", modality))
@@ -42,9 +49,12 @@ class AnalyticModel(BaseSensoryModel):
         if not (isinstance(precision, (int, float)) and np.isfinite(precision) and precision > 0):
             raise ValueError(must_be("precision", "a finite number > 0 (1 / variance of x)", precision,
                                      f"The default for {modality} is {DEFAULT_PRECISION[modality]:.6g}."))
-        self.robot = Robot.load(robot, image_size=image_size)   # cheap: no renderer until render()
+        # cheap: no renderer until render()
+        self.robot = (body_robot(robot, image_size) if isinstance(robot, BodySpec)
+                      else Robot.load(robot, image_size=image_size))
         low, high = self.robot.sampling_ranges.T
-        body = BodySpec(robot, self.robot.joint_names, tuple(map(float, low)), tuple(map(float, high)))
+        body = BodySpec(self.robot.name, self.robot.joint_names, tuple(map(float, low)), tuple(map(float, high)),
+                        robot_source(self.robot))
         out = {"ee_xyz": (3,), "ee_pixel": (2,), "joints": (self.robot.dq,)}[modality]
         super().__init__(body, modality, out)
         self.image_size = self.robot.image_size if modality == "ee_pixel" else None
@@ -80,7 +90,7 @@ class AnalyticModel(BaseSensoryModel):
     @classmethod
     def _from_saved(cls, body, modality, output_shape, config, state):
         size = tuple(config["image_size"]) if config.get("image_size") else None
-        model = cls(config["robot"], config["modality"], size, config["precision"])
+        model = cls(body, config["modality"], size, config["precision"])
         body.check_compatible(model.body, "saved analytic model")
         if config.get("mjcf_sha256") not in (None, model.robot.mjcf_sha256):
             warnings.warn(f"The shipped MJCF of {config['robot']!r} changed since this model was saved "

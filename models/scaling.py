@@ -2,11 +2,13 @@
 
 Callers always pass joint angles in rad; models scale internally so that their kernels and networks see
 inputs in [-1, 1]. The scaling is part of the saved model state, never the caller's business.
+A robot that is not shipped travels with the body (`source`: its record and model file, as a store keeps them), so a
+saved model finds its robot with no path that may have moved (`models.body_robot.body_robot`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import torch
 
@@ -21,6 +23,9 @@ class BodySpec:
     joint_names: tuple[str, ...]    # one per latent dimension, in order
     q_low: tuple[float, ...]        # rad, lower end of the scaled range
     q_high: tuple[float, ...]       # rad, upper end of the scaled range
+    # None: a shipped robot, found by its name; else the robot attrs of `datagen.robot_attrs` (the record and the
+    # model file's text, sha256 and mesh digests) it is rebuilt from. Not hashed: a dict (the name stands for it).
+    source: dict | None = field(default=None, hash=False)
 
     def __post_init__(self):
         n = len(self.joint_names)
@@ -58,13 +63,15 @@ class BodySpec:
                                      "Load a model trained on the same robot and joint set."))
 
     def to_dict(self) -> dict:
-        return {"robot": self.robot, "joint_names": list(self.joint_names),
-                "q_low": list(self.q_low), "q_high": list(self.q_high)}
+        """As saved in meta.json; a shipped robot's body has no `source` key (saved as before it existed)."""
+        out = {"robot": self.robot, "joint_names": list(self.joint_names),
+               "q_low": list(self.q_low), "q_high": list(self.q_high)}
+        return out if self.source is None else {**out, "source": self.source}
 
     @classmethod
     def from_dict(cls, d: dict) -> "BodySpec":
         return cls(d["robot"], tuple(d["joint_names"]), tuple(map(float, d["q_low"])),
-                   tuple(map(float, d["q_high"])))
+                   tuple(map(float, d["q_high"])), d.get("source"))
 
     def _bounds(self, like: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         low = torch.tensor(self.q_low, dtype=like.dtype, device=like.device)

@@ -22,6 +22,7 @@ import zarr
 from tqdm.auto import tqdm
 
 from bodyschema.errors import must_be
+from bodyschema.models.body_robot import attrs_source
 from bodyschema.models.scaling import IMAGE_SCALE, BodySpec
 
 DATA_ARRAYS = ("q", "ee_xyz", "ee_pixel", "image", "jacobian", "qvel", "touch")  # not bookkeeping (shard_done)
@@ -154,7 +155,8 @@ def split_rows(episode: np.ndarray | None, n: int, val_fraction: float,
 
 
 def body_from_attrs(attrs: dict[str, Any], q: np.ndarray) -> BodySpec:
-    """The model's BodySpec: robot and joints from the attrs, latent scaling from the sampled ranges (rad)."""
+    """The model's BodySpec: robot and joints from the attrs, latent scaling from the sampled ranges (rad), and a
+    robot that is not shipped carried along (the store's record and model file: `models.body_robot`)."""
     names = tuple(attrs["joint_names"])
     if len(names) != q.shape[1]:
         raise ValueError(must_be("data attrs['joint_names']", f"one name per column of q ({q.shape[1]})", list(names)))
@@ -163,7 +165,7 @@ def body_from_attrs(attrs: dict[str, Any], q: np.ndarray) -> BodySpec:
         low, high = (tuple(float(r[i]) for r in ranges) for i in (0, 1))
     else:                       # older stores: the observed range of q
         low, high = tuple(map(float, q.min(axis=0))), tuple(map(float, q.max(axis=0)))
-    return BodySpec(str(attrs["robot"]), names, low, high)
+    return BodySpec(str(attrs["robot"]), names, low, high, attrs_source(attrs))
 
 
 def _read_chunked(array: zarr.Array, name: str, digest, progress: bool) -> np.ndarray:

@@ -41,10 +41,12 @@ class PDConfig:
 
 
 class PDController:
-    """PD + Earth-gravity compensation for a torque-driven robot (a name, path or record), batched over B episodes."""
+    """PD + Earth-gravity compensation for a torque-driven robot (a name, path, record or `Robot`: its record and
+    model text, so a robot rebuilt from a store or a model's body needs no file), batched over B episodes."""
 
     def __init__(self, robot, config: PDConfig = PDConfig()):
-        self._robot = Robot.load(robot, actuators="torque", gravity=config.gravity)   # private model: g_⊕ only
+        given = {"robot": robot.record, "text": robot.source.text} if isinstance(robot, Robot) else {"robot": robot}
+        self._robot = Robot.load(**given, actuators="torque", gravity=config.gravity)   # private model: g_⊕ only
         self._data = mujoco.MjData(self._robot.model)
         self.dq = self._robot.dq
         kp, kd = (config.kp, config.kd) if config.kp is not None else robot_gains(self._robot)

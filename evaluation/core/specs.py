@@ -103,9 +103,10 @@ def provenance_rows(models: Sequence) -> list[dict[str, str]]:
 
 # ---- the robot of the models ------------------------------------------------------------------------------
 def load_robot(models: Sequence, image_size: tuple[int, int] | None = None, actuators: str = "position"):
-    """The benchmark robot of the models, with the camera the image model (if any) was trained for, its sampling
+    """The benchmark robot of the models (a shipped one by name, one from a file from the record and model text its
+    models carry: `models.body_robot`), with the camera the image model (if any) was trained for, its sampling
     ranges the joint box every model was trained on."""
-    from bodyschema.datagen.robot import Robot
+    from bodyschema.models.body_robot import body_robot
     image = next((m for m in models if m.modality == "image"), None)
     rgb = False
     if image is not None:
@@ -114,7 +115,7 @@ def load_robot(models: Sequence, image_size: tuple[int, int] | None = None, actu
     pixel = next((m for m in models if getattr(m, "image_size", None)), None)
     if image_size is None and pixel is not None:
         image_size = tuple(pixel.image_size)
-    robot = Robot.load(models[0].body.robot, image_size=image_size, rgb=rgb, actuators=actuators)
+    robot = body_robot(models[0].body, image_size=image_size, rgb=rgb, actuators=actuators)
     check_models_match(models, robot)
     robot.sampling_ranges = trained_workspace(models, robot)
     return robot
@@ -133,30 +134,45 @@ def trained_workspace(models: Sequence, robot) -> np.ndarray:
 
 
 def check_models_match(models: Sequence, robot) -> None:
-    """Every model must be over the benchmark robot and its joints, in order."""
+    """Every model must be over the benchmark robot and its joints, in order; a model that carries its robot's
+    model file (a robot from a file) over the same file (sha256): two arms of one name are not one body."""
+    from bodyschema.models.body_robot import source_sha256
+    known = getattr(robot, "mjcf_sha256", None)                 # a recorded store's body may not know its file
     for m in models:
         if (m.body.robot, tuple(m.body.joint_names)) != (robot.name, tuple(robot.joint_names)):
             raise ValueError(must_be(f"{m.modality} model body", f"robot {robot.name!r} with joints "
                                      f"{list(robot.joint_names)}", f"robot {m.body.robot!r} with joints "
                                      f"{list(m.body.joint_names)}", "Evaluate models of the benchmark's robot."))
+        if known is not None and source_sha256(m.body) not in (None, known):
+            raise ValueError(must_be(f"{m.modality} model's robot file", f"the benchmark robot's (sha256 "
+                                     f"{known[:12]}…)", f"sha256 {source_sha256(m.body)[:12]}…",
+                                     f"Evaluate together only models of the same {robot.name!r} model file."))
 
 
-def body_and_senses(models: Sequence, robot_name: str, visual_kinds: Sequence[str], hint: str = "",
+def robot_name(ref: str) -> str:
+    """The name a robot reference (a shipped name, an MJCF/URDF/record path) gives its models' bodies."""
+    from bodyschema.datagen.robot import robot_record
+    return robot_record(ref).name
+
+
+def body_and_senses(models: Sequence, robot_ref: str, visual_kinds: Sequence[str], hint: str = "",
                     actuators: str = "position"):
     """(robot, [joints model, *visual models]) for benchmarks that set proprioception against vision: every model of
-    `robot_name`, at least one visual model of `visual_kinds`; the robot's exact joints model is added when none is
-    given, and the sampling box is the one every model was trained on (the added joints model's too)."""
+    `robot_ref` (a shipped name or a model/record file), at least one visual model of `visual_kinds`; the robot's
+    exact joints model is added when none is given, and the sampling box is the one every model was trained on (the
+    added joints model's too)."""
     from bodyschema.models.analytic import AnalyticModel
+    name = robot_name(robot_ref)
     for m in models:
-        if m.body.robot != robot_name:
-            raise ValueError(must_be(f"{m.modality} model body", f"robot {robot_name!r}", m.body.robot,
+        if m.body.robot != name:
+            raise ValueError(must_be(f"{m.modality} model body", f"robot {name!r}", m.body.robot,
                                      "Evaluate models of the benchmark's robot (or set --robot)."))
     visual = [m for m in models if m.modality != "joints"]
     if not visual or any(m.modality not in visual_kinds for m in visual):
         raise ValueError(must_be("model modalities", f"at least one of {tuple(visual_kinds)} (plus optionally "
                                  "joints)", [m.modality for m in models], hint))
     robot = load_robot(models, actuators=actuators)
-    proprio = next((m for m in models if m.modality == "joints"), None) or AnalyticModel(robot.name, "joints")
+    proprio = next((m for m in models if m.modality == "joints"), None) or AnalyticModel(models[0].body, "joints")
     robot.sampling_ranges = trained_workspace([proprio, *visual], robot)
     return robot, [proprio, *visual]
 

@@ -112,11 +112,12 @@ class RecordedTargets:
 
 
 def _robot_of(attrs: dict):
-    """The store's robot for forward kinematics when its name loads (a shipped robot or record), else None."""
+    """The store's robot for forward kinematics when it loads (its own record and model text, or a shipped robot's
+    name), else None."""
     from bodyschema.datagen.robot import Robot
 
     try:
-        robot = Robot.load(str(attrs["robot"]))
+        robot = Robot.from_attrs(attrs, image_size=None)          # the record's camera size: only FK is asked
     except (ValueError, OSError):
         return None
     if tuple(robot.joint_names) != tuple(attrs["joint_names"]):

@@ -48,7 +48,7 @@ from bodyschema.evaluation.core.runs import new_run
 from bodyschema.evaluation.core.seeds import EVAL_STREAM
 from bodyschema.evaluation.core.sensing import Sensors, sense
 from bodyschema.evaluation.core.sim import control_substeps
-from bodyschema.evaluation.core.specs import load_robot, models_field, resolve_encoder, resolve_models
+from bodyschema.evaluation.core.specs import load_robot, models_field, resolve_encoder, resolve_models, robot_name
 from bodyschema.evaluation.reaching import goal_pose
 from bodyschema.evaluation.reaching import report as reaching_report
 from bodyschema.evaluation.reaching.robot_defaults import reaching_defaults
@@ -247,7 +247,7 @@ def aif_policy(config: ReachingConfig, models, robot, goal_precisions: dict[str,
                                  "the AIC)", config.broken))
     if config.panda_controller == "velocity":
         controller = VelocityController(models, config.perception, config.action_config, precisions)
-        return ImpedancePolicy(controller, PDController(robot.name), tuple(robot.joint_limits.T), goal_precisions)
+        return ImpedancePolicy(controller, PDController(robot), tuple(robot.joint_limits.T), goal_precisions)
     aic = replace(config.aic, precisions=tuple((m, p) for m, p in config.aic.precisions if m not in precisions)
                   + tuple(precisions.items()))
     extra = [m for m in models if m.modality != "joints"]
@@ -282,7 +282,7 @@ def aif_goal(config: ReachingRunConfig, models, episodes: Episodes) -> tuple[dic
 def baseline_policy(config: ReachingConfig, robot, episodes: Episodes):
     if robot.actuation == "position":
         return ServoPolicy(episodes.q_target)
-    return TorquePolicy(PDController(robot.name), goal={"joints": episodes.q_target})
+    return TorquePolicy(PDController(robot), goal={"joints": episodes.q_target})
 
 
 # ---- the benchmark ----------------------------------------------------------------------------------------
@@ -320,9 +320,10 @@ def prepare(config: ReachingConfig, models=None):
     """Resolve and check the models, load the robot, build the episodes. → robot, models, goal modality,
     episodes, sensed modalities."""
     models = resolve_models(config.models, config.default_models, config.tracking_uri, models)
-    if any(m.body.robot != config.robot for m in models):
-        bad = next(m for m in models if m.body.robot != config.robot)
-        raise ValueError(must_be(f"{bad.modality} model body", f"of robot {config.robot!r}", bad.body.robot,
+    name = robot_name(config.robot)
+    if any(m.body.robot != name for m in models):
+        bad = next(m for m in models if m.body.robot != name)
+        raise ValueError(must_be(f"{bad.modality} model body", f"of robot {name!r}", bad.body.robot,
                                  "Pass models of the benchmark's robot (or change --robot)."))
     robot = load_robot(models, config.image_size, actuators=reaching_defaults(config.robot).actuators)
     names = [m.modality for m in models]

@@ -89,10 +89,10 @@ def summarize(rows: list[dict], walls: dict[str, float]) -> list[dict]:
     return table
 
 
-def markdown(table: list[dict], config, modality: str) -> str:
+def markdown(table: list[dict], config, modality: str, robot_name: str) -> str:
     tol = {"ee_pixel": f"{config.pixel_tolerance:g} px", "image": f"image MSE {config.image_mse_threshold:g}",
            "ee_xyz": f"{config.success_mm:g} mm", "joints": "1°"}[modality]
-    text = (f"Reaching on {config.robot}: {table[0]['episodes']} random reachable targets, {modality} goals, "
+    text = (f"Reaching on {robot_name}: {table[0]['episodes']} random reachable targets, {modality} goals, "
             f"{config.seconds:g} s at {config.rate:g} Hz, seed {config.seed}. `success`: final simulator "
             f"ee error < {config.success_mm:g} mm; `goal_success`: final error in the goal space < {tol}; "
             "`time_to_reach_s`: mean over the episodes that reached and stayed. "
@@ -145,9 +145,9 @@ def write_all(config, out: Path, robot, models, modality, episodes, results: dic
     paths = {"episodes_csv": write_csv(rows, out / "reaching_episodes.csv"),
              "summary_csv": write_csv(table, out / "summary.csv"),
              "summary_md": out / "summary.md"}
-    paths["summary_md"].write_text(markdown(table, config, modality))
+    paths["summary_md"].write_text(markdown(table, config, modality, robot.name))
     paths["ee_error_png"] = plot_errors(results, out / "ee_error.png", config.success_mm)
     goal_px = robot.project(episodes.target_xyz)
     paths["paths_png"] = plot_paths(results, goal_px, robot, out / "image_paths.png", config.path_plots)
-    publish(config, out, f"reaching-{config.robot}", table_metrics(table, "controller"), paths, models)
+    publish(config, out, f"reaching-{robot.name}", table_metrics(table, "controller"), paths, models)
     return paths
