@@ -10,6 +10,7 @@ traceback. This module stays a leaf: optional libraries (mlflow, mujoco, zarr, t
 from __future__ import annotations
 
 import errno
+import os
 import pickle
 import re
 import sys
@@ -46,6 +47,7 @@ LIBRARY = {
 READER_MODULES = ("zarr", "numcodecs", "torch.serialization", "torch._weights_only_unpickler", "json", "pickle")
 READER_FUNCTIONS = ("load_model", "_from_saved", "from_dict", "open_store", "load_dataset", "read_rows",
                     "_read_chunked", "load")
+GL_BACKENDS = "egl (headless GPU or Mesa), osmesa (software) or glfw (a display)"
 FILE_HINT = "It is truncated, corrupt or was edited; re-create it with the command that wrote it, or pass another."
 
 
@@ -65,6 +67,9 @@ def explain(error: BaseException) -> str | None:
                        _unpickler_reason(text), "It was refused without running it. " + FILE_HINT)
     if " must be " in text and isinstance(error, (*ALWAYS, *IF_USERS_FAULT)):
         return text
+    if isinstance(error, RuntimeError) and "MUJOCO_GL" in text:   # mujoco's import refusing an unknown backend
+        return must_be("MUJOCO_GL", f"one of {GL_BACKENDS}", os.environ.get("MUJOCO_GL"),
+                       "Set it to egl or osmesa, or unset it (egl is the default).")
     if isinstance(error, OSError):
         return _explain_os_error(error)
     if isinstance(error, FloatingPointError):

@@ -6,7 +6,7 @@ split depending on the config only, never on the worker count. Shard i draws fro
 Each worker builds its own Robot (once per process), writes its own chunks straight into the store and then its
 shard's done marker holding the shard's checksum; the root attr `complete=True` is written last. Rerunning skips
 done shards and rewrites those whose chunks are missing, unreadable or differ from their checksum (`integrity`).
-Before anything is built or written, `guards` checks MUJOCO_GL, the output folder, the shard count, disk, memory and
+Before anything is built or written, `guards` checks the output folder, the shard count, disk, memory and
 (with images) rendering, and a babbling run simulates one probe episode (a diverging simulation is an error). Then
 the backend comes up (a Ray cluster that does not answer fails here), and the run holds the store's lock
 (`locks.store_lock`) from before it looks at the store until it is complete: one datagen run per store.
@@ -20,9 +20,7 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from bodyschema.datagen.guards import check_gl_backend
 
-check_gl_backend()  # before mujoco is first imported (by robot): an unknown MUJOCO_GL is the house error
 
 from bodyschema.datagen.robot import Robot  # noqa: E402
 

@@ -7,7 +7,6 @@ milliseconds instead of growing a Python list past the machine's memory (measure
 
 from __future__ import annotations
 
-import importlib
 import math
 import os
 import shutil
@@ -23,23 +22,10 @@ MAX_SHARDS = 100_000  # one done-marker file and one task per shard: beyond this
 WORK_FACTOR = 3  # a worker holds ~3x its shard's stored bytes (float64 kinematics, the arrays, encode, read-back)
 
 
-GL_BACKENDS = "egl (headless GPU or Mesa), osmesa (software) or glfw (a display)"
 
 
 class RenderingUnavailable(OSError):
     """No OpenGL context could be made for rendering (MUJOCO_GL unusable on this machine)."""
-
-
-def check_gl_backend() -> None:
-    """Import mujoco, turning an unknown MUJOCO_GL (mujoco refuses to import at all) into the house ValueError."""
-    os.environ.setdefault("MUJOCO_GL", "egl")  # as robot.py: headless unless the user chose
-    try:
-        importlib.import_module("mujoco")
-    except RuntimeError as e:
-        if "MUJOCO_GL" not in str(e):
-            raise
-        raise ValueError(must_be("MUJOCO_GL", f"one of {GL_BACKENDS}", os.environ["MUJOCO_GL"],
-                                 "Set it to egl or osmesa, or unset it (egl).")) from e
 
 
 def check_writable(path: Path) -> None:

@@ -337,12 +337,15 @@ def test_an_unreachable_ray_address_is_a_clear_error(in_world, capsys, monkeypat
     assert "RAY_ADDRESS must be" in err and not (in_world / "ray").exists()
 
 
-def test_an_unknown_mujoco_gl_is_a_clear_error(in_world):
-    """`MUJOCO_GL=bogus` was a RuntimeError traceback from mujoco's import (a fresh process: mujoco reads it once)."""
+@pytest.mark.parametrize("command", ["datagen --n 4 --out new.zarr", "validate good.zarr",
+                                     "evaluate levels --trials 2 --runs 1 --no-mlflow --out res"])
+def test_an_unknown_mujoco_gl_is_a_clear_error(in_world, command):
+    """`MUJOCO_GL=bogus` was a RuntimeError traceback from mujoco's import (a fresh process: mujoco reads it once),
+    in every stage that simulates or renders."""
     env = {k: v for k, v in os.environ.items() if k not in ("MLFLOW_TRACKING_URI", "BODYSCHEMA_DEBUG")}
     env["MUJOCO_GL"] = "bogus"
     before = snapshot(in_world)
-    run = subprocess.run([sys.executable, "-m", "bodyschema.cli", "datagen", "--n", "4", "--out", "new.zarr"],
+    run = subprocess.run([sys.executable, "-m", "bodyschema.cli", *command.split()],
                          cwd=in_world, env=env, capture_output=True, text=True, timeout=120)
     check_clear_failure("datagen-mujoco-gl-bogus", run.returncode, run.stderr, before, snapshot(in_world), in_world)
     assert "MUJOCO_GL must be one of egl" in run.stderr and "osmesa" in run.stderr and "glfw" in run.stderr
