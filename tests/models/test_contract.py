@@ -16,11 +16,9 @@ class TestToyPlanarArmContract(SensoryModelContract):
         gen = torch.Generator().manual_seed(n)
         return (torch.rand(n, 2, generator=gen, dtype=torch.float64) * 4 - 2).to(dtype)
 
-    def test_save_then_load_in_fresh_process_gives_identical_outputs(self, model, tmp_path):
-        # The toy kind lives in tests/, which a fresh process does not import; check an in-process round trip.
-        model.save(tmp_path / "m")
-        z = self.make_inputs(3)
-        torch.testing.assert_close(load_model(tmp_path / "m").predict(z), model.predict(z), rtol=0, atol=0)
+    def test_save_then_load_in_fresh_process_gives_the_same_outputs(self, model, tmp_path):
+        pytest.skip("the toy kind lives in tests/, which a fresh process does not import; the in-process round "
+                    "trip is checked by the contract")
 
 
 def test_load_model_from_missing_directory_names_the_fix(tmp_path):
