@@ -1,9 +1,10 @@
 """Model specs and the benchmark robot: `--model SPEC` → SensoryModel, with what it resolved to (provenance), and
 the robot the models are of, with the camera and joint box they were trained for.
 
-Specs: "analytic:<robot>:<modality>", "models:/<name>@<alias>" or "models:/<name>/<version>" (the registry: the
-alias is resolved once and the version it named is what loads and what is recorded), a model directory logged by
-`bodyschema train` (its digest must be recorded in the tracking database) or "trusted:<dir>" (loaded unchecked).
+Specs: "analytic:<robot>:<modality>" (<robot>: a shipped name or an MJCF/URDF/record path), "models:/<name>@<alias>"
+or "models:/<name>/<version>" (the registry: the alias is resolved once and the version it named is what loads and
+what is recorded), a model directory logged by `bodyschema train` (its digest must be recorded in the tracking
+database) or "trusted:<dir>" (loaded unchecked). The robot of the models is their body's (`models.body_robot`).
 """
 
 from __future__ import annotations

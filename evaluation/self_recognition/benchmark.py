@@ -27,6 +27,7 @@ import torch
 
 from bodyschema.aif.free_energy import sensory_terms
 from bodyschema.aif.perception import METHODS, Perception, PerceptionConfig
+from bodyschema.datagen.robot_record import check_robot_ref
 from bodyschema.errors import must_be
 from bodyschema.evaluation.core.config import TrialsConfig, check_names, within
 from bodyschema.evaluation.core.mlflow_log import table_metrics
@@ -49,7 +50,7 @@ class SelfRecognitionConfig(TrialsConfig):
 
     out: Path = Path("results/self_recognition")     # runs go to <out>/<run-id>/, <out>/latest
     experiment: str = "bodyschema-self-recognition"  # the MLflow experiment
-    robot: str = "nao_arm"                # the babbling body; every model must be of it
+    robot: str = "nao_arm"                # the babbling body (a shipped name or a model file); models are of it
     models: models_field("analytic:<robot>:ee_pixel") = ()
     trials: int = 100                  # episodes per condition: self, each imitator delay, each other source
     sources: tuple[str, ...] = (IMITATOR, "second_arm")   # other sources: imitator, second_arm, mirrored
@@ -72,6 +73,8 @@ class SelfRecognitionConfig(TrialsConfig):
 
     def __post_init__(self):
         super().__post_init__()
+        if check_robot_ref(self.robot):
+            raise ValueError(check_robot_ref(self.robot))
         check_names("sources", self.sources, SOURCES)
         if self.trials < 2:
             raise ValueError(must_be("trials", "at least 2 episodes per condition", self.trials,
