@@ -17,6 +17,7 @@ from bodyschema.errors import must_be
 
 RANGE_TOL = 1e-5   # rad: float32 rounding of the range ends (as validate_store)
 ROBOT_ATTRS = ("mjcf_sha256", "camera_name", "intrinsics", "extrinsics", "reach_m", "base_m")
+SELF_CONTAINED = ("robot_record", "robot_model")   # datagen/robot_attrs.py: the record and the model text
 
 
 @dataclass
@@ -40,7 +41,7 @@ def resolve_body(config: ImportConfig, rec: Recording, image_size: tuple[int, in
         a = rec.attrs
         body = Body(str(a["robot"]), tuple(a["joint_names"]), np.asarray(a["joint_limits"], float),
                     np.asarray(a.get("sampling_ranges") or a["joint_limits"], float),
-                    {k: a.get(k) for k in ROBOT_ATTRS})
+                    {**{k: a.get(k) for k in ROBOT_ATTRS}, **{k: a[k] for k in SELF_CONTAINED if k in a}})
     else:
         raise ValueError(must_be("the body", "--robot NAME, or --joints NAMES with --ranges", "neither",
                                  "Only a bodyschema export records its body."))
@@ -52,12 +53,13 @@ def resolve_body(config: ImportConfig, rec: Recording, image_size: tuple[int, in
 def _robot_body(name: str, image_size: tuple[int, int] | None) -> Body:
     from bodyschema.datagen.reach import arm_reach
     from bodyschema.datagen.robot import Robot
+    from bodyschema.datagen.robot_attrs import robot_attrs
 
     robot = Robot.load(name, image_size=image_size)
-    base, reach = arm_reach(robot.model)
+    base, reach = arm_reach(robot.model, robot.ee_site)
     attrs = {"mjcf_sha256": robot.mjcf_sha256, "camera_name": robot.camera_name,
              "intrinsics": robot.intrinsics().tolist(), "extrinsics": robot.extrinsics().tolist(),
-             "reach_m": reach, "base_m": base.tolist()}
+             "reach_m": reach, "base_m": base.tolist(), **robot_attrs(robot)}   # the store rebuilds its robot
     return Body(robot.name, tuple(robot.joint_names), robot.joint_limits.copy(), None, attrs, robot)
 
 

@@ -102,8 +102,7 @@ def _forward_kinematics(body: Body, q: np.ndarray, arrays: dict[str, np.ndarray]
 def _attrs(config: ImportConfig, rec: Recording, body: Body, arrays: dict, source: Path, foreign: set) -> dict:
     n, step = len(arrays["q"]), chunk_rows(arrays)
     feats = store_features(arrays)
-    robot_made = {k: body.attrs.get(k) for k in ("mjcf_sha256", "camera_name", "intrinsics", "extrinsics",
-                                                  "reach_m", "base_m")}
+    robot_made = dict(body.attrs)
     if "ee_pixel" in foreign:
         robot_made.update(intrinsics=None, extrinsics=None)
     if "ee_xyz" in foreign or "jacobian" in foreign:
