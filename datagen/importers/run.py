@@ -49,7 +49,7 @@ def import_recording(config: ImportConfig) -> Path:
     finally:
         if body.robot is not None:
             body.robot.close()
-    return write_store(Path(config.out), arrays, attrs, config.overwrite)
+    return write_store(Path(config.out), arrays, attrs, config.overwrite, source)
 
 
 def read_source(source: Path, config: ImportConfig) -> Recording:

@@ -13,13 +13,14 @@ from typing import Any
 
 import numpy as np
 
-from bodyschema.datagen.export import write_atomically
 from bodyschema.datagen.integrity import shard_digest
+from bodyschema.datagen.outputs import write_atomically
 from bodyschema.datagen.store import (StoreWriteError, create_store, features, mark_complete, mark_shard_done,
                                       write_shard)
 from bodyschema.errors import must_be
 
 ROWS_WITH_IMAGES, ROWS_WITHOUT = 512, 16384   # rows per chunk, as datagen's default shards
+KIND = "bodyschema-import"                    # the outputs.py marker: --overwrite replaces only an earlier import
 
 
 def store_features(arrays: dict[str, np.ndarray]) -> dict[str, dict[str, Any]]:
@@ -33,9 +34,13 @@ def chunk_rows(arrays: dict[str, np.ndarray]) -> int:
     return ROWS_WITH_IMAGES if "image" in arrays else ROWS_WITHOUT
 
 
-def write_store(out: Path, arrays: dict[str, np.ndarray], attrs: dict[str, Any], overwrite: bool) -> Path:
-    """Write `arrays` (each (N, ...) in the store dtype) with `attrs` to `out`, validated, atomically."""
-    return write_atomically(Path(out), lambda tmp: _write(tmp, arrays, attrs), overwrite)
+def write_store(out: Path, arrays: dict[str, np.ndarray], attrs: dict[str, Any], overwrite: bool,
+                source: Path) -> Path:
+    """Write `arrays` (each (N, ...) in the store dtype) with `attrs` to `out`, validated, atomically; OUT never is,
+    holds or lies inside the source, and --overwrite replaces only an earlier import."""
+    need = sum(values.nbytes for values in arrays.values())         # uncompressed: an upper bound
+    return write_atomically(Path(out), lambda tmp: _write(tmp, arrays, attrs), overwrite, kind=KIND,
+                            inputs=[source], need_bytes=need, source=attrs["source"])
 
 
 def _write(path: Path, arrays: dict[str, np.ndarray], attrs: dict[str, Any]) -> None:

@@ -42,7 +42,10 @@ CASES = [
     ("source-missing", "import {W}/missing --angles deg --robot planar2 " + OUT),
     ("source-not-a-dataset", "import {W}/note.txt --angles deg --robot planar2 " + OUT),
     ("csv-missing", "import {W}/rec --csv {W}/none.csv --angles deg --robot planar2 " + OUT),
-    ("out-exists", "import {W}/rec --angles deg --robot planar2 --out {W}/rec"),
+    ("out-exists", "import {W}/rec --angles deg --robot planar2 --out {W}/demo.h5"),
+    ("out-is-the-source", "import {W}/rec --angles deg --robot planar2 --overwrite --out {W}/rec"),
+    ("out-inside-the-source", "import {W}/rec --angles deg --robot planar2 --out {W}/rec/new.zarr"),
+    ("overwrite-not-an-import", "import {W}/rec --angles deg --robot planar2 --overwrite --out {W}/demo.h5"),
     ("demo-no-joint-key", "import {W}/demo.h5 --angles rad --robot planar2 " + OUT),
     ("demo-unknown-key", "import {W}/demo.h5 --angles rad --robot planar2 --joint-key robot0_joint_pos " + OUT),
     ("demo-unknown-image-key", "import {W}/demo.h5 --angles rad --robot planar2 --joint-key joint_pos "
