@@ -2,9 +2,10 @@
 
     .venv/bin/python bench/probe.py [--timeout 120] [--only SUBSTRING]
 
-Gathers the one-line bad-input cases of `tests/test_cli_fuzz.py` and of every `tests/reliability/test_*.py` that
-has a module-level `CASES` list ((id, command) or (id, command, env)), builds the fuzz scratch folder once (a valid
-store, damaged stores, crafted model folders), runs each case as a real `bodyschema` process in it and sorts the
+Gathers the one-line bad-input cases of `tests/test_cli_fuzz.py` and of every `tests/reliability/test_*.py` (its
+module-level `CASES…` lists of (id, command) or (id, command, env)), builds each module's scratch folder (its
+`make_world(folder)`, else the fuzz test's `build_world`: a valid store, damaged stores, crafted model folders), runs
+each case as a real `bodyschema` process in it and sorts the
 outcome into one of:
   clear error     exit 1–2, the house line (" must be ") or tyro's parse message, no traceback, nothing written
   traceback       a Python traceback reached the user, or the process died of a signal (a segfault)
@@ -36,18 +37,21 @@ from tests.test_cli_fuzz import TYRO_PHRASES, VALIDATE_ANSWERS, build_world, sna
 OUTCOMES = ("clear error", "traceback", "hang", "half-written", "silently accepted", "unclear")
 
 
-def gather_cases() -> list[tuple[str, str, dict[str, str]]]:
-    """Every (id, command, env) of the fuzz test and the reliability tests."""
-    modules = ["tests.test_cli_fuzz"] + [f"tests.reliability.{p.stem}"
-                                         for p in sorted((REPO / "tests" / "reliability").glob("test_*.py"))]
-    cases = []
-    for name in modules:
-        for case in getattr(importlib.import_module(name), "CASES", []):
-            cases.append((case[0], case[1], case[2] if len(case) > 2 else {}))
-    return cases
+def case_modules() -> list:
+    """The fuzz test and every reliability test module that lists one-line cases."""
+    names = ["tests.test_cli_fuzz"] + [f"tests.reliability.{p.stem}"
+                                       for p in sorted((REPO / "tests" / "reliability").glob("test_*.py"))]
+    modules = [importlib.import_module(name) for name in names]
+    return [m for m in modules if module_cases(m)]
 
 
-def classify(case_id: str, done: subprocess.CompletedProcess | None, changed: bool) -> str:
+def module_cases(module) -> list[tuple[str, str, dict[str, str]]]:
+    """Every (id, command, env) of a module's CASES, CASES_WITH_… lists."""
+    lists = [value for name, value in vars(module).items() if name.startswith("CASES") and isinstance(value, list)]
+    return [(case[0], case[1], case[2] if len(case) > 2 else {}) for cases in lists for case in cases]
+
+
+def classify(case_id: str, done: subprocess.CompletedProcess | None, changed: bool, validate_answers: set) -> str:
     if done is None:
         return "hang"
     if "Traceback" in done.stderr or done.returncode < 0:
@@ -57,13 +61,14 @@ def classify(case_id: str, done: subprocess.CompletedProcess | None, changed: bo
     if changed:
         return "half-written"
     clear = " must be " in done.stderr or any(p in done.stderr for p in TYRO_PHRASES)
-    allowed = {1, 2} if case_id in VALIDATE_ANSWERS else {2}
+    allowed = {1, 2} if case_id in validate_answers else {2}   # exit 1: validate's "this store has problems"
     return "clear error" if clear and done.returncode in allowed else "unclear"
 
 
 def run_case(world: Path, command: str, env: dict[str, str], timeout: float) -> tuple[object, bool]:
     before = snapshot(world)
-    full_env = {k: v for k, v in os.environ.items() if k not in ("MLFLOW_TRACKING_URI", "BODYSCHEMA_DEBUG")}
+    unset = ("MLFLOW_TRACKING_URI", "BODYSCHEMA_DEBUG", "RAY_ADDRESS")
+    full_env = {k: v for k, v in os.environ.items() if k not in unset}
     full_env.update({"MUJOCO_GL": full_env.get("MUJOCO_GL", "egl"), **env})
     argv = [sys.executable, "-m", "bodyschema.cli", *command.format(W=world).split()]
     try:
@@ -78,19 +83,25 @@ def main() -> None:
     parser.add_argument("--timeout", type=float, default=120.0, help="seconds before a case counts as a hang")
     parser.add_argument("--only", default="", help="run only the cases whose id contains this")
     args = parser.parse_args()
-    cases = [c for c in gather_cases() if args.only in c[0]]
-    tally, odd = Counter(), []
-    with tempfile.TemporaryDirectory() as scratch:
-        world = build_world(Path(scratch))
-        for i, (case_id, command, env) in enumerate(cases, 1):
-            done, changed = run_case(world, command, env, args.timeout)
-            outcome = classify(case_id, done, changed)
-            tally[outcome] += 1
-            print(f"[{i}/{len(cases)}] {outcome:<17} {case_id}", file=sys.stderr, flush=True)
-            if outcome != "clear error":
-                tail = "" if done is None else (done.stderr.strip().splitlines() or [""])[-1][:200]
-                odd.append(f"- {case_id} ({outcome}): `{command}` {env or ''} → {tail}")
-    print(f"bad inputs {len(cases)}: " + " / ".join(f"{name} {tally[name]}" for name in OUTCOMES))
+    tally, odd, total = Counter(), [], 0
+    for module in case_modules():
+        cases = [c for c in module_cases(module) if args.only in c[0]]
+        if not cases:
+            continue
+        with tempfile.TemporaryDirectory() as scratch:
+            world = getattr(module, "make_world", build_world)(Path(scratch))   # the module's own scratch folder
+            for case_id, command, env in cases:
+                done, changed = run_case(world, command, env, args.timeout)
+                answers = VALIDATE_ANSWERS | getattr(module, "VALIDATE_ANSWERS", set())
+                outcome = classify(case_id, done, changed, answers)
+                tally[outcome] += 1
+                total += 1
+                print(f"[{total}] {outcome:<17} {module.__name__.split('.')[-1]}: {case_id}", file=sys.stderr,
+                      flush=True)
+                if outcome != "clear error":
+                    tail = "" if done is None else (done.stderr.strip().splitlines() or [""])[-1][:200]
+                    odd.append(f"- {case_id} ({outcome}): `{command}` {env or ''} → {tail}")
+    print(f"bad inputs {total}: " + " / ".join(f"{name} {tally[name]}" for name in OUTCOMES))
     print("\n".join(odd))
 
 

@@ -297,7 +297,12 @@ VALIDATE_ANSWERS = {"validate-list-json", "validate-path-robot", "validate-relab
 
 @pytest.fixture(scope="module")
 def world(tmp_path_factory) -> Path:
-    w = build_world(tmp_path_factory.mktemp("fuzz25"))
+    return make_world(tmp_path_factory.mktemp("fuzz25"))
+
+
+def make_world(w: Path) -> Path:
+    """The fuzz world plus stores with a list zarr.json, a path as robot, relabelled attrs, no checksums."""
+    build_world(w)
     for name in ("listjson", "pathrobot", "relabelled", "nodone"):
         shutil.copytree(w / "good.zarr", w / f"{name}.zarr")
     (w / "listjson.zarr" / "zarr.json").write_text("[]")

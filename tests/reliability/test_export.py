@@ -64,10 +64,10 @@ CASES_WITH_EXPORTS = [
 
 @pytest.fixture(scope="module")
 def world(tmp_path_factory) -> Path:
-    return export_world(tmp_path_factory.mktemp("export_fuzz"))
+    return make_world(tmp_path_factory.mktemp("export_fuzz"))
 
 
-def export_world(w: Path) -> Path:
+def make_world(w: Path) -> Path:
     """The fuzz world plus: previous exports (one replaced by a foreign file), a folder named like a PNG and a tiny
     MDN model."""
     from bodyschema.models.mdn import MDNModel

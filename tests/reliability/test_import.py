@@ -64,10 +64,10 @@ CASES = [
 
 @pytest.fixture(scope="module")
 def world(tmp_path_factory):
-    return build_world(tmp_path_factory.mktemp("import_fuzz"))
+    return make_world(tmp_path_factory.mktemp("import_fuzz"))
 
 
-def build_world(w):
+def make_world(w):
     import cv2
 
     q, images = planar2_frames(6)

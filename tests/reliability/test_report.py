@@ -162,7 +162,11 @@ CASES = [
 
 @pytest.fixture(scope="module")
 def world(tmp_path_factory) -> Path:
-    w = tmp_path_factory.mktemp("report_fuzz")
+    return make_world(tmp_path_factory.mktemp("report_fuzz"))
+
+
+def make_world(w: Path) -> Path:
+    """Results with two levels runs, one run outside --results and a summary nested too deep."""
     make_run(w / "results", "levels", OTHER_RUN)
     make_run(w / "results", "levels")
     make_run(w / "outside", "", RUN)

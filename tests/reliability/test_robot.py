@@ -48,7 +48,11 @@ CASES = [
 
 @pytest.fixture(scope="module")
 def world(tmp_path_factory):
-    w = tmp_path_factory.mktemp("robot_world")
+    return make_world(tmp_path_factory.mktemp("robot_world"))
+
+
+def make_world(w):
+    """A one-hinge arm, files that are not robots, and records each wrong in one way."""
     (w / "arm.xml").write_text(ARM)
     (w / "arm.sdf").write_text("<sdf/>")
     (w / "dae.urdf").write_text(URDF)
