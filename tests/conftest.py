@@ -12,4 +12,16 @@ def torch_threads_restored():
     yield
     leaked = torch.get_num_threads()
     torch.set_num_threads(threads)
-    assert leaked == threads, f"the test left torch.get_num_threads() at {leaked} (was {threads}): use tests.threads.one_thread"
+    assert leaked == threads, (f"the test left torch.get_num_threads() at {leaked} (was {threads}): "
+                               "use tests.threads.one_thread")
+
+
+@pytest.fixture
+def in_world(world, monkeypatch):
+    """The bad-input tests' scratch folder (each module's own `world` fixture) as the working folder: default
+    outputs (runs/, results/, mlflow.db) land there, and no tracking URI, debug flag or Ray address of the caller's
+    environment leaks in."""
+    monkeypatch.chdir(world)
+    for name in ("MLFLOW_TRACKING_URI", "BODYSCHEMA_DEBUG", "RAY_ADDRESS"):
+        monkeypatch.delenv(name, raising=False)
+    return world

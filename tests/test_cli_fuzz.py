@@ -154,14 +154,6 @@ def build_world(w: Path) -> Path:
     return w
 
 
-@pytest.fixture
-def in_world(world, monkeypatch):
-    monkeypatch.chdir(world)                            # default outputs (runs/, results/, mlflow.db) land here
-    monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
-    monkeypatch.delenv("BODYSCHEMA_DEBUG", raising=False)
-    return world
-
-
 # The default tracking store may be created or migrated by a command that talks to MLflow: it is not an output.
 TRACKING_STORE = {"mlflow.db", "mlflow.db.lock"}
 
@@ -189,11 +181,18 @@ def check_clear_failure(case_id: str, code: int, err: str, before: dict, after: 
     assert not (world / "PWNED").exists(), f"{case_id}: a crafted pickle ran its payload"
 
 
+def run_and_check(case_id: str, command: str, world: Path, capsys) -> str:
+    """Run one bad-input case in-process in `world` ({W} in the command), check it failed clearly and wrote nothing.
+    Returns its stderr."""
+    before = snapshot(world)
+    code, err = run_in_process(command.format(W=world).split(), capsys)
+    check_clear_failure(case_id, code, err, before, snapshot(world), world)
+    return err
+
+
 @pytest.mark.parametrize("case_id, command", CASES, ids=[c[0] for c in CASES])
 def test_bad_input_is_a_clear_error(case_id, command, in_world, capsys):
-    before = snapshot(in_world)
-    code, err = run_in_process(command.format(W=in_world).split(), capsys)
-    check_clear_failure(case_id, code, err, before, snapshot(in_world), in_world)
+    run_and_check(case_id, command, in_world, capsys)
 
 
 @pytest.mark.parametrize("case_id", SUBPROCESS)

@@ -27,7 +27,7 @@ from bodyschema.evaluation.levels.benchmark import LevelsConfig, measure_levels,
 from bodyschema.models import load_model
 from bodyschema.models.analytic import AnalyticModel
 from bodyschema.models.body_robot import attrs_source, body_robot, robot_source
-from tests.test_cli_fuzz import check_clear_failure, run_in_process, snapshot
+from tests.test_cli_fuzz import run_and_check
 from tests.threads import one_thread
 
 ARM = """<mujoco model="arm3"><compiler angle="radian"/><worldbody><light pos="0 0 2" dir="0 0 -1"/>
@@ -241,17 +241,7 @@ def world(tmp_path_factory) -> Path:
     return w
 
 
-@pytest.fixture
-def in_world(world, monkeypatch):
-    monkeypatch.chdir(world)
-    monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
-    monkeypatch.delenv("BODYSCHEMA_DEBUG", raising=False)
-    return world
-
-
 @pytest.mark.parametrize("case_id, command", CASES, ids=[c[0] for c in CASES])
 def test_bad_file_robot_input_is_a_clear_error(case_id, command, in_world, capsys):
-    before = snapshot(in_world)
-    code, err = run_in_process(command.format(W=in_world).split(), capsys)
-    check_clear_failure(case_id, code, err, before, snapshot(in_world), in_world)
+    run_and_check(case_id, command, in_world, capsys)
 

@@ -312,14 +312,6 @@ def make_world(w: Path) -> Path:
     return w
 
 
-@pytest.fixture
-def in_world(world, monkeypatch):
-    monkeypatch.chdir(world)
-    for name in ("MLFLOW_TRACKING_URI", "BODYSCHEMA_DEBUG", "RAY_ADDRESS"):
-        monkeypatch.delenv(name, raising=False)
-    return world
-
-
 @pytest.mark.parametrize("case_id, command", CASES, ids=[c[0] for c in CASES])
 def test_bad_input_is_a_clear_error(case_id, command, in_world, capsys):
     before = snapshot(in_world)

@@ -14,10 +14,7 @@ Bad command lines are one line each in CASES, run through the fuzz harness of te
 
 from __future__ import annotations
 
-import contextlib
 import os
-import resource
-import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -29,6 +26,7 @@ import torch
 from bodyschema.cli import after_interrupt, main
 from bodyschema.datagen.export import export_dataset
 from bodyschema.datagen.outputs import marker_path
+from tests.limits import file_size_limit
 from tests.test_cli_fuzz import build_world, check_clear_failure, run_in_process, snapshot
 
 pytest.importorskip("h5py"), pytest.importorskip("pyarrow")
@@ -84,14 +82,6 @@ def make_world(w: Path) -> Path:
     MDNModel(body, "ee_xyz", (3,), hidden=(8,), epochs=2).fit(q, torch.cat([q, q.sum(1, True)], 1),
                                                               progress=False).save(w / "mdn_model")
     return w
-
-
-@pytest.fixture
-def in_world(world, monkeypatch):
-    monkeypatch.chdir(world)
-    monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
-    monkeypatch.delenv("BODYSCHEMA_DEBUG", raising=False)
-    return world
 
 
 @pytest.mark.parametrize("case_id, command", CASES + CASES_WITH_EXPORTS,
@@ -160,17 +150,6 @@ def test_an_onnx_write_failing_for_space_leaves_no_partial(world, tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
-@contextlib.contextmanager
-def file_size_limit(limit: int):
-    """Writes past `limit` bytes fail with EFBIG in this process (the soft limit only: it can be raised back)."""
-    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
-    handler = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-    resource.setrlimit(resource.RLIMIT_FSIZE, (limit, hard))
-    try:
-        yield
-    finally:
-        resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
-        signal.signal(signal.SIGXFSZ, handler)
 
 
 # ---- leftovers of killed exports ---------------------------------------------------------------------------

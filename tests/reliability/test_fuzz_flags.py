@@ -10,7 +10,7 @@ import sqlite3
 import pytest
 
 from bodyschema import cli
-from tests.test_cli_fuzz import build_world, check_clear_failure, run_in_process, snapshot
+from tests.test_cli_fuzz import build_world, run_in_process, run_and_check
 
 CASES = [   # (id, argv; {W} is the scratch folder of build_world: good.zarr kinematics, img.zarr images)
     ("levels-runs-huge", "evaluate levels --runs 1000000000 --out {W}/res"),
@@ -66,19 +66,9 @@ def world(tmp_path_factory):
     return build_world(tmp_path_factory.mktemp("fuzz_flags"))
 
 
-@pytest.fixture
-def in_world(world, monkeypatch):
-    monkeypatch.chdir(world)                            # default outputs (runs/, results/, mlflow.db) land here
-    monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
-    monkeypatch.delenv("BODYSCHEMA_DEBUG", raising=False)
-    return world
-
-
 @pytest.mark.parametrize("case_id, command", CASES, ids=[c[0] for c in CASES])
 def test_a_bad_flag_is_a_clear_error(case_id, command, in_world, capsys):
-    before = snapshot(in_world)
-    code, err = run_in_process(command.format(W=in_world).split(), capsys)
-    check_clear_failure(case_id, code, err, before, snapshot(in_world), in_world)
+    err = run_and_check(case_id, command, in_world, capsys)
     assert "dtype" not in err, f"{case_id}: the error names a dtype instead of the value:\n{err}"
 
 

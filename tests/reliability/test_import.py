@@ -1,4 +1,5 @@
-"""Bad input to `bodyschema import` and to `evaluate levels --targets` (the extended fuzz test beside tests/test_cli_fuzz.py, with its harness): every
+"""Bad input to `bodyschema import` and to `evaluate levels --targets` (the extended fuzz test beside
+tests/test_cli_fuzz.py, with its harness): every
 case exits 2 with the house message, no traceback, and the scratch folder unchanged — no store and no temporary
 sibling left behind, even when the failure comes after the store was written (an edited export that fails
 validation). Adding a case is one line in CASES."""
@@ -12,7 +13,7 @@ import numpy as np
 import pytest
 
 from tests.datagen.import_sources import planar2_frames, write_demo_hdf5, write_folder
-from tests.test_cli_fuzz import check_clear_failure, run_in_process, snapshot
+from tests.test_cli_fuzz import run_in_process, run_and_check
 
 OUT = "--out {W}/new.zarr"
 LEVELS = "--trials 2 --runs 1 --no-mlflow --out {W}/res"
@@ -129,17 +130,9 @@ def _own_exports(w) -> None:
         f["ee_pixel"][...] = f["ee_pixel"][()] + 5.0
 
 
-@pytest.fixture
-def in_world(world, monkeypatch):
-    monkeypatch.chdir(world)
-    return world
-
-
 @pytest.mark.parametrize("case_id, command", CASES, ids=[c[0] for c in CASES])
 def test_bad_import_is_a_clear_error_and_writes_nothing(case_id, command, in_world, capsys):
-    before = snapshot(in_world)
-    code, err = run_in_process(command.format(W=in_world).split(), capsys)
-    check_clear_failure(case_id, code, err, before, snapshot(in_world), in_world)
+    run_and_check(case_id, command, in_world, capsys)
 
 
 def test_the_good_recording_of_the_world_imports(in_world, capsys):

@@ -15,9 +15,7 @@ import errno
 import importlib.util
 import json
 import logging
-import resource
 import shutil
-import signal
 import sys
 from pathlib import Path
 
@@ -32,7 +30,8 @@ from bodyschema.errors import explain
 from bodyschema.models import BodySpec, load_model
 from bodyschema.training.registry import load, promote, use_tracking
 from bodyschema.training.train import train
-from tests.test_cli_fuzz import build_world, check_clear_failure, run_in_process, snapshot
+from tests.limits import file_size_limit
+from tests.test_cli_fuzz import build_world, run_in_process, run_and_check
 from tests.training.conftest import empty_db, kin_store, tiny_kind, workdir  # noqa: F401 (fixtures)
 from tests.training.tiny_model import TinyModel, tiny_config
 
@@ -41,17 +40,6 @@ BODY = BodySpec("planar2", ("shoulder", "elbow"), (-1.0, -1.0), (1.0, 1.0))
 
 
 # ---- helpers ---------------------------------------------------------------------------------------------
-@contextlib.contextmanager
-def file_size_limit(n_bytes: int):
-    """Writes past `n_bytes` fail with EFBIG in this process (SIGXFSZ ignored), as on a full disk."""
-    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
-    previous = signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-    resource.setrlimit(resource.RLIMIT_FSIZE, (n_bytes, hard))
-    try:
-        yield
-    finally:
-        resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
-        signal.signal(signal.SIGXFSZ, previous)
 
 
 def artifact_dir(version) -> Path:
@@ -263,20 +251,10 @@ def world(tmp_path_factory) -> Path:
     return build_world(tmp_path_factory.mktemp("registry-fuzz"))
 
 
-@pytest.fixture
-def in_world(world, monkeypatch):
-    monkeypatch.chdir(world)
-    monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
-    monkeypatch.delenv("BODYSCHEMA_DEBUG", raising=False)
-    return world
-
-
 @pytest.mark.parametrize("case_id, command", CASES, ids=[c[0] for c in CASES])
 def test_bad_tracking_uri_is_a_clear_error_at_once(case_id, command, in_world, capsys):
     """Before: a folder took 106 s of retries then a traceback; a text file or a missing driver, a traceback."""
     if case_id in DRIVER_CASES and importlib.util.find_spec(DRIVER_CASES[case_id]) is not None:
         pytest.skip(f"{DRIVER_CASES[case_id]} is installed here")
-    before = snapshot(in_world)
-    code, err = run_in_process(command.format(W=in_world).split(), capsys)
-    check_clear_failure(case_id, code, err, before, snapshot(in_world), in_world)
+    err = run_and_check(case_id, command, in_world, capsys)
     assert not [line for line in err.splitlines() if "error:" in line and "secret" in line], "a password shown"

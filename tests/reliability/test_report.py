@@ -25,7 +25,7 @@ from bodyschema.evaluation.report import ReportConfig, write_report
 from bodyschema.evaluation.report.markdown_html import markdown_to_html
 from bodyschema.models.analytic import AnalyticModel
 from tests.evaluation.test_report import write_png
-from tests.test_cli_fuzz import check_clear_failure, run_in_process, snapshot
+from tests.test_cli_fuzz import run_in_process, run_and_check
 
 RUN = "20260101T000000.000Z-0123abcd"
 OTHER_RUN = "20260102T000000.000Z-0123abcd"
@@ -176,17 +176,9 @@ def make_world(w: Path) -> Path:
     return w
 
 
-@pytest.fixture
-def in_world(world, monkeypatch):
-    monkeypatch.chdir(world)
-    return world
-
-
 @pytest.mark.parametrize("case_id, command", CASES, ids=[c[0] for c in CASES])
 def test_bad_runs_are_a_clear_error(case_id, command, in_world, capsys):
-    before = snapshot(in_world)
-    code, err = run_in_process(command.format(W=in_world).split(), capsys)
-    check_clear_failure(case_id, code, err, before, snapshot(in_world), in_world)
+    run_and_check(case_id, command, in_world, capsys)
 
 
 def test_a_run_outside_results_is_named_with_results(in_world, capsys):

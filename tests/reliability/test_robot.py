@@ -5,7 +5,7 @@ under 20 % of poses, an unsupported mesh. Each case: the house line, exit 2, no 
 import pytest
 
 from bodyschema.datagen.robot_record import dumps_toml
-from tests.test_cli_fuzz import check_clear_failure, run_in_process, snapshot
+from tests.test_cli_fuzz import run_in_process, run_and_check
 
 ARM = """<mujoco model="arm"><compiler angle="radian"/><worldbody>
   <camera name="away" pos="0 0 2" xyaxes="1 0 0 0 -1 0"/>
@@ -67,18 +67,9 @@ def make_world(w):
     return w
 
 
-@pytest.fixture
-def in_world(world, monkeypatch):
-    monkeypatch.chdir(world)
-    monkeypatch.delenv("BODYSCHEMA_DEBUG", raising=False)
-    return world
-
-
 @pytest.mark.parametrize("case_id, command", CASES, ids=[c[0] for c in CASES])
 def test_bad_robot_input_is_a_clear_error(case_id, command, in_world, capsys):
-    before = snapshot(in_world)
-    code, err = run_in_process(command.format(W=in_world).split(), capsys)
-    check_clear_failure(case_id, code, err, before, snapshot(in_world), in_world)
+    run_and_check(case_id, command, in_world, capsys)
 
 
 @pytest.mark.parametrize("case_id, words", [
