@@ -48,7 +48,7 @@ class ArmBatch:
         self.datas = [self._start(q, hold) for q in np.asarray(q0, dtype=np.float64)]
         self.failed = np.zeros(len(self.datas), dtype=bool)
         self.reasons: list[str | None] = [None] * len(self.datas)
-        site = self.model.site("ee")
+        site = self.model.site(robot.ee_site)             # "ee", or the site a record adds on a body + offset
         self._site, self._body = site.id, int(site.bodyid[0])
         self._marker_local = self.model.site_pos[site.id].copy()                       # (3,) m, hand frame
         self.marker_offsets = np.zeros((len(self.datas), 3)) if marker_offsets is None \
