@@ -6,6 +6,7 @@ From the model file (MJCF, or URDF through `urdf.load_urdf`) the spec is edited 
   constraints and keyframes that name it. A humanoid's free root is welded where the model puts it, so the
   chosen arm babbles on a fixed body, and qpos is exactly the chosen joint angles;
 - a continuous hinge (no limits) gets the limits ±π;
+- with `collisions = "none"` (what `robot init` writes) no geom of the arm collides, as in the shipped arms;
 - the ee becomes a site (an ee given as a body plus an offset adds one, `robot_record.EE_SITE`);
 - a camera placed by the record is added to the world (with a light beside it when the model has none);
 - with [actuators] kind = "servos" the chosen joints get position servos with the record's gains;
@@ -95,6 +96,8 @@ def build_model(record: RobotRecord, actuators: str = "position", text: str | No
     joints = chosen_joints(record, reference)
     _weld_others(spec, reference, joints, record.hold)
     _limit_continuous(spec, joints)
+    if record.collisions == "none":
+        _no_collisions(spec)
     site = _ee_site(spec, record.ee, record.name)
     camera = _camera(spec, record.camera, record.name)
     if record.actuators["kind"] == "servos":
@@ -187,6 +190,13 @@ def _fold_body(spec, model, body: int, welded: set[int], hold: dict[str, float])
     target = spec.joints[joints[0]].parent
     target.pos, target.quat = pos, quat / np.linalg.norm(quat)
     target.alt.type = mujoco.mjtOrientation.mjORIENTATION_QUAT
+
+
+def _no_collisions(spec: mujoco.MjSpec) -> None:
+    """No geom on a body of the arm collides with anything (the world's own geoms, e.g. a floor, keep theirs)."""
+    for geom in spec.geoms:
+        if geom.parent.name != spec.worldbody.name:
+            geom.contype = geom.conaffinity = 0
 
 
 def _mat(quat: np.ndarray) -> np.ndarray:

@@ -43,7 +43,7 @@ def infer_record(path: Path, mesh_dir: Path | None = None, visual: str = "mesh",
     box = ((-1.0, 1.0),)
     draft = RobotRecord(name=path.stem, model=path.name, image_size=tuple(image_size), base=path.parent,
                         workspaces={"full": box, "camera": box}, camera=_PLACEHOLDER_CAMERA, mesh_dir=mesh,
-                        visual=visual)
+                        visual=visual, collisions="none")
     spec, _ = read_source(draft)
     model = spec.compile()
     ee, body = _infer_ee(model)

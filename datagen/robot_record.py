@@ -31,11 +31,13 @@ AUTO_CAMERA = "auto"                         # the name of a camera placed by th
 EE_SITE = "bodyschema_ee"                    # the site added for an ee given as a body plus an offset
 ACTUATORS = ("model", "servos")              # the model's own actuators | position servos added with [actuators] gains
 VISUALS = ("mesh", "collision")              # URDF: render the visual meshes | the collision geometry instead
+COLLISIONS = ("model", "none")               # contacts as the file has them | the arm's geoms collide with nothing
 REQUIRED_WORKSPACES = ("full", "camera")     # every record names these two (datagen picks one by --images)
 SECTIONS = {"ee": ("site", "body", "offset"), "camera": ("name", "pos", "xyaxes", "fovy"),
             "actuators": ("kind", "kp", "kv"), "pd": ("kp", "kd"),
             "reaching": ("models", "control_hz", "duration_s", "actuators", "action")}
-TOP_KEYS = ("name", "model", "joints", "image_size", "mesh_dir", "visual", "hold", "workspaces", *SECTIONS)
+TOP_KEYS = ("name", "model", "joints", "image_size", "mesh_dir", "visual", "collisions", "hold", "workspaces",
+            *SECTIONS)
 
 
 @dataclass(frozen=True)
@@ -55,6 +57,9 @@ class RobotRecord:
     reaching: dict[str, Any] = field(default_factory=dict)   # models, control_hz, duration_s, actuators, action
     mesh_dir: str = ""                                 # URDF: where package:// meshes are found besides the file's
     visual: str = "mesh"                               # URDF: "collision" renders the collision geometry
+    # "none": no geom of the arm collides (as the shipped arms are built). A file's collision meshes often touch
+    # each other across a joint's range, and a servo pushing into a contact jams: reaching failed for PD too.
+    collisions: str = "model"
     base: Path = Path(".")                             # the folder `model` and `mesh_dir` are relative to
 
     def __post_init__(self):
@@ -88,6 +93,8 @@ class RobotRecord:
             out["mesh_dir"] = self.mesh_dir
         if self.visual != "mesh":
             out["visual"] = self.visual
+        if self.collisions != "model":
+            out["collisions"] = self.collisions
         for key in ("ee", "camera", "hold", "actuators", "pd", "reaching"):
             if getattr(self, key):
                 out[key] = _plain(getattr(self, key))
@@ -250,6 +257,9 @@ def _problems(r: RobotRecord) -> list[str]:
         p.append(must_be("record [pd] kp and kd", "lists of finite gains >= 0, one per joint", r.pd))
     if r.visual not in VISUALS:
         p.append(must_be("record `visual`", f"one of {VISUALS}", r.visual))
+    if r.collisions not in COLLISIONS:
+        p.append(must_be("record `collisions`", f"one of {COLLISIONS}", r.collisions,
+                         '"none": the arm collides with nothing; "model": as the model file says.'))
     return p
 
 

@@ -14,7 +14,7 @@ from bodyschema.cli import main
 from bodyschema.datagen.config import DatagenConfig
 from bodyschema.datagen.generate import generate
 from bodyschema.datagen.robot import Robot
-from bodyschema.datagen.robot_build import read_source
+from bodyschema.datagen.robot_build import build_model, read_source
 from bodyschema.datagen.robot_infer import ee_samples, infer_record, place_camera, view_fraction
 from bodyschema.datagen.robot_record import RobotRecord, write_record
 from bodyschema.datagen.validate import validate_store
@@ -125,3 +125,33 @@ def test_robot_show_and_datagen_with_images_on_talos(talos_record, tmp_path, cap
     assert "arm_left_1_joint" in out and "ee in view" in out and (tmp_path / "sheet.png").is_file()
     store = generate(DatagenConfig(robot=str(path), n=6, shard_size=6, out=tmp_path / "talos.zarr"), progress=False)
     assert validate_store(store) == []
+
+
+def _servo_episodes(record: RobotRecord, episodes: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    """Per episode: the largest joint error after 2 s of position servos to a random target, and whether any
+    contact occurred (targets and starts uniform in the record's full box, seed 0)."""
+    model = build_model(record).model
+    box = np.array(record.workspaces["full"])
+    rng = np.random.default_rng(0)
+    errors, touched = [], []
+    for _ in range(episodes):
+        data = mujoco.MjData(model)
+        data.qpos[:], data.ctrl[:] = rng.uniform(box[:, 0], box[:, 1], (2, model.nq))
+        contact = False
+        for _ in range(int(2.0 / model.opt.timestep)):
+            mujoco.mj_step(model, data)
+            contact |= data.ncon > 0
+        errors.append(np.abs(data.qpos - data.ctrl).max())
+        touched.append(contact)
+    return np.array(errors), np.array(touched)
+
+
+def test_ur5_record_drops_self_collisions_so_its_servos_reach_what_its_collision_meshes_jammed(robots_dir,
+                                                                                              tmp_path):
+    urdf = robots_dir / "ur_description/urdf/ur5_robot.urdf"
+    record = infer_record(urdf, visual="collision")
+    assert record.collisions == "none"
+    errors, touched = _servo_episodes(record)
+    assert not touched.any() and errors.max() < 0.1          # gravity sag of the inferred gains: ≤ 0.05 rad
+    _, touched = _servo_episodes(dataclasses.replace(record, collisions="model"))
+    assert touched.any()                                    # the file's own collision meshes do touch

@@ -37,7 +37,7 @@ def test_a_record_written_reads_back_equal_floats_included(tmp_path):
                          camera={"name": "auto", "pos": [1.0, 2.0, 3.0], "xyaxes": [1, 0, 0, 0, 1, 0], "fovy": 45.0},
                          actuators={"kind": "servos", "kp": [1.5, 2.0], "kv": [0.1, 0.2]},
                          pd={"kp": [1, 2], "kd": [3, 4]},
-                         reaching={"models": ["ee_xyz"], "action": {"k_a": 0.25}}, base=tmp_path)
+                         reaching={"models": ["ee_xyz"], "action": {"k_a": 0.25}}, collisions="none", base=tmp_path)
     back = read_record(write_record(record, tmp_path / "arm.toml", "a header\nof two lines"))
     assert back == record
     assert not list(tmp_path.glob(".*.tmp"))                               # the temporary sibling is gone
@@ -59,6 +59,7 @@ def test_the_toml_writer_nests_tables():
     ({"actuators": {"kind": "servos", "kp": [1]}}, "kp and kv"),
     ({"actuators": {"kind": "muscles"}}, "kind must be one of"),
     ({"workspaces": {"full": [[1, 0]], "camera": [[0, 1]]}}, "lo < hi"),
+    ({"collisions": "self"}, "collisions` must be one of"),
 ])
 def test_a_bad_record_is_the_house_error(tmp_path, change, words):
     values = {"name": "arm", "model": "arm.xml", "image_size": [64, 64], "camera": {"name": "eye"},
