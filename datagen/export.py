@@ -1,25 +1,22 @@
 """`export_dataset(store, out, to)`: a Zarr dataset store as another format ("hdf5" or "lerobot"), checked first.
 
-What every format gets from here, so the writers only lay it out: the store validated (an incomplete or damaged
-store is refused with every problem listed, as `bodyschema validate` would), its data arrays with their
-per-sample shape, unit and axis names, the body (robot, joint names, the sampled joint ranges the models scale
-by: `training.data.body_from_attrs`'s values), the root attrs as JSON, and a writer that builds the output
-beside its final path and renames it into place (datagen/outputs.py): a killed export never leaves a half-written
-OUT, and --overwrite replaces only a previous export of the same format, never the store itself.
+What every format gets from here, so the writers only lay it out: the store checked (an incomplete or damaged
+store is refused with every problem listed, as `bodyschema validate` would), its size and the row blocks to read it
+in, and a writer that builds the output beside its final path and renames it into place (datagen/outputs.py): a
+killed export never leaves a half-written OUT, and --overwrite replaces only a previous export of the same format,
+never the store itself. What they read (arrays, features, attrs, the body the models of it scale by) comes from
+`datagen.store_reader`, the reader training uses.
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
 from pathlib import Path
-from typing import Any
 
-import numpy as np
 import zarr
 
+from bodyschema.datagen.integrity import data_arrays
 from bodyschema.datagen.outputs import check_out, write_atomically
-from bodyschema.datagen.store import DONE, open_store, shard_digests
+from bodyschema.datagen.store_reader import CREATE_HINT, check_store, source_digest
 from bodyschema.errors import must_be
 
 FORMATS = ("hdf5", "lerobot")
@@ -43,25 +40,14 @@ def export_dataset(store: str | Path, out: str | Path, to: str, *, overwrite: bo
 
 
 def checked_store(path: Path) -> zarr.Group:
-    """The open store, refused (all problems listed) unless `validate_store` finds it complete and intact."""
-    from bodyschema.datagen.validate import validate_store
-
+    """The open store, refused (all problems listed) unless it is complete and intact (`check_store`)."""
     if not path.exists():
-        raise FileNotFoundError(must_be("STORE", "an existing .zarr store", str(path),
-                                        "Create one with `bodyschema datagen --out PATH`."))
-    root = open_store(path)
-    problems = validate_store(path)
-    if problems:
-        raise ValueError(must_be("STORE", "a complete, valid store", f"{len(problems)} problem(s) in {path}",
-                                 "See `bodyschema validate " + str(path) + "`:\n - " + "\n - ".join(problems)))
-    return root
-
-
-def source_digest(root: zarr.Group) -> str:
-    """sha256 of the store's root attrs and its shards' checksums (which `validate_store` checked against the rows)."""
-    h = hashlib.sha256(attrs_json(root).encode())
-    h.update(shard_digests(root).tobytes())
-    return h.hexdigest()
+        raise FileNotFoundError(must_be("STORE", "an existing .zarr store", str(path), CREATE_HINT))
+    store = check_store(path, what="STORE")
+    if store.problems:
+        raise ValueError(must_be("STORE", "a complete, valid store", f"{len(store.problems)} problem(s) in {path}",
+                                 "See `bodyschema validate " + str(path) + "`:\n - " + "\n - ".join(store.problems)))
+    return store.root
 
 
 def stored_bytes(root: zarr.Group) -> int:
@@ -69,36 +55,7 @@ def stored_bytes(root: zarr.Group) -> int:
     return sum(int(root[name].nbytes_stored()) for name in data_arrays(root))
 
 
-# ---- what the writers share ---------------------------------------------------------------------------------
-def data_arrays(root: zarr.Group) -> list[str]:
-    """The data arrays (everything but the bookkeeping `shard_done`), sorted."""
-    return sorted(name for name in root.array_keys() if name != DONE)
-
-
-def feature(root: zarr.Group, name: str) -> dict[str, Any]:
-    """{dtype, shape (per sample), unit, names} of one array, from the array itself and its attrs."""
-    arr = root[name]
-    return {"dtype": str(arr.dtype), "shape": [int(s) for s in arr.shape[1:]],
-            "unit": str(arr.attrs.get("unit", "")), "names": list(arr.attrs.get("names", []))}
-
-
-def body(attrs: dict[str, Any]) -> dict[str, Any]:
-    """The model body spec of the store: robot, joint names and the sampled ranges in rad (BodySpec.to_dict)."""
-    ranges = attrs.get("sampling_ranges") or attrs["joint_limits"]
-    return {"robot": str(attrs["robot"]), "joint_names": list(attrs["joint_names"]),
-            "q_low": [float(r[0]) for r in ranges], "q_high": [float(r[1]) for r in ranges]}
-
-
-def attrs_json(root: zarr.Group) -> str:
-    """The store's root attrs as one JSON text (nested dicts and lists kept as they are)."""
-    return json.dumps(dict(root.attrs), sort_keys=True, default=str)
-
-
 def row_blocks(n: int, step: int | None = None):
     """(start, stop) ranges covering [0, n) in steps of `step` rows (default ROWS_PER_READ)."""
     step = step or ROWS_PER_READ
     return ((start, min(n, start + step)) for start in range(0, n, step))
-
-
-def read(root: zarr.Group, name: str, start: int, stop: int) -> np.ndarray:
-    return np.asarray(root[name][start:stop])

@@ -17,7 +17,9 @@ from pathlib import Path
 import numpy as np
 import zarr
 
-from bodyschema.datagen.export import attrs_json, body, data_arrays, feature, read, row_blocks
+from bodyschema.datagen.export import row_blocks
+from bodyschema.datagen.integrity import data_arrays
+from bodyschema.datagen.store_reader import attrs_json, feature, read, store_body
 
 FORMAT, FORMAT_VERSION = "bodyschema-hdf5", 1
 SIZE_FACTOR = 1.5                       # output / the store's compressed bytes: 1.4 measured (1500 planar2 images)
@@ -33,7 +35,7 @@ def write_hdf5(root: zarr.Group, out: Path) -> None:
             for key, value in dict(root.attrs).items():
                 if isinstance(value, (str, int, float, bool)):     # nested ones are in store_attrs only
                     f.attrs[key] = value
-            spec = body(dict(root.attrs))
+            spec = store_body(root)
             group = f.create_group("body")
             for key, value in spec.items():
                 group.attrs[key] = value

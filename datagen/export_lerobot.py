@@ -27,7 +27,9 @@ import cv2
 import numpy as np
 import zarr
 
-from bodyschema.datagen.export import attrs_json, body, data_arrays, feature, read, row_blocks
+from bodyschema.datagen.export import row_blocks
+from bodyschema.datagen.integrity import data_arrays
+from bodyschema.datagen.store_reader import attrs_json, feature, read, store_body
 from bodyschema.errors import must_be
 
 FORMAT = "bodyschema-lerobot"
@@ -243,7 +245,7 @@ def _write_meta(out: Path, attrs: dict, feats: dict, episodes: list[tuple[int, i
     arrays = {KEYS[n]: n for n in KEYS if KEYS[n] in feats}
     if "image" in root.array_keys():
         units[image_key(root)], arrays[image_key(root)] = "intensity 0-255", "image"
-    ours = {"format": FORMAT, "units": units, "body": body(attrs), "arrays": arrays,
+    ours = {"format": FORMAT, "units": units, "body": store_body(root), "arrays": arrays,
             "frames": "a babbling trajectory" if "t" in root.array_keys() else "independent poses (fps 1: frame i "
             "at i s)", "store_attrs": json.loads(attrs_json(root))}
     (meta / "bodyschema.json").write_text(json.dumps(ours, indent=2))

@@ -339,9 +339,14 @@ def validate_store(path: str | Path) -> list[str]:
     """Every problem found in the store at `path`; an empty list means it is valid and complete."""
     try:
         root = open_store(Path(path))
-        attrs = dict(root.attrs)
     except Exception as e:  # noqa: BLE001 - an unopenable store is one problem, reported, not raised
         return [str(e)]
+    return validate_open_store(Path(path), root)
+
+
+def validate_open_store(path: Path, root: zarr.Group) -> list[str]:
+    """`validate_store` of the store at `path`, already opened as `root` (a reader keeps the group it checked)."""
+    attrs = dict(root.attrs)
     problems: list[str] = []
     missing = [key for key in REQUIRED_ATTRS if key not in attrs]
     if missing:

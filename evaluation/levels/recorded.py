@@ -52,8 +52,8 @@ class RecordedTargets:
 
     def __init__(self, path: Path, models, image: bool):
         from bodyschema.datagen.store import open_store
+        from bodyschema.datagen.store_reader import store_digest
         from bodyschema.datagen.validate import validate_store
-        from bodyschema.training.data import store_digest
 
         self.path = Path(path)
         if not self.path.exists():

@@ -81,8 +81,8 @@ def test_image_levels_on_recorded_frames_with_the_plain_pixel_aif_row(tmp_path, 
     text = summary.paths["summary_md"].read_text()
     assert f"1 {PLAIN_LABEL}" in text and "wins" in text
     lineage = json.loads(summary.paths["targets_json"].read_text())
-    from bodyschema.training.data import store_digest
     from bodyschema.datagen.store import open_store
+    from bodyschema.datagen.store_reader import store_digest
     assert lineage["sha256"] == store_digest(open_store(store)) and lineage["frames"] == 4
 
 
