@@ -22,8 +22,7 @@ reaches for that pose through its joints model.
 An ee pixel goal fixes the ray through the target, not its depth: with the default nao_arm models the AIF meets
 the pixel goal far more often than the 1 cm (3-D) criterion; `--depth-cue-deg σ` adds the depth as a second goal,
 the target's joint pose seen through σ° of noise (Π = 1/σ²), fused with the pixel goal by the same attractor.
-With an image model every control tick renders B images: 100 targets × 3 s at 50 Hz, imagination included, took
-81–117 s on 2 shared cores.
+With an image model every control tick renders B images (wall times per controller: the run's summary table).
 """
 
 from __future__ import annotations
@@ -39,23 +38,21 @@ from bodyschema.aif.action import ActionConfig, VelocityController
 from bodyschema.aif.aic import AICConfig, AICController
 from bodyschema.aif.goal_inference import goal_precision
 from bodyschema.aif.perception import PerceptionConfig
+from bodyschema.datagen.reach import arm_reach
 from bodyschema.datagen.robot_record import check_robot_ref
 from bodyschema.datagen.samplers import uniform
 from bodyschema.errors import must_be
 from bodyschema.evaluation.core.config import TrialsConfig
 from bodyschema.evaluation.core.pd import PDController
 from bodyschema.evaluation.core.runs import new_run
-from bodyschema.evaluation.core.seeds import EVAL_STREAM
+from bodyschema.evaluation.core.seeds import REACHING, eval_rng
 from bodyschema.evaluation.core.sensing import Sensors, sense
 from bodyschema.evaluation.core.sim import control_substeps
 from bodyschema.evaluation.core.specs import load_robot, models_field, resolve_encoder, resolve_models, robot_name
-from bodyschema.evaluation.reaching import goal_pose
-from bodyschema.evaluation.reaching import report as reaching_report
-from bodyschema.evaluation.reaching.robot_defaults import reaching_defaults
+from bodyschema.evaluation.reaching import goal_pose, report as reaching_report
 from bodyschema.evaluation.reaching.loop import ImpedancePolicy, ServoPolicy, TorquePolicy, VelocityPolicy, rollout
+from bodyschema.evaluation.reaching.robot_defaults import reaching_defaults
 
-REACHING_STREAM = 0x4EAC_4100          # second entropy word: reaching targets are their own stream
-PURPOSE = {"targets": 0, "starts": 1, "noise": 2, "cue": 3, "imagined": 4}
 PANDA_CONTROLLERS = ("velocity", "aic")
 GOAL_PREFERENCE = ("image", "ee_xyz", "ee_pixel", "joints")   # "auto": the first modality among the models
 
@@ -70,8 +67,8 @@ class ReachingRunConfig(TrialsConfig):
     models: models_field("the robot's analytic defaults (nao_arm: ee_pixel + joints; panda: ee_xyz)") = ()
     goal: str = "auto"                     # goal modality; auto: image > ee_xyz > ee_pixel > joints among the models
     trials: int = 100                      # random reachable targets (episodes per controller)
-    duration: float | None = None          # s per episode; None: 3 (nao_arm), 10 (panda)
-    control_hz: float | None = None        # must divide into whole MuJoCo steps; None: 50 (nao_arm), 500 (panda)
+    duration: float | None = None          # s per episode; None: the robot record's [reaching] duration_s
+    control_hz: float | None = None        # must divide into whole MuJoCo steps; None: the record's control_hz
     action: ActionConfig = ActionConfig()  # the velocity controller; left at its default: the robot record's
     perception: PerceptionConfig = PerceptionConfig(step_control="none")   # servo robots: per tick (attractor prior)
     aic: AICConfig = AICConfig()           # torque robots: the AIC's gains and precisions
@@ -133,10 +130,6 @@ class ReachingConfig(ReachingRunConfig):
     path_plots: int = 6                    # targets drawn in the image-plane path plot
 
 
-def reaching_rng(seed: int, purpose: str) -> np.random.Generator:
-    return np.random.default_rng(np.random.SeedSequence([EVAL_STREAM, REACHING_STREAM, int(seed), PURPOSE[purpose]]))
-
-
 @dataclass
 class Episodes:
     q_target: np.ndarray                   # (N, Dq) rad
@@ -185,23 +178,13 @@ def check_goal(robot, modality: str, goal, output_shape: tuple[int, ...]) -> Non
             raise ValueError(must_be("ee_pixel goal", f"inside the {w}×{h} px image", x[outside][0].tolist(),
                                      "A pixel the camera cannot see is not a reachable goal."))
     elif modality == "ee_xyz":
-        base, reach = _reach(robot)
+        base, reach = arm_reach(robot.model, robot.ee_site)   # a bound: a goal beyond it is unreachable
         far = np.linalg.norm(x - base, axis=1) > reach
         if far.any():
             raise ValueError(must_be("ee_xyz goal", f"within the arm's reach ({reach:.3f} m from {base.round(3)})",
                                      x[far][0].round(4).tolist(), "Pick a goal inside the workspace."))
     elif modality == "image" and ((x < 0) | (x > 1)).any():
         raise ValueError(must_be("image goal", "intensities in [0, 1] (uint8 / 255)", (x.min(), x.max())))
-
-
-def _reach(robot) -> tuple[np.ndarray, float]:
-    """The first joint's anchor (m) and the largest ee distance from it over the joint limits (m)."""
-    import mujoco
-    d = mujoco.MjData(robot.model)
-    mujoco.mj_kinematics(robot.model, d)
-    base = d.xanchor[0].copy()
-    q = uniform(np.random.default_rng(0), robot.joint_limits, 4096)
-    return base, float(np.linalg.norm(robot.fk(q) - base, axis=1).max()) * 1.01
 
 
 def spread_ranges(robot, spread: float) -> np.ndarray:
@@ -222,14 +205,16 @@ def in_view_targets(rng: np.random.Generator, robot, n: int, ranges=None) -> np.
 
 def make_episodes(config: ReachingConfig, robot, modality: str, output_shape) -> Episodes:
     ranges = robot.sampling_ranges if config.spread == 1 else spread_ranges(robot, config.spread)
-    q_target = in_view_targets(reaching_rng(config.seed, "targets"), robot, config.trials, ranges)
-    q_start = uniform(reaching_rng(config.seed, "starts"), ranges, config.trials)
+    targets_rng, starts_rng = (eval_rng(config.seed, None, p, stream=REACHING) for p in ("targets", "starts"))
+    q_target = in_view_targets(targets_rng, robot, config.trials, ranges)
+    q_start = uniform(starts_rng, ranges, config.trials)
     goal = make_goal(robot, modality, q_target)
     check_goal(robot, modality, goal, output_shape)
     episodes = Episodes(q_target, q_start, {modality: goal}, robot.fk(q_target))
     if config.depth_cue_deg > 0:
         sigma = np.deg2rad(config.depth_cue_deg)
-        cue = q_target + sigma * reaching_rng(config.seed, "cue").standard_normal(q_target.shape)   # (N, Dq) rad
+        cue_rng = eval_rng(config.seed, None, "cue", stream=REACHING)
+        cue = q_target + sigma * cue_rng.standard_normal(q_target.shape)   # (N, Dq) rad
         episodes.goal["joints"] = torch.from_numpy(np.clip(cue, *robot.joint_limits.T))
         episodes.extra["goal_precisions"] = {"joints": 1.0 / sigma ** 2}
     return episodes
@@ -306,7 +291,7 @@ def simulate(config: ReachingConfig, models=None):
     results, walls = {}, {}
     for name, policy in policies.items():
         sensors = Sensors(sensed if name == "aif" else (), dict(config.noise), frozenset(config.frozen),
-                          reaching_rng(config.seed, "noise"))                  # the baselines sense the true state
+                          eval_rng(config.seed, None, "noise", stream=REACHING))   # the baselines sense the true state
         start = time.perf_counter()
         goal = {k: v.clone() for k, v in (goals if name == "aif" else episodes.goal).items()}
         results[name] = rollout(robot, policy, episodes.q_start, goal, episodes.target_xyz, sensors, ticks,
@@ -346,8 +331,8 @@ def prepare(config: ReachingConfig, models=None):
     if infer_pose:
         start = time.perf_counter()
         ranges = robot.sampling_ranges if config.spread == 1 else spread_ranges(robot, config.spread)
-        episodes.extra["imagined"] = goal_pose.imagine(config, models, robot, episodes,
-                                                       reaching_rng(config.seed, "imagined"), ranges, encoder)
+        imagined_rng = eval_rng(config.seed, None, "imagined", stream=REACHING)
+        episodes.extra["imagined"] = goal_pose.imagine(config, models, robot, episodes, imagined_rng, ranges, encoder)
         episodes.extra["imagined_wall_s"] = time.perf_counter() - start
     sensed = tuple(dict.fromkeys(names + builtin_sensors(robot)))
     unknown = sorted(set(dict(config.noise)) - set(sensed))
