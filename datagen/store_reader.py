@@ -1,12 +1,13 @@
 """The read side of a dataset store, for every stage that reads one: check, read, digest and the body it holds.
 
-`check_store` opens a store once, after `validate_store` has listed every problem of it, and adds the arrays a
-reader needs: training, export and evaluation's recorded targets read only a store whose problems are empty.
-What they then read comes from here too: whole arrays chunk by chunk (`read_arrays`), or rows of one (`read`), the
-per-sample features, the root attrs as JSON, the store's digests, and the body (robot, joints and the joint box
-models scale by) from the root attrs. Two digests, both built on the per-shard checksums `validate_store` has just
-recomputed from the rows: `store_digest`, the dataset's identity training logs to MLflow (and evaluation records for
-its targets), and `source_digest`, which an export records of the store it came from.
+`check_store` opens a store once and lists every problem of it (`validate_store`'s, and the arrays a reader needs):
+training and export read only a store whose problems are empty. What they then read comes from here too: whole
+arrays chunk by chunk (`read_arrays`) or rows of one (`read`), the per-sample features, the root attrs as JSON, the
+store's digests, and the body (robot, joints and the joint box models scale by) from the root attrs, which import
+also reads from an export's copy of them (`attrs_body`).
+Two digests, both built on the per-shard checksums that `validate_store` recomputes from the rows: `store_digest`,
+the dataset's identity training logs to MLflow (and evaluation records of its targets), and `source_digest`, which
+an export records of the store it came from. Each is kept as it was, since recorded values must stay comparable.
 """
 
 from __future__ import annotations
@@ -26,6 +27,8 @@ from bodyschema.datagen.store import has_checksums, open_store, shard_digests
 from bodyschema.errors import must_be
 
 CREATE_HINT = "Create one with `bodyschema datagen --out PATH`."
+EDITED_HINT = ("The store's attrs (or an export's copy of them) were edited; regenerate the store with `bodyschema "
+               "datagen` (and export it again).")
 
 
 @dataclass(frozen=True)
@@ -120,15 +123,28 @@ def _check_checksums(root: zarr.Group) -> None:
 
 
 def store_body(root: zarr.Group) -> dict[str, Any]:
-    """The body of the store's samples, as `BodySpec.to_dict` of a shipped robot: robot, joint names (one per
-    column of q) and the sampled joint box q_low, q_high (rad) a model of it scales by (attrs sampling_ranges)."""
-    attrs, width = dict(root.attrs), root["q"].shape[1]
+    """`attrs_body` of an open store."""
+    return attrs_body(dict(root.attrs), root["q"].shape[1])
+
+
+def attrs_body(attrs: dict[str, Any], q_width: int) -> dict[str, Any]:
+    """The body of a store's samples from its root attrs (or an export's copy of them), as `BodySpec.to_dict` of a
+    shipped robot: robot, joint names (one per column of q) and the sampled joint box q_low, q_high (rad) a model
+    of it scales by (attrs sampling_ranges; never a stand-in: `validate_store` requires them)."""
     names = list(attrs["joint_names"])
-    if len(names) != width:
-        raise ValueError(must_be("data attrs['joint_names']", f"one name per column of q ({width})", names))
-    ranges = attrs.get("sampling_ranges")
-    if ranges is None or np.shape(ranges) != (width, 2):
-        raise ValueError(must_be("data attrs['sampling_ranges']", f"({width}, 2) (lo, hi) rad, one per column of q",
-                                 ranges, "`bodyschema validate` the store; regenerate it with `bodyschema datagen`."))
-    return {"robot": str(attrs["robot"]), "joint_names": names,
-            "q_low": [float(r[0]) for r in ranges], "q_high": [float(r[1]) for r in ranges]}
+    if len(names) != q_width:
+        raise ValueError(must_be("data attrs['joint_names']", f"one name per column of q ({q_width})", names,
+                                 EDITED_HINT))
+    box = _box(attrs.get("sampling_ranges"))
+    if box is None or box.shape != (q_width, 2):
+        raise ValueError(must_be("data attrs['sampling_ranges']", f"({q_width}, 2) (lo, hi) rad, one per column of q",
+                                 attrs.get("sampling_ranges"), EDITED_HINT))
+    return {"robot": str(attrs["robot"]), "joint_names": names, "q_low": box[:, 0].tolist(),
+            "q_high": box[:, 1].tolist()}
+
+
+def _box(ranges) -> np.ndarray | None:
+    try:
+        return None if ranges is None else np.asarray(ranges, dtype=float)
+    except (TypeError, ValueError):       # ragged or not numbers
+        return None

@@ -385,6 +385,6 @@ def summarize_store(path: str | Path, check: bool = True) -> str:
     size = sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
     lines.append(f"  on disk: {size / 1e6:.2f} MB · versions {a.get('versions')}")
     if check:
-        problems = validate_store(path)
+        problems = validate_open_store(path, root)
         lines.append("  valid" if not problems else f"  {len(problems)} problems:\n    - " + "\n    - ".join(problems))
     return "\n".join(lines)

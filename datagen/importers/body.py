@@ -13,6 +13,7 @@ import numpy as np
 
 from bodyschema.datagen.importers.config import ImportConfig
 from bodyschema.datagen.importers.recording import Recording, check_finite
+from bodyschema.datagen.store_reader import attrs_body
 from bodyschema.errors import must_be
 
 RANGE_TOL = 1e-5   # rad: float32 rounding of the range ends (as validate_store)
@@ -38,9 +39,9 @@ def resolve_body(config: ImportConfig, rec: Recording, image_size: tuple[int, in
         limits = np.asarray(config.ranges, float) * _factor(config, rec)
         body = Body(config.name, tuple(config.joints), limits, None, dict.fromkeys(ROBOT_ATTRS))
     elif rec.attrs:
-        a = rec.attrs
-        body = Body(str(a["robot"]), tuple(a["joint_names"]), np.asarray(a["joint_limits"], float),
-                    np.asarray(a.get("sampling_ranges") or a["joint_limits"], float),
+        a, spec = rec.attrs, attrs_body(rec.attrs, rec.q.shape[1])       # the body the export's models scale by
+        body = Body(spec["robot"], tuple(spec["joint_names"]), np.asarray(a["joint_limits"], float),
+                    np.array([spec["q_low"], spec["q_high"]]).T,
                     {**{k: a.get(k) for k in ROBOT_ATTRS}, **{k: a[k] for k in SELF_CONTAINED if k in a}})
     else:
         raise ValueError(must_be("the body", "--robot NAME, or --joints NAMES with --ranges", "neither",

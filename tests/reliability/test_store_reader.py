@@ -1,6 +1,6 @@
-"""datagen owns the read side of a store (issue 22, item 3): training, export and evaluation read through
-`datagen.store_reader`, with the digests and the body they had before, and stores edited where the two old body
-readers differed are refused by every reader alike. Bad command lines are one line each in CASES, run through the
+"""datagen owns the read side of a store (issue 22, item 3): training, export, import and evaluation read through
+`datagen.store_reader`, with the digests and the body they had before, and stores (or exports) edited where the old
+body readers differed are refused by every reader alike. Bad command lines are one line each in CASES, run through the
 fuzz harness of tests/test_cli_fuzz.py (the extended fuzz test beside it)."""
 
 from __future__ import annotations
@@ -33,6 +33,9 @@ CASES = [
     ("export-one-joint-name-short", "export dataset --to hdf5 {W}/short_names.zarr {W}/o.h5"),
     ("export-not-a-store", "export dataset --to hdf5 {W}/notastore {W}/o.h5"),
     ("export-bad-json", "export dataset --to hdf5 {W}/badjson.zarr {W}/o.h5"),
+    ("import-export-without-sampling-ranges", "import {W}/no_ranges.h5 --out {W}/new.zarr"),
+    ("import-export-sampling-ranges-null", "import {W}/null_ranges.h5 --out {W}/new.zarr"),
+    ("import-export-one-joint-name-short", "import {W}/short_names.h5 --out {W}/new.zarr"),
     ("levels-targets-no-sampling-ranges", "evaluate levels --targets {W}/no_ranges.zarr --trials 2 --runs 1 "
                                           "--no-mlflow --out {W}/res"),
 ]
@@ -48,8 +51,12 @@ def world(tmp_path_factory) -> Path:
 
 
 def make_world(w: Path) -> Path:
-    """The fuzz world plus copies of its valid store with the body attrs edited (EDITS)."""
+    """The fuzz world plus, for each of EDITS, its valid store with the body attrs so edited (`<edit>.zarr`) and
+    an HDF5 export of it whose copy of the store attrs is (`<edit>.h5`)."""
+    import h5py
+
     build_world(w)
+    export_dataset(w / "good.zarr", w / "good.h5", "hdf5")
     for name, edit in EDITS.items():
         shutil.copytree(w / "good.zarr", w / f"{name}.zarr")
         group = zarr.open_group(str(w / f"{name}.zarr"), mode="r+")
@@ -57,6 +64,9 @@ def make_world(w: Path) -> Path:
         edit(attrs)
         group.attrs.clear()
         group.attrs.update(attrs)
+        shutil.copy(w / "good.h5", w / f"{name}.h5")
+        with h5py.File(w / f"{name}.h5", "r+") as f:
+            f.attrs["store_attrs"] = json.dumps(attrs)
     return w
 
 
