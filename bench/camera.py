@@ -21,15 +21,16 @@ import tempfile
 import time
 from pathlib import Path
 
-from bodyschema.datagen.robot import Robot  # sets MUJOCO_GL=egl before mujoco is imported
+from bodyschema.datagen.robot import Robot  # first: bodyschema sets MUJOCO_GL before mujoco is imported
 
-import cv2  # noqa: E402
-import mujoco  # noqa: E402
-import numpy as np  # noqa: E402
+# isort: split
+import cv2
+import mujoco
+import numpy as np
 
-from bodyschema.datagen.config import DatagenConfig  # noqa: E402
-from bodyschema.datagen.contact_sheet import write_contact_sheet  # noqa: E402
-from bodyschema.datagen.generate import generate  # noqa: E402
+from bodyschema.datagen.config import DatagenConfig
+from bodyschema.datagen.contact_sheet import write_contact_sheet
+from bodyschema.datagen.generate import generate
 
 ROBOT, WORKSPACE = "nao_arm", "camera"
 CAMERAS = {"old": "eye", "new": "CameraBottom"}

@@ -20,15 +20,16 @@ import tempfile
 import time
 from pathlib import Path
 
-from bodyschema.datagen.robot import Robot  # sets MUJOCO_GL=egl before mujoco is imported
+from bodyschema.datagen.robot import Robot  # first: bodyschema sets MUJOCO_GL before mujoco is imported
 
-import cv2  # noqa: E402
-import mujoco  # noqa: E402
-import numpy as np  # noqa: E402
-from joblib.externals.loky import get_reusable_executor  # noqa: E402
+# isort: split
+import cv2
+import mujoco
+import numpy as np
+from joblib.externals.loky import get_reusable_executor
 
-from bodyschema.datagen.config import DatagenConfig  # noqa: E402
-from bodyschema.datagen.generate import generate  # noqa: E402
+from bodyschema.datagen.config import DatagenConfig
+from bodyschema.datagen.generate import generate
 
 ROBOT, SIZE = "nao_arm", (56, 80)
 
@@ -102,7 +103,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--n-images", type=int, default=3000)
     parser.add_argument("--n-kinematic", type=int, default=100_000)
-    parser.add_argument("--rounds", type=int, default=3, help="interleaved repeats; best of each and median of per-round ratios")
+    parser.add_argument("--rounds", type=int, default=3,
+                        help="interleaved repeats; best of each and median of per-round ratios")
     args = parser.parse_args()
     ni, nk = args.n_images, args.n_kinematic
     print(f"datagen benchmark: {ROBOT} {SIZE[0]}x{SIZE[1]} px, {ni} rendered / {nk} kinematic samples, "
@@ -123,8 +125,13 @@ def main() -> None:
     render, gen1, gen2, kin, genk = (best[k] for k in ("render", "gen1", "gen2", "kin", "genk"))
     print(f"{'':38}{'samples/s':>11}{'ratio':>7}{'target':>9}{'median paired':>15}   all rounds")
     row = "{:38}{:11.0f}{:>7}{:>9}{:>15}   {}"
-    fmt = lambda k: " ".join(f"{x:.0f}" for x in runs[k])  # noqa: E731
-    med = lambda k: f"{np.median(paired[k]):.2f}"  # noqa: E731
+
+    def fmt(k: str) -> str:
+        return " ".join(f"{x:.0f}" for x in runs[k])
+
+    def med(k: str) -> str:
+        return f"{np.median(paired[k]):.2f}"
+
     print(row.format("bare mujoco.Renderer loop", render, "", "", "", fmt("render")))
     print(row.format("generate, images, 1 worker", gen1, f"{gen1 / render:.2f}", ">= 0.80", med("gen1"), fmt("gen1")))
     print(row.format("generate, images, 2 workers", gen2, f"{gen2 / gen1:.2f}x", ">= 1.7x", med("gen2") + "x",

@@ -17,7 +17,14 @@ show_store, export_dataset. Models out: export_onnx. Perception: Perception, Per
 
 from __future__ import annotations
 
+import os
+
 from bodyschema.lazy import lazy_exports
+
+# Headless rendering by default. mujoco picks its GL backend once, when first imported, and every module of ours
+# that imports it runs this package's __init__ first: the one place to set it. A value the user set wins.
+if os.environ.setdefault("MUJOCO_GL", "egl") in ("egl", "osmesa"):
+    os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
 
 __version__ = "0.1.0"
 

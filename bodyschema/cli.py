@@ -26,18 +26,10 @@ prints its traceback and exits 1; Ctrl-C exits 130.
 
 from __future__ import annotations
 
-import os
-
-# Headless rendering by default. mujoco reads MUJOCO_GL once, when first imported (by a stage, later), so this
-# must come before any stage runs; a value the user set wins.
-_GL = os.environ.setdefault("MUJOCO_GL", "egl")
-if _GL in ("egl", "osmesa"):
-    os.environ.setdefault("PYOPENGL_PLATFORM", _GL)
-# (every import below comes after it on purpose)
-
 import contextlib
 import dataclasses
 import logging
+import os
 import re
 import sys
 import traceback
@@ -50,12 +42,12 @@ import tyro
 
 from bodyschema import log
 from bodyschema.datagen.config import DatagenConfig
-from bodyschema.datagen.robot_commands import RUNNERS as ROBOT_RUNNERS, RobotInitArgs, RobotShowArgs
 from bodyschema.datagen.importers.config import ImportConfig
+from bodyschema.datagen.robot_commands import RUNNERS as ROBOT_RUNNERS, RobotInitArgs, RobotShowArgs
 from bodyschema.demo import DemoConfig
+from bodyschema.errors import expected_types, explain, must_be
 from bodyschema.evaluation import registry
 from bodyschema.evaluation.report import ReportConfig, write_report
-from bodyschema.errors import expected_types, explain, must_be
 from bodyschema.export_commands import RUNNERS as EXPORT_RUNNERS, ExportDatasetArgs, ExportOnnxArgs, ShowArgs
 from bodyschema.training.config import TrainConfig, train_commands
 

@@ -15,20 +15,17 @@ robot names its workspaces (joint boxes, `robot.workspaces`); `sampling_ranges` 
 from __future__ import annotations
 
 import dataclasses
-import os
 from pathlib import Path
 
-os.environ.setdefault("MUJOCO_GL", "egl")   # headless rendering; must be set before mujoco is imported
+import cv2
+import mujoco
+import numpy as np
 
-import cv2  # noqa: E402
-import mujoco  # noqa: E402
-import numpy as np  # noqa: E402
-
-from bodyschema.datagen.camera import project  # noqa: E402
-from bodyschema.datagen.chain import HingeChain  # noqa: E402
-from bodyschema.datagen.robot_build import ACTUATOR_KINDS, Built, build_model  # noqa: E402
-from bodyschema.datagen.robot_record import SHIPPED, RobotRecord, load_record  # noqa: E402
-from bodyschema.errors import must_be  # noqa: E402
+from bodyschema.datagen.camera import project
+from bodyschema.datagen.chain import HingeChain
+from bodyschema.datagen.robot_build import ACTUATOR_KINDS, Built, build_model
+from bodyschema.datagen.robot_record import SHIPPED, RobotRecord, load_record
+from bodyschema.errors import must_be
 
 ROBOT_NAMES = SHIPPED          # the shipped robots (datagen/robots/<name>.toml); any other is a file path
 IMAGE_SIZE_RANGE = (8, 1024)   # px, per side; the MJCF offscreen buffers are 1024 × 1024

@@ -16,19 +16,16 @@ From the model file (MJCF, or URDF through `urdf.load_urdf`) the spec is edited 
 from __future__ import annotations
 
 import hashlib
-import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-os.environ.setdefault("MUJOCO_GL", "egl")   # as robot.py: before the first `import mujoco`
+import mujoco
+import numpy as np
 
-import mujoco  # noqa: E402
-import numpy as np  # noqa: E402
-
-from bodyschema.datagen.robot_record import AUTO_CAMERA, EE_SITE, RobotRecord  # noqa: E402
-from bodyschema.datagen.urdf import load_urdf  # noqa: E402
-from bodyschema.errors import must_be  # noqa: E402
+from bodyschema.datagen.robot_record import AUTO_CAMERA, EE_SITE, RobotRecord
+from bodyschema.datagen.urdf import load_urdf
+from bodyschema.errors import must_be
 
 ACTUATOR_KINDS = ("position", "torque")
 _HINGE, _SLIDE = mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtJoint.mjJNT_SLIDE

@@ -11,15 +11,12 @@ warnings go to our logger instead of a MUJOCO_LOG.TXT in the working folder.
 from __future__ import annotations
 
 import logging
-import os
 
-os.environ.setdefault("MUJOCO_GL", "egl")  # as robot.py: must precede the first `import mujoco` of the process
+import mujoco
+import numpy as np
 
-import mujoco  # noqa: E402
-import numpy as np  # noqa: E402
-
-from bodyschema.datagen.store import MAX_JOINT_SPEED  # noqa: E402
-from bodyschema.errors import must_be  # noqa: E402
+from bodyschema.datagen.store import MAX_JOINT_SPEED
+from bodyschema.errors import must_be
 
 logger = logging.getLogger(__name__)
 _last_warning = ["none"]  # MuJoCo's latest warning text in this process, quoted by the divergence error

@@ -10,15 +10,12 @@ the file, unless `visual="collision"` asks for the collision geometry to be rend
 from __future__ import annotations
 
 import hashlib
-import os
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-os.environ.setdefault("MUJOCO_GL", "egl")   # as robot.py: before the first `import mujoco`
+import mujoco
 
-import mujoco  # noqa: E402
-
-from bodyschema.errors import must_be  # noqa: E402
+from bodyschema.errors import must_be
 
 MESH_SUFFIXES = (".stl", ".obj", ".msh")    # what MuJoCo loads
 
@@ -78,7 +75,7 @@ def resolve_mesh(written: str, folder: Path, mesh_dir: Path | None) -> Path:
 def _check_format(file: Path, written: str, kind: str) -> None:
     if file.suffix.lower() in MESH_SUFFIXES:
         return
-    hint = f"Convert it to STL or OBJ (e.g. with meshlab or trimesh) and point the URDF at the copy"
+    hint = "Convert it to STL or OBJ (e.g. with meshlab or trimesh) and point the URDF at the copy"
     if kind == "visual":
         hint += (", or render the collision geometry instead: `bodyschema robot init FILE --visual collision` "
                  "writes a record saying so")
