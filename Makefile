@@ -8,7 +8,7 @@ EXTRAS   ?= test
 export MUJOCO_GL ?= egl
 export PYOPENGL_PLATFORM ?= egl
 
-.PHONY: demo test test-all bench system-deps clean
+.PHONY: demo test test-all lint bench system-deps clean
 
 demo: $(VENV)/.installed system-deps
 	$(BIN)/bodyschema demo
@@ -18,6 +18,9 @@ test: $(VENV)/.installed system-deps
 
 test-all: $(VENV)/.installed system-deps   ## including tests marked slow
 	$(BIN)/python -m pytest -q -m ""
+
+lint: $(VENV)/.installed   ## ruff (pinned in the test extra; config in pyproject.toml)
+	$(BIN)/ruff check .
 
 bench: $(VENV)/.installed system-deps
 	for script in bench/*.py; do echo "== $$script"; $(BIN)/python $$script || exit 1; done
