@@ -51,19 +51,18 @@ class RecordedTargets:
     """A validated store's frames as level targets for `models` (+ an encoder's image)."""
 
     def __init__(self, path: Path, models, image: bool):
-        from bodyschema.datagen.store import open_store
-        from bodyschema.datagen.store_reader import store_digest
-        from bodyschema.datagen.validate import validate_store
+        from bodyschema.datagen.store_reader import check_store, store_digest
 
         self.path = Path(path)
         if not self.path.exists():
             raise FileNotFoundError(must_be("--targets", "an existing dataset store", str(self.path),
                                             "Import recordings with `bodyschema import` or generate a store."))
-        problems = validate_store(self.path)
-        if problems:
-            raise ValueError(must_be("--targets", "a complete, valid dataset store", f"{len(problems)} problem(s) "
-                                     f"in {self.path}", "See `bodyschema validate`:\n - " + "\n - ".join(problems)))
-        root = open_store(self.path)
+        store = check_store(self.path, what="--targets")
+        if store.problems:
+            raise ValueError(must_be("--targets", "a complete, valid dataset store", f"{len(store.problems)} "
+                                     f"problem(s) in {self.path}",
+                                     "See `bodyschema validate`:\n - " + "\n - ".join(store.problems)))
+        root = store.root
         self.attrs, self.digest = dict(root.attrs), store_digest(root)
         wanted = {m.modality for m in models if m.modality in SENSED} | ({"image"} if image else set())
         missing = sorted(wanted - set(root.array_keys()))
