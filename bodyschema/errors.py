@@ -52,7 +52,8 @@ FILE_HINT = "It is truncated, corrupt or was edited; re-create it with the comma
 
 
 def expected_types() -> tuple[type[BaseException], ...]:
-    """Every exception class a user can cause (the CLI's `except` clause); IF_USERS_FAULT ones are sorted by `explain`."""
+    """Every exception class a user can cause (the CLI's `except` clause); IF_USERS_FAULT ones are sorted by
+    `explain`."""
     return (*ALWAYS, *IF_USERS_FAULT, *(cls for cls, _ in _loaded_library_errors()))
 
 

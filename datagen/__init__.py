@@ -13,4 +13,5 @@ _EXPORTS = {"DatagenConfig": "config", "generate": "generate", "validate_store":
             "export_dataset": "export", "open_store": "store"}
 
 __all__, __getattr__, __dir__ = lazy_exports(
-    "bodyschema.datagen", globals(), {name: (f"bodyschema.datagen.{module}", name) for name, module in _EXPORTS.items()})
+    "bodyschema.datagen", globals(),
+    {name: (f"bodyschema.datagen.{module}", name) for name, module in _EXPORTS.items()})

@@ -20,27 +20,36 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+from tqdm.auto import tqdm
 
-
-from bodyschema.datagen.robot import Robot  # noqa: E402
-
-import numpy as np  # noqa: E402
-from tqdm.auto import tqdm  # noqa: E402
-
-from bodyschema.datagen.backends import Runner, backend  # noqa: E402
-from bodyschema.datagen.config import DatagenConfig  # noqa: E402
-from bodyschema.datagen.guards import check_resources, check_writable, n_shards, probe_render  # noqa: E402
-from bodyschema.datagen.integrity import (clear_shard, data_arrays, failing_shards,  # noqa: E402
-                                          shard_digest)
-from bodyschema.datagen.reach import arm_reach  # noqa: E402
-from bodyschema.datagen.robot_attrs import robot_attrs  # noqa: E402
-from bodyschema.datagen.robot_infer import check_view  # noqa: E402
-from bodyschema.datagen.samplers import Babbler, sample_kinematic  # noqa: E402
-from bodyschema.datagen.locks import store_lock  # noqa: E402
-from bodyschema.datagen.store import (SCHEMA_VERSION, StoreWriteError, create_store, drop_shard_marks,  # noqa: E402
-                                      features, has_done_markers, mark_complete, mark_shard_done, now, open_store,
-                                      reset_done_markers, shards_done, versions, write_shard)
-from bodyschema.errors import must_be  # noqa: E402
+from bodyschema.datagen.backends import Runner, backend
+from bodyschema.datagen.config import DatagenConfig
+from bodyschema.datagen.guards import check_resources, check_writable, n_shards, probe_render
+from bodyschema.datagen.integrity import clear_shard, data_arrays, failing_shards, shard_digest
+from bodyschema.datagen.locks import store_lock
+from bodyschema.datagen.reach import arm_reach
+from bodyschema.datagen.robot import Robot
+from bodyschema.datagen.robot_attrs import robot_attrs
+from bodyschema.datagen.robot_infer import check_view
+from bodyschema.datagen.samplers import Babbler, sample_kinematic
+from bodyschema.datagen.store import (
+    SCHEMA_VERSION,
+    StoreWriteError,
+    create_store,
+    drop_shard_marks,
+    features,
+    has_done_markers,
+    mark_complete,
+    mark_shard_done,
+    now,
+    open_store,
+    reset_done_markers,
+    shards_done,
+    versions,
+    write_shard,
+)
+from bodyschema.errors import must_be
 
 logger = logging.getLogger(__name__)
 PROBE_SAMPLES = 200  # babbling: samples of the probe episode simulated before anything is written (~10 s of motion)

@@ -51,5 +51,6 @@ def test_repeated_model_flags_fuse_instead_of_replacing(words):
     import tyro
 
     from bodyschema.cli import COMMANDS
-    config = tyro.cli(COMMANDS, args=[*words, "--model", "analytic:nao_arm:ee_xyz", "--model", "analytic:nao_arm:joints"])
+    models = ["--model", "analytic:nao_arm:ee_xyz", "--model", "analytic:nao_arm:joints"]
+    config = tyro.cli(COMMANDS, args=[*words, *models])
     assert config.models == ("analytic:nao_arm:ee_xyz", "analytic:nao_arm:joints")

@@ -15,8 +15,14 @@ import numpy as np
 
 from bodyschema.datagen.integrity import shard_digest
 from bodyschema.datagen.outputs import write_atomically
-from bodyschema.datagen.store import (StoreWriteError, create_store, features, mark_complete, mark_shard_done,
-                                      write_shard)
+from bodyschema.datagen.store import (
+    StoreWriteError,
+    create_store,
+    features,
+    mark_complete,
+    mark_shard_done,
+    write_shard,
+)
 from bodyschema.errors import must_be
 
 ROWS_WITH_IMAGES, ROWS_WITHOUT = 512, 16384   # rows per chunk, as datagen's default shards

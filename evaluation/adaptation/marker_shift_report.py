@@ -113,7 +113,7 @@ def mean_curves(batches: Mapping[float, Mapping[str, np.ndarray]], shifts: Seque
 # ---- outputs -----------------------------------------------------------------------------------------------
 def plot_over_time(curves: Sequence[Mapping], shift_time: float, path: Path, what: str) -> Path:
     """One panel per shift: `what` (pixel errors, or hand displacement) vs time, one colour per visual precision."""
-    from bodyschema.evaluation.core.plots import plt, save_figure   # matplotlib only when plotting
+    from bodyschema.evaluation.core.plots import plt, save_figure  # matplotlib only when plotting
     shifts = list(dict.fromkeys(r["shift"] for r in curves))
     precisions = list(dict.fromkeys(r["visual_precision"] for r in curves))
     fig, axes = plt.subplots(1, len(shifts), figsize=(3.6 * len(shifts), 3.4), squeeze=False, sharey=True)
@@ -139,7 +139,7 @@ def plot_image_paths(batches: Mapping[float, Mapping[str, np.ndarray]], shifts: 
                      image_size: tuple[int, int], path: Path) -> Path:
     """Image plane, the first episode of each shift: hand (dashed) and seen marker (solid, from the shift on; ○ where
     it was seen just after the shift) paths, final positions (•), goal (×)."""
-    from bodyschema.evaluation.core.plots import plt, save_figure   # matplotlib only when plotting
+    from bodyschema.evaluation.core.plots import plt, save_figure  # matplotlib only when plotting
     names = list(dict.fromkeys(shifts))
     fig, axes = plt.subplots(1, len(names), figsize=(3.6 * len(names), 3.4), squeeze=False)
     for ax, shift in zip(axes[0], names):
@@ -163,7 +163,7 @@ def plot_image_paths(batches: Mapping[float, Mapping[str, np.ndarray]], shifts: 
 
 def plot_correction(table: Sequence[Mapping], path: Path) -> Path:
     """Measured vs predicted correction against visual precision, one line per shift: the trust trade-off."""
-    from bodyschema.evaluation.core.plots import plt, save_figure   # matplotlib only when plotting
+    from bodyschema.evaluation.core.plots import plt, save_figure  # matplotlib only when plotting
     fig, ax = plt.subplots(figsize=(5, 3.6))
     for n, shift in enumerate(dict.fromkeys(r["shift"] for r in table)):
         mine = [r for r in table if r["shift"] == shift and np.isfinite(r["correction"])]

@@ -37,7 +37,7 @@ def markdown(table: Sequence[Mapping], columns: Sequence[str] = MAIN_COLUMNS, ke
 
 
 def plot_boxes(per_trial: Mapping[str, np.ndarray], path: Path) -> Path:
-    from bodyschema.evaluation.core.plots import plt, save_figure   # matplotlib only when plotting
+    from bodyschema.evaluation.core.plots import plt, save_figure  # matplotlib only when plotting
     fig, ax = plt.subplots(figsize=(1.6 + 1.2 * len(per_trial), 4))
     labels = list(per_trial)
     ax.boxplot([np.maximum(per_trial[k], 1e-9) for k in labels], showfliers=True)
@@ -51,7 +51,7 @@ def plot_boxes(per_trial: Mapping[str, np.ndarray], path: Path) -> Path:
 
 def plot_curves(curves: Mapping[str, np.ndarray], path: Path) -> Path:
     """Median and inter-quartile band of F(t) − F_final per level (trials that stopped hold their last F)."""
-    from bodyschema.evaluation.core.plots import plt, save_figure   # matplotlib only when plotting
+    from bodyschema.evaluation.core.plots import plt, save_figure  # matplotlib only when plotting
     fig, ax = plt.subplots(figsize=(6, 4))
     for level, f in curves.items():                                       # (T, N), NaN once a trial stopped
         held = _hold_last(f)
@@ -71,7 +71,7 @@ def plot_sweep(rows: Sequence[Mapping], x: str, path: Path, y: str = "joint_err_
                ylabel: str | None = None) -> Path:
     """Error vs a swept quantity (noise σ), or a bar per case (broken sensor) when x is not numeric. The labels
     default to the column names; pass them with units (robustness does)."""
-    from bodyschema.evaluation.core.plots import plt, save_figure   # matplotlib only when plotting
+    from bodyschema.evaluation.core.plots import plt, save_figure  # matplotlib only when plotting
     fig, ax = plt.subplots(figsize=(5, 3.5))
     xs = [r[x] for r in rows]
     ys = np.maximum([r[y] for r in rows], 1e-9)                           # log axis: an exact 0 shows at 1e-9

@@ -34,7 +34,7 @@ def markdown_to_html(text: str, image_src: Callable[[str], str | None] = lambda 
 
 
 def _parser():
-    from markdown_it import MarkdownIt     # imported when a report is written, not with the CLI
+    from markdown_it import MarkdownIt  # imported when a report is written, not with the CLI
 
     md = MarkdownIt("commonmark", {"html": False}).enable("table")
     md.add_render_rule("heading_open", _heading_open)

@@ -84,6 +84,7 @@ def test_batched_rows_equal_the_per_trial_loop_in_float64(make, config):
 @pytest.mark.parametrize("level", [1, 2])
 def test_planar2_levels_recover_poses_from_the_analytic_oracle(level):
     import numpy as np
+
     from bodyschema.evaluation.core.seeds import eval_rng
     from bodyschema.evaluation.core.specs import load_robot
     from bodyschema.evaluation.levels.targets import initial_beliefs, make_targets

@@ -6,8 +6,16 @@ import numpy as np
 import pytest
 
 from bodyschema.datagen.robot import Robot
-from bodyschema.datagen.robot_record import (SHIPPED, RobotRecord, dumps_toml, load_record, read_record,
-                                             record_from_dict, shipped_dir, write_record)
+from bodyschema.datagen.robot_record import (
+    SHIPPED,
+    RobotRecord,
+    dumps_toml,
+    load_record,
+    read_record,
+    record_from_dict,
+    shipped_dir,
+    write_record,
+)
 
 
 @pytest.mark.parametrize("name", SHIPPED)

@@ -3,8 +3,17 @@
 import numpy as np
 import pytest
 
-from bodyschema.datagen.store import (DONE, create_store, features, is_complete, mark_complete, mark_shard_done,
-                                      open_store, shards_done, write_shard)
+from bodyschema.datagen.store import (
+    DONE,
+    create_store,
+    features,
+    is_complete,
+    mark_complete,
+    mark_shard_done,
+    open_store,
+    shards_done,
+    write_shard,
+)
 
 
 def test_features_follow_the_schema():

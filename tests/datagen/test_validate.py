@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 import zarr
 
+from bodyschema.datagen.camera import project
 from bodyschema.datagen.config import DatagenConfig
 from bodyschema.datagen.contact_sheet import write_contact_sheet
 from bodyschema.datagen.generate import generate
-from bodyschema.datagen.camera import project
 from bodyschema.datagen.integrity import shard_digest
 from bodyschema.datagen.store import mark_shard_done
 from bodyschema.datagen.validate import summarize_store, validate_store

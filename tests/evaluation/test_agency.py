@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from bodyschema.evaluation.agency.benchmark import AgencyConfig, prepare, predicted_free_energy, run_agency
+from bodyschema.evaluation.agency.benchmark import AgencyConfig, predicted_free_energy, prepare, run_agency
 from bodyschema.evaluation.agency.report import ALL, roc_rows
 from bodyschema.evaluation.agency.streams import SELF, delayed, make_episodes, observe
 from bodyschema.models.analytic import AnalyticModel

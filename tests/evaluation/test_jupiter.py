@@ -9,8 +9,15 @@ import pytest
 
 from bodyschema.aif.aic import AICConfig, AICController
 from bodyschema.datagen.robot import Robot
-from bodyschema.evaluation.adaptation.jupiter import (READY, JupiterConfig, control_substeps, errors, run_jupiter,
-                                                      sample_poses, simulate)
+from bodyschema.evaluation.adaptation.jupiter import (
+    READY,
+    JupiterConfig,
+    control_substeps,
+    errors,
+    run_jupiter,
+    sample_poses,
+    simulate,
+)
 from bodyschema.evaluation.core.pd import PDController
 from bodyschema.evaluation.core.seeds import eval_rng
 from bodyschema.models.analytic import AnalyticModel

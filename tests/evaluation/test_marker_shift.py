@@ -9,8 +9,13 @@ import csv
 import numpy as np
 import pytest
 
-from bodyschema.evaluation.adaptation.marker_shift import (MarkerShiftConfig, goal_poses, marker_offsets,
-                                                           run_marker_shift, simulate)
+from bodyschema.evaluation.adaptation.marker_shift import (
+    MarkerShiftConfig,
+    goal_poses,
+    marker_offsets,
+    run_marker_shift,
+    simulate,
+)
 from bodyschema.evaluation.adaptation.marker_shift_report import episode_rows, predicted_correction
 from bodyschema.evaluation.core.sim import control_substeps
 from bodyschema.evaluation.core.specs import load_robot

@@ -12,7 +12,6 @@ from bodyschema.evaluation.core.specs import resolve_model
 from bodyschema.evaluation.levels import LevelsConfig, run_levels
 from bodyschema.evaluation.report import ReportConfig, write_report
 from bodyschema.training.train import train
-from tests.training.conftest import empty_db, kin_store, tiny_kind, workdir  # noqa: F401 (fixtures)
 from tests.training.tiny_model import tiny_config
 
 

@@ -9,11 +9,18 @@ import numpy as np
 import pytest
 import torch
 
-from bodyschema.evaluation.reaching.benchmark import (ReachingConfig, aif_policy, check_goal, make_goal, prepare,
-                                                      run_reaching, simulate)
 from bodyschema.evaluation.core.sensing import Sensors
 from bodyschema.evaluation.core.sim import control_substeps
 from bodyschema.evaluation.reaching import goal_pose
+from bodyschema.evaluation.reaching.benchmark import (
+    ReachingConfig,
+    aif_policy,
+    check_goal,
+    make_goal,
+    prepare,
+    run_reaching,
+    simulate,
+)
 from bodyschema.evaluation.reaching.loop import rollout
 from bodyschema.evaluation.reaching.report import time_to_reach
 

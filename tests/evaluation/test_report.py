@@ -13,10 +13,9 @@ from urllib.parse import unquote
 import pytest
 import tyro
 
-from bodyschema.evaluation.report import page as report
+from bodyschema.evaluation.report import ReportConfig, page as report, write_report
 from bodyschema.evaluation.report.markdown_html import markdown_to_html, slug
 from bodyschema.evaluation.report.sections import PNG_SIGNATURE
-from bodyschema.evaluation.report import ReportConfig, write_report
 
 TABLE = "| level | joint_err_deg |\n|:---|---:|\n| 1 | 0.5 |\n| 3+ms | 2 \\| 3 |\n"
 

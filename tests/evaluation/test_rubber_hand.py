@@ -9,8 +9,13 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from bodyschema.evaluation.rubber_hand.benchmark import (RubberHandConfig, make_episodes, prepare, run_rubber_hand,
-                                                        track_drift)
+from bodyschema.evaluation.rubber_hand.benchmark import (
+    RubberHandConfig,
+    make_episodes,
+    prepare,
+    run_rubber_hand,
+    track_drift,
+)
 from bodyschema.evaluation.rubber_hand.report import final_drift
 from bodyschema.evaluation.rubber_hand.stroking import felt_strokes, ownership, strokes, temporal_log_lr
 from bodyschema.models.analytic import AnalyticModel

@@ -9,8 +9,7 @@ pytest.importorskip("onnxruntime")
 pytest.importorskip("onnxscript")
 pytestmark = pytest.mark.filterwarnings("ignore:.*LeafSpec.*:FutureWarning")   # torch.export internals
 
-from bodyschema.models.onnx_export import (OPSET, check_exportable, export_onnx, read_metadata,  # noqa: E402
-                                           verify_onnx)
+from bodyschema.models.onnx_export import OPSET, check_exportable, export_onnx, read_metadata, verify_onnx  # noqa: E402
 from bodyschema.models.scaling import BodySpec  # noqa: E402
 
 BODY = BodySpec("toy", ("a", "b", "c"), (-1.0, -0.5, 0.0), (1.0, 1.5, 2.0))

@@ -15,7 +15,6 @@ from bodyschema.evaluation.core.specs import PROVENANCE_KEYS, resolve_model, res
 from bodyschema.evaluation.registry import BENCHMARKS
 from bodyschema.models.analytic import AnalyticModel
 from bodyschema.training.digest import directory_sha256
-from tests.training.conftest import empty_db, workdir  # noqa: F401 (fixtures)
 
 SWEEPS = {"robustness": ("planar2", "ee_xyz", ()),                                  # (robot, modality, fused)
           "loop-robustness": ("nao_arm", "ee_pixel", ("analytic:nao_arm:joints",))}

@@ -10,7 +10,7 @@ import sqlite3
 import pytest
 
 from bodyschema import cli
-from tests.test_cli_fuzz import build_world, run_in_process, run_and_check
+from tests.test_cli_fuzz import build_world, run_and_check, run_in_process
 
 CASES = [   # (id, argv; {W} is the scratch folder of build_world: good.zarr kinematics, img.zarr images)
     ("levels-runs-huge", "evaluate levels --runs 1000000000 --out {W}/res"),

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from tests.datagen.import_sources import planar2_frames, write_demo_hdf5, write_folder
-from tests.test_cli_fuzz import run_in_process, run_and_check
+from tests.test_cli_fuzz import run_and_check, run_in_process
 
 OUT = "--out {W}/new.zarr"
 LEVELS = "--trials 2 --runs 1 --no-mlflow --out {W}/res"

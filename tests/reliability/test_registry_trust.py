@@ -31,8 +31,7 @@ from bodyschema.models import BodySpec, load_model
 from bodyschema.training.registry import load, promote, use_tracking
 from bodyschema.training.train import train
 from tests.limits import file_size_limit
-from tests.test_cli_fuzz import build_world, run_in_process, run_and_check
-from tests.training.conftest import empty_db, kin_store, tiny_kind, workdir  # noqa: F401 (fixtures)
+from tests.test_cli_fuzz import build_world, run_and_check, run_in_process
 from tests.training.tiny_model import TinyModel, tiny_config
 
 NAME = "bodyschema-planar2-ee_xyz-tiny"

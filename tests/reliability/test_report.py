@@ -25,7 +25,7 @@ from bodyschema.evaluation.report import ReportConfig, write_report
 from bodyschema.evaluation.report.markdown_html import markdown_to_html
 from bodyschema.models.analytic import AnalyticModel
 from tests.evaluation.test_report import write_png
-from tests.test_cli_fuzz import run_in_process, run_and_check
+from tests.test_cli_fuzz import run_and_check, run_in_process
 
 RUN = "20260101T000000.000Z-0123abcd"
 OTHER_RUN = "20260102T000000.000Z-0123abcd"

@@ -5,7 +5,7 @@ under 20 % of poses, an unsupported mesh. Each case: the house line, exit 2, no 
 import pytest
 
 from bodyschema.datagen.robot_record import dumps_toml
-from tests.test_cli_fuzz import run_in_process, run_and_check
+from tests.test_cli_fuzz import run_and_check, run_in_process
 
 ARM = """<mujoco model="arm"><compiler angle="radian"/><worldbody>
   <camera name="away" pos="0 0 2" xyaxes="1 0 0 0 -1 0"/>

@@ -80,7 +80,7 @@ def test_train_register_and_load_through_a_tracking_server(mlflow_server, kin_st
 
     z = torch.zeros(3, 2, dtype=torch.float64)
     torch.testing.assert_close(model.predict(z), load_model(result.model_dir).predict(z), rtol=0, atol=0)
-    import mlflow                      # the pyfunc's loader finds the recorded digest through the server too
+    import mlflow  # the pyfunc's loader finds the recorded digest through the server too
 
     pyfunc = mlflow.pyfunc.load_model(f"models:/{result.registered_name}@champion")
     torch.testing.assert_close(torch.as_tensor(pyfunc.predict(z.numpy(), params={"output": "jacobian"})),

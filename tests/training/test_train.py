@@ -124,8 +124,8 @@ def test_training_score_subset_keeps_rows_aligned(kin_store):
 
 
 def test_an_image_encoder_is_scored_in_joint_degrees_registered_and_loaded_back(workdir, image_store):
-    from bodyschema.models.encoder import ImageEncoder
     from bodyschema.models.configs import EncoderConfig
+    from bodyschema.models.encoder import ImageEncoder
     from bodyschema.training.config import TrainConfig
 
     hyper = EncoderConfig(epochs=3, channels=(8, 8), fc_hidden=16)
