@@ -297,7 +297,7 @@ def _typed_flag(kind: str | None, name: str, value: str) -> list[str]:
     from bodyschema.models import kinds
 
     flag = "--" + name.replace("_", "-")
-    config = kinds.KINDS[kind].config if kind in kinds.KINDS else None
+    config = kinds.KINDS[kind].config_class if kind in kinds.KINDS else None
     hint = {f.name: f.type for f in dataclasses.fields(config)}.get(name) if config else None
     if hint in (bool, "bool") and value.lower() in ("true", "false"):
         return [flag if value.lower() == "true" else "--no-" + flag[2:]]

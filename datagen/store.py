@@ -27,6 +27,7 @@ import numpy as np
 import zarr
 from zarr.codecs import ZstdCodec
 
+from bodyschema.datagen.modalities import store_feature
 from bodyschema.errors import must_be
 
 SCHEMA_VERSION = 2  # 2: shard_done holds a per-shard checksum (1: a bare 0/1 flag); attrs reach_m, base_m
@@ -53,17 +54,8 @@ class StoreWriteError(OSError):
 
 def features(dq: int, image_shape: tuple[int, ...] | None, touch: bool, babble: bool) -> dict[str, dict[str, Any]]:
     """The data arrays of a store as {name: {dtype, shape (per sample), unit, names}} (as LeRobot's features)."""
-    f: dict[str, dict[str, Any]] = {
-        "q": {"dtype": "float32", "shape": [dq], "unit": "rad", "names": ["joint"]},
-        "ee_xyz": {"dtype": "float32", "shape": [3], "unit": "m", "names": ["x", "y", "z"]},
-        "ee_pixel": {"dtype": "float32", "shape": [2], "unit": "px", "names": ["u", "v"]},
-        "jacobian": {"dtype": "float32", "shape": [3, dq], "unit": "m/rad", "names": ["xyz", "joint"]},
-    }
-    if image_shape is not None:
-        f["image"] = {"dtype": "uint8", "shape": list(image_shape), "unit": "intensity",
-                      "names": ["row", "col", "channel"][: len(image_shape)]}
-    if touch:
-        f["touch"] = {"dtype": "float32", "shape": [1], "unit": "N", "names": ["contact"]}
+    names = ["q", "ee_xyz", "ee_pixel", "jacobian"] + ["image"] * (image_shape is not None) + ["touch"] * touch
+    f: dict[str, dict[str, Any]] = {n: store_feature(n, dq, image_shape) for n in names}   # datagen/modalities.py
     if babble:
         f["qvel"] = {"dtype": "float32", "shape": [dq], "unit": "rad/s", "names": ["joint"]}
         f["episode"] = {"dtype": "int32", "shape": [], "unit": "index", "names": []}

@@ -25,6 +25,7 @@ from torch import nn
 from tqdm.auto import tqdm
 
 from bodyschema.errors import must_be
+from bodyschema.models.capabilities import Capabilities
 from bodyschema.models.device import check_device
 from bodyschema.models.files import torch_bytes, write_atomically
 from bodyschema.models.scaling import IMAGE_SCALE
@@ -231,8 +232,10 @@ def _resume(path: Path, module, opt, gen, fingerprint, device: torch.device) -> 
 
 
 # ---- inference plumbing -----------------------------------------------------------------------------
-class NetHolder:
+class NetHolder(Capabilities):
     """Mixin: a trained network `self.net_` (float32) with its dtype copies, its device, and its saved state."""
+
+    network = True                  # the subclass builds it with `_factory()` and fits it with `settings`
 
     net_: nn.Module | None = None
     device = torch.device("cpu")    # where the network is evaluated (`to`); trained models arrive on the CPU

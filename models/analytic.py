@@ -18,17 +18,16 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from bodyschema.datagen import modalities
 from bodyschema.datagen.robot import Robot
 from bodyschema.errors import must_be
 from bodyschema.models.body_robot import body_robot, robot_source
 from bodyschema.models.contract import BaseSensoryModel, register_kind
 from bodyschema.models.scaling import BodySpec
 
-MODALITIES = ("ee_xyz", "ee_pixel", "joints")
-# Default diagonal precisions Π_x: 1 / σ² with σ = 1 mm, 1 px, 1°.
-DEFAULT_PRECISION = {"ee_xyz": 1.0 / 1e-3 ** 2,                  # m⁻²
-                     "ee_pixel": 1.0,                            # px⁻²
-                     "joints": 1.0 / np.deg2rad(1.0) ** 2}       # rad⁻²
+MODALITIES = modalities.KINEMATIC
+# Default diagonal precisions Π_x, the table's (σ = 1 mm, 1 px, 1°).
+DEFAULT_PRECISION = {m: modalities.MODALITIES[m].precision for m in MODALITIES}
 
 
 @register_kind
@@ -55,8 +54,7 @@ class AnalyticModel(BaseSensoryModel):
         low, high = self.robot.sampling_ranges.T
         body = BodySpec(self.robot.name, self.robot.joint_names, tuple(map(float, low)), tuple(map(float, high)),
                         robot_source(self.robot))
-        out = {"ee_xyz": (3,), "ee_pixel": (2,), "joints": (self.robot.dq,)}[modality]
-        super().__init__(body, modality, out)
+        super().__init__(body, modality, modalities.shape_of(modality, self.robot.dq))
         self.image_size = self.robot.image_size if modality == "ee_pixel" else None
         self.fixed_precision = float(precision)
 

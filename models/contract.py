@@ -23,6 +23,7 @@ import torch
 
 from bodyschema.errors import NotFittedError, must_be
 from bodyschema.models import kinds
+from bodyschema.models.capabilities import Capabilities
 from bodyschema.models.files import torch_bytes, write_atomically
 from bodyschema.models.scaling import BodySpec
 
@@ -52,8 +53,7 @@ def register_kind(cls):
     return cls
 
 
-class BaseSensoryModel:
-    kind: ClassVar[str] = "base"
+class BaseSensoryModel(Capabilities):
     # True when Π depends on z (GPR predictive variance, MDN mixture): F = ½εᵀΠ(z)ε − ½ln|Π(z)| then needs ∂Π/∂z
     precision_varies: ClassVar[bool] = False
 

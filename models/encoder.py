@@ -53,6 +53,7 @@ class EncoderNet(nn.Module):
 @register_kind
 class ImageEncoder(NetHolder):
     kind = "encoder"
+    exports_onnx = convolutional = encodes = True
 
     def __init__(self, body: BodySpec, modality: str = "image", image_shape: tuple[int, ...] = (56, 80), *,
                  channels: tuple[int, ...] = (16, 32, 64),   # 56×80 → 28×40×16 → 14×20×32 → 7×10×64

@@ -26,6 +26,7 @@ import torch
 from tqdm.auto import tqdm
 
 from bodyschema.models import _gp_data, _gp_math
+from bodyschema.models.capabilities import GPMemory
 from bodyschema.models.contract import BaseSensoryModel, register_kind
 from bodyschema.models.scaling import BodySpec
 
@@ -68,6 +69,9 @@ class GPRModel(BaseSensoryModel):
 
     kind = "gpr"
     precision_varies = True      # 1 / (predictive variance + noise) at z
+    exports_onnx = True          # its posterior mean is a few matmuls and one exp (models/onnx_export.py)
+    # measured peak (bench: ru_maxrss, training/guards.py): autograd keeps the kernel, its Cholesky and gradients
+    gp_memory = GPMemory(fit_copies=12.0, condition_copies=3.0, per_output=True)
 
     def __init__(self, body: BodySpec, modality: str, output_shape: tuple[int, ...], *,
                  hyper_points: int = 500,     # MLL fitted on this many samples: O(m³) per step, 500 takes seconds

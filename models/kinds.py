@@ -6,6 +6,11 @@ Names are hyphenated, as CLI words are. Models saved before the one spelling (is
 and `mm_member`: `ALIASES` maps them, in `canonical`, the one place a name read from outside is resolved.
 Modules are imported lazily: a kind's module (torch, gpytorch, sklearn) is imported only when that kind is
 built or loaded, and a broken module fails only the kind it holds.
+
+A kind is its module plus its line here. What it can do (ONNX export, the GP memory guard, members, encoding) is
+declared on its class (models/capabilities.py), not here. Its hyper-parameters: a `ModelConfig` class, either one
+of models/configs.py (the shipped kinds: the CLI builds its help without importing any model module) or the name
+of a class in the kind's own module (a new kind in one file; the CLI then imports that module to list it).
 """
 
 from __future__ import annotations
@@ -23,9 +28,14 @@ class Kind:
     module: str                            # imported only when the kind is built or loaded
     saved: str                             # class a saved model of this kind is rebuilt as (`_from_saved`)
     trains: str | None = None              # class `bodyschema train <name>` builds; None: not trainable
-    config: type[ModelConfig] | None = None  # its hyper-parameters (models/configs.py)
+    config: type[ModelConfig] | str | None = None  # its hyper-parameters: a class, or a class name in `module`
     modality: str = "ee_xyz"               # what it learns to predict unless --modality says otherwise
     summary: str = ""                      # one line of `bodyschema train --help`
+
+    @property
+    def config_class(self) -> type[ModelConfig] | None:
+        """The hyper-parameter class (a name is looked up in the kind's module, imported now)."""
+        return _attribute(self, self.config) if isinstance(self.config, str) else self.config
 
 
 KINDS: dict[str, Kind] = {k.name: k for k in (
@@ -72,9 +82,9 @@ def trainable() -> list[Kind]:
 def of_config(config: ModelConfig) -> Kind:
     """The kind a hyper-parameter config trains (its class must be the kind's config class)."""
     kind = KINDS.get(getattr(config, "kind", None))
-    if kind is None or kind.config is not type(config):
+    if kind is None or kind.config_class is not type(config):
         raise ValueError(f"{type(config).__name__} is not the config of a trainable model kind. Use one of "
-                         f"{[k.config.__name__ for k in trainable()]}.")
+                         f"{[k.config_class.__name__ for k in trainable()]}.")
     return kind
 
 

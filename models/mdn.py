@@ -48,6 +48,7 @@ class MDNNet(nn.Module):
 class MDNModel(NetModel, BaseSensoryModel):
     kind = "mdn"
     precision_varies = True      # 1 / mixture variance at z
+    exports_onnx = True
 
     def __init__(self, body: BodySpec, modality: str, output_shape: tuple[int, ...], *,
                  hidden: tuple[int, ...] = (64, 64),

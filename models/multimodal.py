@@ -22,6 +22,7 @@ from torch import nn
 from bodyschema.errors import must_be
 from bodyschema.models._nn_fit import (LeafParams, NetModel, TrainSettings, build, check_fit_data, check_val,
                                        output_standardizer, train)
+from bodyschema.models.capabilities import Capabilities
 from bodyschema.models.contract import BaseSensoryModel, load_model, register_kind
 from bodyschema.models.pixel import PixelDecoderNet, fast_layout
 from bodyschema.models.scaling import BodySpec
@@ -42,6 +43,7 @@ class MemberNet(nn.Module):
 @register_kind
 class MultimodalMember(NetModel, BaseSensoryModel):
     kind = "multimodal"
+    exports_onnx = True
 
     def __init__(self, body: BodySpec, modality: str, output_shape: tuple[int, ...], *,
                  decoder: str = "auto",                  # auto: "pixel" for (H, W[, C]) images, else "mlp"
@@ -80,6 +82,10 @@ class MultimodalMember(NetModel, BaseSensoryModel):
 
     def _target(self, x: torch.Tensor) -> torch.Tensor:
         return (x.reshape(x.shape[0], -1) - self.x_mean_) / self.x_scale_             # (N, O)
+
+    @property
+    def convolutional(self) -> bool:
+        return self.decoder == "pixel"
 
     def _factory(self) -> MemberNet:
         if self.decoder == "pixel":
@@ -185,9 +191,12 @@ def _check_keys(what: str, d, members) -> None:
         raise ValueError(must_be(what, f"a dict with exactly the modalities {sorted(members)}", got))
 
 
-class MultimodalModel:
+class MultimodalModel(Capabilities):
     """Members over one shared z. `output_shapes`: {modality: per-sample shape}; `member_hyper`: per-member
     overrides of the shared hyper-parameters; `precisions`: {modality: fixed precision} (others are learned)."""
+
+    kind = "multimodal"
+    network = has_members = True     # trained as one; each member is saved, registered and exported on its own
 
     def __init__(self, body: BodySpec, output_shapes: dict[str, tuple[int, ...]], *,
                  member_hyper: dict[str, dict] | None = None, precisions: dict[str, float] | None = None,

@@ -6,12 +6,14 @@ public wrapper: the wrapper's edge checks (`isfinite`, shape and dtype errors, d
     rad → [-1, 1] (the body's `to_unit`) → network (or the GP's k(u, X) α) → output de-standardization
 with no second copy of any of it, and `verify_onnx` checks it against the wrapper's `predict` with onnxruntime.
 
-Kinds: "mdn" (either mode), "pixel", "multimodal" (a member: MLP or pixel decoder) and "gpr" (its posterior mean: the
-RBF kernel against the cached training inputs and α, a few matmuls and one exp) map q (B, Dz) rad → x (B, *out);
-"encoder" maps images (B, H, W[, C]) in [0, 1] → q (B, Dz) rad. Not exportable: "analytic" (MuJoCo's forward
-kinematics, no tensor graph) and "sklearn-gpr" (scikit-learn computes its mean in numpy).
+Kinds: a model class that declares `exports_onnx` (models/capabilities.py) is exported: a network (`network`:
+"mdn", "pixel", a "multimodal" member) through its `_outputs`, any other (the "gpr" posterior mean: the RBF kernel
+against the cached training inputs and α, a few matmuls and one exp) through its `_predict`, each mapping
+q (B, Dz) rad → x (B, *out); an encoder (`encodes`) maps images (B, H, W[, C]) in [0, 1] → q (B, Dz) rad.
+Not exportable: "analytic" (MuJoCo's forward kinematics, no tensor graph) and "sklearn-gpr" (scikit-learn
+computes its mean in numpy).
 
-dtype: float64 graphs for vector models (error vs `predict` ~1e-12); float32 for models with convolutions,
+dtype: float64 graphs for vector models (error vs `predict` ~1e-12); float32 for `convolutional` models,
 because onnxruntime's CPU provider has no float64 Conv / ConvTranspose kernels. Their weights are float32
 anyway; the float32 graph rounds differently from torch by ~1e-7 relative, far below 1e-5 on (0, 1) intensities.
 """
@@ -27,15 +29,13 @@ import numpy as np
 import torch
 from torch import nn
 
+from bodyschema.datagen import modalities
 from bodyschema.errors import must_be
 
 OPSET = 18                              # onnxruntime ≥ 1.14 runs it; torch's exporter targets ≥ 18
 TOLERANCE = 1e-5                        # max |onnxruntime − model| accepted (output units; rad for an encoder)
 CHECK_INPUTS = 64                       # seeded inputs of that check
 FORMAT = "bodyschema-onnx"              # the kind of output its marker names (datagen/outputs.py)
-NETWORK_KINDS = ("mdn", "pixel", "multimodal")     # models/kinds.py spellings
-EXPORTABLE = (*NETWORK_KINDS, "encoder", "gpr")
-CONV_KINDS = ("pixel", "encoder")       # float32 graphs (see the module doc)
 
 
 class PredictGraph(nn.Module):
@@ -44,7 +44,7 @@ class PredictGraph(nn.Module):
     def __init__(self, model, dtype: torch.dtype):
         super().__init__()
         self.model = [model]                            # a list: keeps the wrapper out of the module tree
-        self.net = model._net(dtype) if model.kind in NETWORK_KINDS else None   # registered: weights → initializers
+        self.net = model._net(dtype) if model.network else None   # registered: weights → initializers
 
     def forward(self, q):
         model = self.model[0]
@@ -65,22 +65,39 @@ class EncodeGraph(nn.Module):
         return self.body.from_unit(self.net(x))
 
 
+def _why_not(model) -> tuple[str, str]:
+    """(what was given, how to export it) for a model that does not declare `exports_onnx`."""
+    if getattr(model, "has_members", False):
+        return type(model).__name__, "Export each member, one file per modality: model.members[modality]"
+    kind = getattr(model, "kind", type(model).__name__)
+    why = {"analytic": "MuJoCo's forward kinematics has no tensor graph: export the robot's MJCF instead",
+           "sklearn-gpr": "scikit-learn computes its mean in numpy: train kind 'gpr' for an exportable GP"}
+    return kind, why.get(kind, "")
+
+
 def graph_dtype(model) -> torch.dtype:
-    return torch.float32 if _is_conv(model) else torch.float64
+    return torch.float32 if model.convolutional else torch.float64
 
 
-def _is_conv(model) -> bool:
-    return model.kind in CONV_KINDS or getattr(model, "decoder", None) == "pixel"
+def exportable_kinds() -> list[str]:
+    """The kinds whose saved class declares `exports_onnx` (imports every kind's module: for messages only)."""
+    from bodyschema.models import kinds
+
+    return [name for name in kinds.KINDS if _declares_export(name)]
+
+
+def _declares_export(name: str) -> bool:
+    from bodyschema.models import kinds
+
+    try:
+        return kinds.saved_class(name).exports_onnx
+    except ImportError:                 # a kind whose module is broken exports nothing
+        return False
 
 
 def check_exportable(model) -> None:
-    kind = getattr(model, "kind", type(model).__name__)
-    if kind not in EXPORTABLE:
-        why = {"analytic": "MuJoCo's forward kinematics has no tensor graph: export the robot's MJCF instead",
-               "sklearn-gpr": "scikit-learn computes its mean in numpy: train kind 'gpr' for an exportable GP",
-               "MultimodalModel": "Export each member, one file per modality: model.members[modality]"}
-        raise ValueError(must_be("model kind", f"one of {list(EXPORTABLE)} to export ONNX", kind,
-                                 why.get(kind, "")))
+    if not getattr(model, "exports_onnx", False):     # any object without the declaration is refused by name
+        raise ValueError(must_be("model kind", f"one of {exportable_kinds()} to export ONNX", *_why_not(model)))
     if not model.is_fitted:
         raise ValueError(must_be("model", "fitted", "a model without learned state", "Call `fit` first."))
 
@@ -154,7 +171,7 @@ def model_opset(proto) -> int:
 def _graph(model) -> tuple[nn.Module, torch.Tensor, tuple[str, str]]:
     """(module, an example input of batch 2, (input name, output name))."""
     dtype = graph_dtype(model)
-    if model.kind == "encoder":
+    if model.encodes:
         return EncodeGraph(model).eval(), torch.rand(2, *model.image_shape, dtype=torch.float32), ("image", "q")
     z = model.body.from_unit(torch.zeros(2, model.latent_dim, dtype=dtype))        # (2, Dz) mid-range, rad
     return PredictGraph(model, dtype).eval(), z, ("q", "x")
@@ -163,7 +180,7 @@ def _graph(model) -> tuple[nn.Module, torch.Tensor, tuple[str, str]]:
 def metadata(model, opset: int, error: float) -> dict[str, str]:
     """What a consumer needs beside the graph: units, shapes, joint order, where the numbers came from, and the
     check it passed (`error`: max |onnxruntime − model| over CHECK_INPUTS inputs)."""
-    encoder = model.kind == "encoder"
+    encoder = model.encodes
     dtype = "float32" if encoder else str(graph_dtype(model)).removeprefix("torch.")
     return {"bodyschema.opset": str(opset), "bodyschema.kind": model.kind, "bodyschema.modality": model.modality,
             "bodyschema.body": json.dumps(model.body.to_dict()), "bodyschema.dtype": dtype,
@@ -171,19 +188,10 @@ def metadata(model, opset: int, error: float) -> dict[str, str]:
                                  else f"q (B, {model.latent_dim}) {dtype} rad, joints {list(model.body.joint_names)}"),
             "bodyschema.output": (f"q (B, {model.latent_dim}) rad" if encoder
                                   else f"x (B, {', '.join(map(str, model.output_shape))}) {model.modality} in "
-                                       f"{unit(model.modality)}"),
+                                       f"{modalities.unit(model.modality, 'its dataset units')}"),
             "bodyschema.source": json.dumps(getattr(model, "provenance", None) or {}),   # registry name, version, sha
             "bodyschema.check": f"onnxruntime vs the model: max |error| {error:.3g} over {CHECK_INPUTS} inputs "
                                 f"(tolerance {TOLERANCE:g})"}
-
-
-def unit(modality: str) -> str:
-    """The unit of a modality's predictions: the dataset schema's, except images, which models predict in [0, 1]."""
-    from bodyschema.datagen.store import features
-
-    if modality == "image":
-        return "intensity [0, 1]"
-    return features(1, None, touch=True, babble=True).get(modality, {}).get("unit") or "its dataset units"
 
 
 def read_metadata(path: str | Path) -> dict[str, str]:
@@ -205,7 +213,7 @@ def verify_onnx(model, graph: str | Path | bytes, *, n: int = CHECK_INPUTS, seed
     session = ort.InferenceSession(graph if isinstance(graph, bytes) else str(graph),
                                    providers=["CPUExecutionProvider"])
     gen = torch.Generator().manual_seed(seed)
-    if model.kind == "encoder":
+    if model.encodes:
         x = torch.rand(n, *model.image_shape, generator=gen)                        # (n, H, W[, C]) float32
         want = model.encode(x).double()                                             # (n, Dz) rad
     else:

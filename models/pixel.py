@@ -82,6 +82,7 @@ def fast_layout(net: nn.Module) -> nn.Module:
 @register_kind
 class PixelDecoder(NetModel, BaseSensoryModel):
     kind = "pixel"
+    exports_onnx = convolutional = True
 
     def __init__(self, body: BodySpec, modality: str = "image", output_shape: tuple[int, ...] = (56, 80), *,
                  size: str = "lean",                        # a capacity preset of SIZES

@@ -28,6 +28,7 @@ from sklearn.gaussian_process.kernels import RBF, ConstantKernel, WhiteKernel
 from tqdm.auto import tqdm
 
 from bodyschema.models import _gp_data, _gp_math
+from bodyschema.models.capabilities import GPMemory
 from bodyschema.models.contract import BaseSensoryModel, register_kind
 from bodyschema.models.scaling import BodySpec
 
@@ -48,6 +49,9 @@ class SklearnGPRModel(BaseSensoryModel):
 
     kind = "sklearn-gpr"
     precision_varies = True      # 1 / predictive std² at z
+    # not exportable: scikit-learn computes its mean in numpy. Measured peak (training/guards.py): its gradient is
+    # (m, m, Dz + 2); one kernel serves all outputs
+    gp_memory = GPMemory(fit_copies=14.0, condition_copies=3.5, per_output=False)
 
     def __init__(self, body: BodySpec, modality: str, output_shape: tuple[int, ...], *,
                  hyper_points: int = 500,     # LML fitted on this many samples (sklearn's gradient is O(m²·D) memory)

@@ -25,11 +25,11 @@ from typing import Annotated, Any, Generic, TypeVar
 
 import tyro
 
+from bodyschema.datagen.modalities import MODALITIES
 from bodyschema.errors import must_be
 from bodyschema.models import kinds
 from bodyschema.models.configs import ModelConfig
 
-MODALITIES = ("ee_xyz", "ee_pixel", "image", "touch", "jacobian", "joints")
 NON_IDENTITY_FIELDS = ("tracking_uri", "experiment", "run_root", "progress", "register", "device")
 M = TypeVar("M", bound=ModelConfig)
 
@@ -67,7 +67,7 @@ class TrainConfig(Generic[M]):
         if self.modality is None:
             fix("modality", kind.modality if kind else "ee_xyz")
         elif not isinstance(self.modality, str) or not all(self.modality.split(",")):
-            problems.append(must_be("modality", f"a dataset array name such as {MODALITIES}", self.modality))
+            problems.append(must_be("modality", f"a dataset array name such as {list(MODALITIES)}", self.modality))
         elif "," in self.modality and kind is not None and kind.name != "multimodal":
             problems.append(must_be("modality", f"one array name for model kind {kind.name!r}", self.modality,
                                     "Several modalities (comma-separated) need `bodyschema train multimodal`."))
@@ -133,7 +133,7 @@ class TrainConfig(Generic[M]):
 
 def train_commands() -> list[tuple[str, type, str]]:
     """(subcommand, config type, description) of every trainable kind: `bodyschema train <kind>`."""
-    return [(k.name, TrainConfig[k.config], k.summary) for k in kinds.trainable()]
+    return [(k.name, TrainConfig[k.config_class], k.summary) for k in kinds.trainable()]
 
 
 def build_model(config: TrainConfig, body, output_shapes: dict[str, tuple[int, ...]]):

@@ -1,8 +1,9 @@
 """Resource guards of `train`, checked before any work starts: a fit that cannot fit in memory is refused.
 
-An exact GP keeps n×n matrices: `gpr` one per output dimension (its kernel is per output), `sklearn-gpr` one
-shared by all outputs. Peak memory, measured on this code (bench: ru_maxrss of a fit, n up to 4000, O up to 6),
-is the larger of the two phases:
+Which guard applies is the model class's declaration (models/capabilities.py): `gp_memory` for an exact GP,
+`network` for a minibatch network. An exact GP keeps n×n matrices: `gpr` one per output dimension (its kernel is
+per output), `sklearn-gpr` one shared by all outputs. Peak memory, measured on this code (bench: ru_maxrss of a fit,
+n up to 4000, O up to 6), declared as each class's `gp_memory`, is the larger of the two phases:
 - hyper-parameters on m = min(hyper_points, n) samples: gpr ≈ 11 · m² · O, sklearn ≈ 13 · m² float64 values
   (autograd keeps the kernel, its Cholesky and their gradients; sklearn's gradient is (m, m, Dz + 2));
 - conditioning on n = min(max_points, training samples): gpr ≈ 2.7 · n² · O, sklearn ≈ 3.2 · n² values.
@@ -20,12 +21,8 @@ import math
 from pathlib import Path
 
 from bodyschema.errors import must_be
-
-GP_KINDS = ("gpr", "sklearn-gpr")
-# Measured copies of an n×n (or m×m) float64 matrix at the peak, rounded up (see the module doc).
-FIT_COPIES = {"gpr": 12.0, "sklearn-gpr": 14.0}
-CONDITION_COPIES = {"gpr": 3.0, "sklearn-gpr": 3.5}
-PER_OUTPUT = {"gpr": True, "sklearn-gpr": False}      # gpr keeps one kernel per output dimension
+from bodyschema.models import kinds
+from bodyschema.models.capabilities import GPMemory
 # Network fits (float32, Adam): measured copies, rounded up, of the weights at the peak (weights, gradients, Adam's
 # two moments, the best weights kept for early stopping, the checkpoint, the float64 inference copy) and of one
 # minibatch's activations (kept for the backward pass, their gradients): see the module doc.
@@ -34,38 +31,53 @@ ACTIVATION_COPIES = 3.5
 LIMIT_FRACTION = 0.8      # of the available memory: leave room for the dataset, Python and the other processes
 
 
+def gp_memory(kind: str) -> GPMemory | None:
+    """The measured memory of kind `kind`'s fit when it is an exact GP (imports its module), else None."""
+    return kinds.model_class(kind).gp_memory
+
+
 def check_config(model: str, modalities: tuple[str, ...]) -> None:
     """Refuse a GP on images before anything is loaded (a GP per pixel cannot fit in any memory)."""
-    if model in GP_KINDS and "image" in modalities:
+    if "image" in modalities and gp_memory(model) is not None:
         raise ValueError(must_be("model", "'pixel' for modality 'image'", f"{model} on image",
                                  "An exact GP keeps an n×n matrix per output, and an image has thousands of "
                                  "outputs (56×80 = 4480): train the pixel decoder, `bodyschema train pixel`."))
 
 
 def gp_peak_bytes(kind: str, n: int, m: int, outputs: int) -> float:
-    """Estimated peak memory (bytes) of a GP fit on n conditioning and m hyper-parameter samples."""
-    per = outputs if PER_OUTPUT[kind] else 1
-    return 8.0 * per * max(FIT_COPIES[kind] * m * m, CONDITION_COPIES[kind] * n * n)
+    """Estimated peak memory (bytes) of a GP fit of kind `kind` on n conditioning and m hyper-parameter samples."""
+    return _gp_peak(gp_memory(kind), n, m, outputs)
+
+
+def _gp_peak(memory: GPMemory, n: int, m: int, outputs: int) -> float:
+    per = outputs if memory.per_output else 1
+    return 8.0 * per * max(memory.fit_copies * m * m, memory.condition_copies * n * n)
 
 
 def check_memory(kind: str, model, n_train: int, output_shape: tuple[int, ...],
                  available: float | None = None) -> None:
     """Refuse a fit whose estimated peak exceeds LIMIT_FRACTION of the available memory (`available` bytes;
-    None: read from the system): a GP by its n×n matrices, a network by its size and one batch's activations."""
-    if kind not in GP_KINDS:
-        if hasattr(model, "_factory") or hasattr(model, "members"):
-            check_net_memory(model, n_train, available)
-        return
-    outputs = math.prod(output_shape)
+    None: read from the system): a GP by its n×n matrices, a network by its size and one batch's activations;
+    the model's class says which it is (models/capabilities.py)."""
+    if model.gp_memory is not None:
+        check_gp_memory(kind, model, n_train, output_shape, available)
+    elif model.network:
+        check_net_memory(model, n_train, available)
+
+
+def check_gp_memory(kind: str, model, n_train: int, output_shape: tuple[int, ...],
+                    available: float | None = None) -> None:
+    """Refuse an exact GP whose n×n matrices (model.gp_memory) exceed LIMIT_FRACTION of the available memory."""
+    memory, outputs = model.gp_memory, math.prod(output_shape)
     n = min(n_train, int(getattr(model, "max_points", n_train)))
     m = min(n, int(getattr(model, "hyper_points", n)))
-    need = gp_peak_bytes(kind, n, m, outputs)
+    need = _gp_peak(memory, n, m, outputs)
     available = available_memory() if available is None else available
     limit = LIMIT_FRACTION * available
     if need <= limit:
         return
-    per = 8.0 * (outputs if PER_OUTPUT[kind] else 1)
-    fits = int(math.sqrt(limit / (per * max(FIT_COPIES[kind], CONDITION_COPIES[kind]))))
+    per = 8.0 * (outputs if memory.per_output else 1)
+    fits = int(math.sqrt(limit / (per * max(memory.fit_copies, memory.condition_copies))))
     hint = (f"Train on fewer samples: --max-train {fits} (or --max-points {fits} --hyper-points "
             f"{min(fits, m)})." if fits >= 2 else
             "Even 2 samples do not fit: free memory, or use a kind that fits in mini-batches (`bodyschema train mdn`).")
@@ -81,7 +93,7 @@ def net_sizes(model) -> tuple[int, int]:
     import torch
 
     params = activations = 0
-    for member in getattr(model, "members", {"": model}).values():
+    for member in _networks(model):
         with torch.device("meta"):
             net = member._factory()
             params += sum(p.numel() for p in net.parameters())
@@ -97,7 +109,7 @@ def _activations_per_sample(net, member) -> int:
     hooks = [m.register_forward_hook(lambda _m, _in, out: sizes.append(out.numel()))
              for m in net.modules() if not list(m.children())]
     try:
-        shape = getattr(member, "image_shape", None) or (member.latent_dim,)    # an encoder reads images
+        shape = member.image_shape if member.encodes else (member.latent_dim,)  # an encoder reads images
         net(torch.zeros(1, *shape, device="meta"))
     finally:
         for hook in hooks:
@@ -129,8 +141,12 @@ def check_net_memory(model, n_train: int, available: float | None = None) -> Non
 
 
 def _batch_size(model) -> int:
-    members = list(getattr(model, "members", {"": model}).values())
-    return max(m.settings.batch_size for m in members)
+    return max(m.settings.batch_size for m in _networks(model))
+
+
+def _networks(model) -> list:
+    """The networks `model` fits: its members' (multimodal) or its own."""
+    return list(model.members.values()) if model.has_members else [model]
 
 
 def available_memory() -> float:

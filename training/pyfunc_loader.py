@@ -60,7 +60,7 @@ def log_sensory_model(model_dir: str | Path, model, *, name: str = "model"):
     # No input schema: MLflow would refuse float32 against a float64 tensor spec; `predict` checks z itself.
     signature = ModelSignature(inputs=None, outputs=None, params=ParamSchema([ParamSpec("output", "string",
                                                                                         "predict")]))
-    given = ("images (B, H, W[, C]) uint8 or float in [0, 1]" if hasattr(model, "encode")
+    given = ("images (B, H, W[, C]) uint8 or float in [0, 1]" if model.encodes
              else f"z (B, {model.latent_dim}) rad, float32 or float64")
     metadata = {"bodyschema": {"input": given, "kind": model.kind,
                                "joint_names": list(model.body.joint_names), "modality": model.modality,
@@ -159,7 +159,7 @@ class SensoryPyfunc:
         output = (params or {}).get("output", "predict")
         if output not in OUTPUTS:
             raise ValueError(must_be("params['output']", f"one of {OUTPUTS}", output))
-        if hasattr(self.model, "encode"):                # an image encoder: images → z (B, Dz) rad
+        if self.model.encodes:                           # an image encoder: images → z (B, Dz) rad
             if output != "predict":
                 raise ValueError(must_be("params['output']", "'predict' for an image encoder", output))
             images = model_input.to_numpy() if hasattr(model_input, "to_numpy") else np.asarray(model_input)

@@ -29,6 +29,7 @@ from mlflow.data.dataset_source_registry import resolve_dataset_source
 from mlflow.data.meta_dataset import MetaDataset
 from mlflow.exceptions import MlflowException
 
+from bodyschema.datagen import modalities
 from bodyschema.errors import must_be
 from bodyschema.training import guards, plots, runs
 from bodyschema.training.config import NON_IDENTITY_FIELDS, TrainConfig, build_model
@@ -38,7 +39,6 @@ from bodyschema.training.pyfunc_loader import log_sensory_model
 from bodyschema.training.registry import CHAMPION, METRIC, ensure_experiment, register_version, registered_name, \
     use_tracking
 
-UNITS = {"ee_xyz": "m", "ee_pixel": "px", "image": "intensity", "touch": "N", "jacobian": "m/rad"}
 PREDICT_BATCH = 256       # validation prediction batch: bounded memory for image decoders
 FINAL_METRICS = ("val_rmse", "val_mean_error", "train_rmse", "train_mean_error", "fit_seconds")
 LIBRARIES = ("bodyschema", "torch", "numpy", "mlflow", "zarr", "gpytorch", "scikit-learn", "mujoco")
@@ -108,7 +108,7 @@ def train(config: TrainConfig) -> TrainResult:
                                  "Only the network kinds (pixel, encoder) train on CUDA."))
     for shape in shapes.values():                                 # GP memory (n², outputs) vs available RAM
         guards.check_memory(config.kind, model, len(data.train), shape)
-    multi = hasattr(model, "members")              # MultimodalModel: one SensoryModel per modality
+    multi = model.has_members                      # MultimodalModel: one SensoryModel per modality
     members = dict(model.members) if multi else {config.modality: model}
     run_dir = config.run_dir(data.sha256)
     with runs.claim(run_dir):      # one process per config: the same command started twice is refused, naming the pid
@@ -187,7 +187,7 @@ def _train_owned(config: TrainConfig, client, data: Dataset, model, members: dic
 def _score_and_plot(member, data: Dataset, modality: str, seed: int, out: Path,
                     prefix: str) -> tuple[dict[str, float], dict[str, Path]]:
     """Held-out and (a subset of) training scores of one member, and its prediction plot."""
-    if hasattr(member, "encode"):
+    if member.encodes:
         return _score_encoder(member, data, modality, seed, out)
     image = data.is_image(modality)
     dtype = torch.float32 if image else torch.float64       # GP means in float64; images: float32 is plenty
@@ -203,7 +203,7 @@ def _score_and_plot(member, data: Dataset, modality: str, seed: int, out: Path,
         plot = {f"{prefix}val_images": plots.image_grid(target, val_pred, out / f"{stem}val_images.png", title)}
     else:
         plot = {f"{prefix}val_scatter": plots.prediction_scatter(target, val_pred, out / f"{stem}val_scatter.png",
-                                                                 UNITS.get(modality, "?"), title)}
+                                                                 modalities.unit(modality, "?"), title)}
     return scores, plot
 
 

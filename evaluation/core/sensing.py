@@ -18,8 +18,6 @@ import torch
 
 from bodyschema.models.scaling import IMAGE_SCALE
 
-MODALITIES = ("joints", "ee_xyz", "ee_pixel", "image")
-
 
 def sense(robot, modality: str, q: np.ndarray, xyz: np.ndarray | None = None,
           marker_offsets: np.ndarray | None = None, image_dtype=np.float64) -> np.ndarray:

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bodyschema.datagen import modalities
 from bodyschema.errors import must_be
 from bodyschema.evaluation.core.mlflow_log import table_metrics
 from bodyschema.evaluation.core.publish import publish
@@ -23,7 +24,7 @@ from bodyschema.evaluation.reaching import report as reaching_report
 from bodyschema.evaluation.reaching.benchmark import (ReachingConfig, ReachingRunConfig, builtin_sensors,
                                                       simulate)
 from bodyschema.evaluation.reaching.robot_defaults import reaching_defaults
-from bodyschema.evaluation.robustness.units import NOISE_UNITS, noise_label
+from bodyschema.evaluation.robustness.units import noise_label
 
 COLUMNS = ("success", "goal_success", "ee_err_mm", "ee_err_median_mm", "time_to_reach_s", "failed")
 
@@ -96,7 +97,7 @@ def _write(config: LoopRobustnessConfig, models, noise, broken) -> dict[str, Pat
 
 
 def _markdown(rows, config: LoopRobustnessConfig) -> str:
-    unit = NOISE_UNITS.get(config.modality, "its unit")
+    unit = modalities.unit(config.modality, "its unit")
     text = (f"Closed-loop AIF reaching on {config.robot} ({config.trials} targets, {config.seconds:g} s at "
             f"{config.rate:g} Hz, seed {config.seed}) with Gaussian noise σ on {config.modality} ({unit}) and with "
             "each sensor broken: precision 0 (the controller ignores it) or its stream frozen at the first reading "

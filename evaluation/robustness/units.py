@@ -3,10 +3,10 @@
 
 from __future__ import annotations
 
-NOISE_UNITS = {"joints": "rad", "ee_xyz": "m", "ee_pixel": "px", "image": "intensity in [0, 1]", "touch": "N"}
+from bodyschema.datagen import modalities
 
 
 def noise_label(modality: str) -> str:
     """'observation noise σ on ee_xyz (m)'; a modality without a known unit is named without one."""
-    unit = NOISE_UNITS.get(modality)
+    unit = modalities.unit(modality)
     return f"observation noise σ on {modality}" + (f" ({unit})" if unit else "")

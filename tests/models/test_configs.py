@@ -42,20 +42,21 @@ def constructor_keywords_of(cls: type) -> dict[str, object]:
 def test_config_fields_are_the_constructors_hyper_parameters_with_its_defaults(name):
     kind = kinds.KINDS[name]
     expected = constructor_keywords(kind)
-    for skipped in kind.config.not_on_cli:
-        assert skipped in expected, f"{kind.config.__name__}.not_on_cli names {skipped!r}, not a parameter"
+    for skipped in kind.config_class.not_on_cli:
+        assert skipped in expected, f"{kind.config_class.__name__}.not_on_cli names {skipped!r}, not a parameter"
         del expected[skipped]
-    fields = {f.name: f.default for f in dataclasses.fields(kind.config)}
+    fields = {f.name: f.default for f in dataclasses.fields(kind.config_class)}
     assert sorted(fields) == sorted(expected), (
-        f"{kind.config.__name__} fields vs {kind.trains}'s keywords: missing {sorted(set(expected) - set(fields))}, "
+        f"{kind.config_class.__name__} fields vs {kind.trains}'s keywords: "
+        f"missing {sorted(set(expected) - set(fields))}, "
         f"extra {sorted(set(fields) - set(expected))}")
     differ = {n: (fields[n], expected[n]) for n in fields if fields[n] != expected[n]}
-    assert not differ, f"{kind.config.__name__} defaults (config, model) differ: {differ}"
+    assert not differ, f"{kind.config_class.__name__} defaults (config, model) differ: {differ}"
 
 
 @pytest.mark.parametrize("name", TRAINABLE)
 def test_every_field_has_a_help_line_and_the_defaults_pass_the_checks(name):
-    config = kinds.KINDS[name].config
+    config = kinds.KINDS[name].config_class
     source = inspect.getsource(config)
     for f in dataclasses.fields(config):
         line = next(line for line in source.splitlines() if line.strip().startswith(f"{f.name}:"))

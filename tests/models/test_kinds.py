@@ -19,8 +19,8 @@ def test_each_kind_has_one_spelling_in_its_classes_and_its_config(name):
     kind = kinds.KINDS[name]
     assert "_" not in name, "kind names are hyphenated, as CLI words are"
     assert kinds.saved_class(name).kind == name, f"{kind.saved}.kind is not the registry's spelling {name!r}"
-    if kind.config is not None:
-        assert kind.config.kind == name and kinds.of_config(kind.config()) is kind
+    if kind.config_class is not None:
+        assert kind.config_class.kind == name and kinds.of_config(kind.config_class()) is kind
 
 
 def test_old_spellings_map_to_the_new_and_unknown_names_list_the_available_ones():

@@ -5,7 +5,7 @@ import re
 
 import pytest
 
-from bodyschema.models.configs import GPRConfig, SklearnGPRConfig
+from bodyschema.models.configs import GPRConfig, MDNConfig, SklearnGPRConfig
 from bodyschema.training import guards
 from bodyschema.training.config import TrainConfig, build_model
 from bodyschema.training.data import load_dataset
@@ -16,7 +16,7 @@ GB = 1e9
 
 @pytest.mark.parametrize("hyper", [GPRConfig(), SklearnGPRConfig()])
 def test_a_gp_on_images_is_refused_before_anything_is_loaded(hyper, workdir, tmp_path):
-    assert hyper.kind in guards.GP_KINDS
+    assert guards.gp_memory(hyper.kind) is not None, "the kind's class declares the GP memory guard"
     config = TrainConfig(model=hyper, data=tmp_path / "never-read.zarr", modality="image", progress=False)
     with pytest.raises(ValueError, match=r"model must be 'pixel' for modality 'image'. .*`bodyschema train pixel`"):
         train(config)
@@ -44,7 +44,9 @@ def test_a_gp_too_big_for_the_memory_is_refused_with_a_max_train_that_fits(kin_s
     fits = int(re.search(r"--max-train (\d+)", str(info.value))[1])
     assert 2 <= fits < len(data.train)
     guards.check_memory("gpr", model, fits, (3,), available=available)   # the advice is enough
-    guards.check_memory("mdn", model, 10 ** 9, (3,), available=1.0)     # mini-batch kinds are not estimated
+    mdn = build_model(TrainConfig(model=MDNConfig(), data=kin_store), data.body, {"ee_xyz": (3,)})
+    assert mdn.gp_memory is None and mdn.network, "a network is guarded by its size, not by n²"
+    guards.check_memory("mdn", mdn, 10 ** 9, (3,), available=1e12)
 
     monkeypatch.setattr(guards, "available_memory", lambda: available)  # end to end: refused before a run exists
     with pytest.raises(ValueError, match="gpr fit memory must be at most"):
