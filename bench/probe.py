@@ -32,7 +32,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from tests.test_cli_fuzz import TYRO_PHRASES, VALIDATE_ANSWERS, build_world, snapshot  # noqa: E402
+from tests.test_cli_fuzz import TYRO_PHRASES, VALIDATE_ANSWERS, build_world, snapshot  # noqa: E402 — after the repo root is on sys.path
 
 OUTCOMES = ("clear error", "traceback", "hang", "half-written", "silently accepted", "unclear")
 

@@ -88,7 +88,7 @@ def _command(name: str, kind, description: str):
 def _group(name: str, description: str, *members):
     """members: (name, Config, description) triples, or groups built by _group."""
     built = tuple(_command(*m) if isinstance(m, tuple) else m for m in members)
-    return _command(name, Union[built], description)  # noqa: UP007 (tyro: Union)
+    return _command(name, Union[built], description)  # noqa: UP007 — tyro reads subcommands from typing.Union
 
 
 class _Runners(Mapping):
@@ -174,7 +174,7 @@ def commands(words: list[str] | None = None):
     """The tyro type of the whole CLI. `words`: the command words given (`_command_words`); a benchmark's config is
     imported only when they name it. None: every benchmark's real config (tests, `COMMANDS`)."""
     named = None if words is None else tuple(words[1:]) if words[:1] == ["evaluate"] else ()
-    return Union[(  # noqa: UP007
+    return Union[(  # noqa: UP007 — tyro reads subcommands from typing.Union
         _command("datagen", DatagenConfig, "Generate a motor-babbling dataset (Zarr v3)."),
         _command("validate", ValidateArgs, "Check a dataset store; exit 0 when valid, else list every problem."),
         _command("show", ShowArgs, "Summarize a dataset store and draw a contact sheet of its images (PNG)."),

@@ -10,7 +10,7 @@ Two safety rules hold for both:
 
 `backend(name, workers)` brings the backend up before the caller creates anything, and yields the runner. With
 RAY_ADDRESS, the address Ray will dial is first checked with a TCP connect of RAY_CONNECT_TIMEOUT_S (Ray itself
-retries an unreachable GCS for minutes, ~41 s per try, and turns 127.0.0.1 into this machine's routable address).
+retries an unreachable GCS for minutes and turns 127.0.0.1 into this machine's routable address).
 """
 
 from __future__ import annotations

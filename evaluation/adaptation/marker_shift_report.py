@@ -178,6 +178,11 @@ def plot_correction(table: Sequence[Mapping], path: Path) -> Path:
     return save_figure(fig, path, dpi=120)
 
 
+def _row_label(row: Mapping) -> str:
+    """A summary row's name in MLflow metrics: its shift and visual precision."""
+    return f"{row['shift']}.pv{row['visual_precision']:g}"
+
+
 def write_all(config, out: Path, robot, models, rows: list[dict], batches: dict, shifts: list[str]
               ) -> dict[str, Path]:
     """summary.md/csv, per-episode and mean time-series CSVs, plots into the run folder `out`; then the models, one
@@ -199,6 +204,5 @@ def write_all(config, out: Path, robot, models, rows: list[dict], batches: dict,
              "image_paths_png": plot_image_paths(batches, shifts, robot.image_size, out / "image_paths.png"),
              "correction_png": plot_correction(table, out / "correction_vs_precision.png")}
     paths["summary_md"].write_text(markdown(table, note))
-    label = lambda row: f"{row['shift']}.pv{row['visual_precision']:g}"   # noqa: E731
-    publish(config, out, "marker_shift", table_metrics(table, label), paths, models)
+    publish(config, out, "marker_shift", table_metrics(table, _row_label), paths, models)
     return paths

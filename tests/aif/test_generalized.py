@@ -45,7 +45,7 @@ def test_prior_gradient_and_curvature_match_autograd_for_linear_dynamics():
     terms = prior_terms(u, "attractor", 2.0, f0, a)
     (auto,) = torch.autograd.grad(terms.free_energy.sum(), u)
     torch.testing.assert_close(terms.grad, auto)
-    one = lambda v: prior_terms(v.reshape(1, 3, 2), "attractor", 2.0,                      # noqa: E731
+    one = lambda v: prior_terms(v.reshape(1, 3, 2), "attractor", 2.0,    # noqa: E731 — F of one sample
                                 a[:1] @ v.reshape(3, 2)[0] + c[:1], a[:1]).free_energy.sum()
     hess = torch.autograd.functional.hessian(one, u[0].detach().reshape(-1))
     torch.testing.assert_close(terms.hessian[0], hess)                     # linear ε: Gauss–Newton is exact

@@ -25,7 +25,7 @@ def test_the_imagined_pose_produces_the_goal_from_a_far_belief():
     guesses = (torch.rand(40, 15, 2, generator=g, dtype=torch.float64) * 2 - 1) * 2.5
     alone = infer_goal_pose(perception, goal, far)
     pose = infer_goal_pose(perception, goal, far, guesses)
-    exact = lambda p: ((arm.predict(p.q) - goal["ee_xyz"]).norm(dim=-1) < 1e-4).double().mean()   # noqa: E731
+    exact = lambda p: ((arm.predict(p.q) - goal["ee_xyz"]).norm(dim=-1) < 1e-4).double().mean()   # noqa: E731 — a metric
     assert exact(pose) >= 0.95 and exact(pose) > exact(alone), (exact(alone), exact(pose))
     assert (pose.F <= alone.F + 1.0).all()                                  # within the margin of the belief's
     assert pose.q.shape == (40, 2) and pose.chosen.shape == (40,) and (alone.chosen == 0).all()

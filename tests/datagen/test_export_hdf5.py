@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 import zarr
 
-h5py = pytest.importorskip("h5py")
+from bodyschema.datagen.export import export_dataset
+from bodyschema.datagen.store import DONE
+from tests.datagen.export_stores import babble_store, uniform_store
 
-from bodyschema.datagen.export import export_dataset  # noqa: E402
-from bodyschema.datagen.store import DONE  # noqa: E402
-from tests.datagen.export_stores import babble_store, uniform_store  # noqa: E402
+h5py = pytest.importorskip("h5py")
 
 
 @pytest.fixture(scope="module")

@@ -11,11 +11,12 @@ import numpy as np
 import pytest
 import zarr
 
+from bodyschema.datagen import export_lerobot
+from bodyschema.datagen.export import export_dataset
+from tests.datagen.export_stores import babble_store, uniform_store
+
 pq = pytest.importorskip("pyarrow.parquet")
 
-from bodyschema.datagen import export_lerobot  # noqa: E402
-from bodyschema.datagen.export import export_dataset  # noqa: E402
-from tests.datagen.export_stores import babble_store, uniform_store  # noqa: E402
 
 INFO_KEYS = {"codebase_version", "robot_type", "total_episodes", "total_frames", "total_tasks", "chunks_size",
              "data_files_size_in_mb", "video_files_size_in_mb", "fps", "splits", "data_path", "video_path", "features"}

@@ -11,14 +11,14 @@ import numpy as np
 import pytest
 import zarr
 
+from bodyschema.datagen.export import export_dataset
+from bodyschema.datagen.importers.config import ImportConfig
+from bodyschema.datagen.importers.run import import_recording
+from bodyschema.datagen.validate import validate_store
+from tests.datagen.import_sources import planar2_frames, write_demo_hdf5
+
 pytest.importorskip("h5py")
 pytest.importorskip("pyarrow")
-
-from bodyschema.datagen.export import export_dataset  # noqa: E402
-from bodyschema.datagen.importers.config import ImportConfig  # noqa: E402
-from bodyschema.datagen.importers.run import import_recording  # noqa: E402
-from bodyschema.datagen.validate import validate_store  # noqa: E402
-from tests.datagen.import_sources import planar2_frames, write_demo_hdf5  # noqa: E402
 
 
 def test_hdf5_demo_episodes_in_natural_order_with_their_ee_readings(tmp_path):

@@ -8,16 +8,16 @@ import numpy as np
 import pytest
 import zarr
 
+from bodyschema.datagen.export import export_dataset
+from bodyschema.datagen.importers.config import ImportConfig
+from bodyschema.datagen.importers.recording import source_sha256
+from bodyschema.datagen.importers.run import import_recording
+from bodyschema.datagen.store import DONE
+from bodyschema.datagen.validate import validate_store
+from tests.datagen.export_stores import babble_store, uniform_store
+
 pytest.importorskip("h5py")
 pytest.importorskip("pyarrow")
-
-from bodyschema.datagen.export import export_dataset  # noqa: E402
-from bodyschema.datagen.importers.config import ImportConfig  # noqa: E402
-from bodyschema.datagen.importers.recording import source_sha256  # noqa: E402
-from bodyschema.datagen.importers.run import import_recording  # noqa: E402
-from bodyschema.datagen.store import DONE  # noqa: E402
-from bodyschema.datagen.validate import validate_store  # noqa: E402
-from tests.datagen.export_stores import babble_store, uniform_store  # noqa: E402
 
 
 @pytest.fixture(scope="module")

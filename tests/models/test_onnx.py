@@ -5,12 +5,13 @@ from __future__ import annotations
 import pytest
 import torch
 
+from bodyschema.models.onnx_export import OPSET, check_exportable, export_onnx, read_metadata, verify_onnx
+from bodyschema.models.scaling import BodySpec
+
 pytest.importorskip("onnxruntime")
 pytest.importorskip("onnxscript")
 pytestmark = pytest.mark.filterwarnings("ignore:.*LeafSpec.*:FutureWarning")   # torch.export internals
 
-from bodyschema.models.onnx_export import OPSET, check_exportable, export_onnx, read_metadata, verify_onnx  # noqa: E402
-from bodyschema.models.scaling import BodySpec  # noqa: E402
 
 BODY = BodySpec("toy", ("a", "b", "c"), (-1.0, -0.5, 0.0), (1.0, 1.5, 2.0))
 IMAGE = (12, 20)          # small images: two ×2 stages of the decoder, a centre crop on the width
