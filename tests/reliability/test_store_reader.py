@@ -22,6 +22,7 @@ from bodyschema.datagen.store import DONE, open_store
 from bodyschema.training.data import load_dataset
 from tests.test_cli_fuzz import build_world, run_and_check
 
+h5py, _ = pytest.importorskip("h5py"), pytest.importorskip("pyarrow")   # the export formats
 REPO = Path(__file__).resolve().parents[2]
 TRAIN = "train gpr --modality ee_xyz --data"
 CASES = [
@@ -53,8 +54,6 @@ def world(tmp_path_factory) -> Path:
 def make_world(w: Path) -> Path:
     """The fuzz world plus, for each of EDITS, its valid store with the body attrs so edited (`<edit>.zarr`) and
     an HDF5 export of it whose copy of the store attrs is (`<edit>.h5`)."""
-    import h5py
-
     build_world(w)
     export_dataset(w / "good.zarr", w / "good.h5", "hdf5")
     for name, edit in EDITS.items():
@@ -124,7 +123,6 @@ def test_a_store_without_checksums_has_no_digest(world, tmp_path):
 
 # ---- one body reader -------------------------------------------------------------------------------------------
 def test_training_and_export_read_the_same_body_the_sampled_box(world, tmp_path):
-    h5py = pytest.importorskip("h5py")
     attrs = dict(open_store(world / "good.zarr").attrs)
     body = load_dataset(world / "good.zarr", "ee_xyz").body
     assert (body.robot, list(body.joint_names)) == (attrs["robot"], attrs["joint_names"])
