@@ -378,7 +378,7 @@ def summarize_store(path: str | Path, check: bool = True) -> str:
             xyz = np.asarray(root["ee_xyz"][:])
             xyz = xyz[np.isfinite(xyz).all(axis=1)]
             lo, hi = xyz.min(axis=0), xyz.max(axis=0)
-            box = ", ".join(f"{c} [{l:+.3f}, {h:+.3f}]" for c, l, h in zip("xyz", lo, hi))
+            box = ", ".join(f"{c} [{low:+.3f}, {high:+.3f}]" for c, low, high in zip("xyz", lo, hi))
             lines.append(f"  ee_xyz box (m): {box}")
         except Exception as e:  # noqa: BLE001 - a damaged or empty array is listed by validate_store below
             lines.append(f"  ee_xyz box (m): unavailable ({type(e).__name__})")
