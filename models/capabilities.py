@@ -2,7 +2,7 @@
 
 Every model class (a `BaseSensoryModel`, the image encoder, the multimodal trainer) inherits `Capabilities` and
 overrides the flags that are true of it, next to its code, so a new kind needs no table elsewhere:
-- `exports_onnx`: `models/onnx_export.py` traces it (its hooks are pure torch);
+- `exports_onnx`: `models/onnx_export.py` traces it (its hooks are pure torch); else `onnx_hint` says what to do;
 - `convolutional`: its graph has Conv layers, exported in float32 (onnxruntime's CPU provider has no float64 Conv);
 - `gp_memory`: an exact GP, refused by `training/guards.py` when its n×n matrices cannot fit in memory;
 - `network`: fitted on minibatches from `_factory()` and `settings.batch_size`, guarded by its size;
@@ -31,6 +31,7 @@ class Capabilities:
 
     kind: ClassVar[str] = "base"
     exports_onnx: ClassVar[bool] = False
+    onnx_hint: ClassVar[str] = ""
     convolutional: ClassVar[bool] = False
     gp_memory: ClassVar[GPMemory | None] = None
     network: ClassVar[bool] = False

@@ -197,6 +197,7 @@ class MultimodalModel(Capabilities):
 
     kind = "multimodal"
     network = has_members = True     # trained as one; each member is saved, registered and exported on its own
+    onnx_hint = "Export each member, one file per modality: model.members[modality]"
 
     def __init__(self, body: BodySpec, output_shapes: dict[str, tuple[int, ...]], *,
                  member_hyper: dict[str, dict] | None = None, precisions: dict[str, float] | None = None,

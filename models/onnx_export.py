@@ -66,13 +66,10 @@ class EncodeGraph(nn.Module):
 
 
 def _why_not(model) -> tuple[str, str]:
-    """(what was given, how to export it) for a model that does not declare `exports_onnx`."""
-    if getattr(model, "has_members", False):
-        return type(model).__name__, "Export each member, one file per modality: model.members[modality]"
-    kind = getattr(model, "kind", type(model).__name__)
-    why = {"analytic": "MuJoCo's forward kinematics has no tensor graph: export the robot's MJCF instead",
-           "sklearn-gpr": "scikit-learn computes its mean in numpy: train kind 'gpr' for an exportable GP"}
-    return kind, why.get(kind, "")
+    """(what was given, the class's `onnx_hint`) for a model that does not declare `exports_onnx`."""
+    members = getattr(model, "has_members", False)          # named by its class: its members have its kind
+    given = type(model).__name__ if members else getattr(model, "kind", type(model).__name__)
+    return given, getattr(model, "onnx_hint", "")
 
 
 def graph_dtype(model) -> torch.dtype:

@@ -49,8 +49,8 @@ class SklearnGPRModel(BaseSensoryModel):
 
     kind = "sklearn-gpr"
     precision_varies = True      # 1 / predictive std² at z
-    # not exportable: scikit-learn computes its mean in numpy. Measured peak (training/guards.py): its gradient is
-    # (m, m, Dz + 2); one kernel serves all outputs
+    onnx_hint = "scikit-learn computes its mean in numpy: train kind 'gpr' for an exportable GP"
+    # measured peak (training/guards.py): its gradient is (m, m, Dz + 2); one kernel serves all outputs
     gp_memory = GPMemory(fit_copies=14.0, condition_copies=3.5, per_output=False)
 
     def __init__(self, body: BodySpec, modality: str, output_shape: tuple[int, ...], *,

@@ -51,9 +51,10 @@ def test_a_model_that_does_not_declare_export_is_refused_by_name(name):
     from bodyschema.models.onnx_export import check_exportable, exportable_kinds
 
     model = _untrained(name)
-    assert not model.exports_onnx
-    with pytest.raises(ValueError, match="model kind must be one of .* to export ONNX. Got"):
+    assert not model.exports_onnx and model.onnx_hint, "a kind that does not export says what to do instead"
+    with pytest.raises(ValueError, match="model kind must be one of .* to export ONNX. Got") as info:
         check_exportable(model)
+    assert str(info.value).endswith(model.onnx_hint)
     assert "gpr" in exportable_kinds() and "sklearn-gpr" not in exportable_kinds()
 
 

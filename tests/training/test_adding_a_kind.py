@@ -117,7 +117,7 @@ def test_the_registry_line_lists_the_kind_and_its_flags_on_the_cli(toy_kind, cap
 
 def test_the_toy_kind_trains_registers_loads_and_exports(toy_kind, kin_store, workdir, tmp_path):
     from bodyschema.models.onnx_export import export_onnx, read_metadata
-    from bodyschema.training import guards
+    from bodyschema.training import guards, registry
     from bodyschema.training.data import load_dataset
 
     config = TrainConfig(model=toy_kind.config_class(), data=kin_store, progress=False)
@@ -127,11 +127,14 @@ def test_the_toy_kind_trains_registers_loads_and_exports(toy_kind, kin_store, wo
 
     model = load_model(result.model_dir)
     assert type(model).__name__ == "ToyMLP" and model.kind == "toy-mlp"
+    champion = registry.load(f"models:/{result.registered_name}@champion")     # digest-checked, from the registry
+    assert type(champion) is type(model)
     data = load_dataset(kin_store, "ee_xyz")
     q, x = torch.as_tensor(data.val.q, dtype=torch.float64), np.asarray(data.val.x, dtype=np.float64)
     rmse = float(np.sqrt(((model.predict(q).numpy() - x) ** 2).mean()))
     assert rmse == pytest.approx(result.metrics["val_rmse"], rel=1e-5), "the loaded model is the scored one"
     assert rmse < x.std(), "it learned more than the mean"
+    torch.testing.assert_close(champion.predict(q), model.predict(q), rtol=0, atol=0)
     assert guards.net_sizes(model)[0] > 0, "the network memory guard sizes it from its _factory"
 
     path = export_onnx(model, tmp_path / "toy.onnx")
