@@ -131,7 +131,7 @@ def export_onnx(model, out: str | Path, *, opset: int = OPSET, overwrite: bool =
 def supported_opsets() -> range:
     """The opsets the installed exporter accepts: torch's ONNX range, capped by what the installed onnx knows."""
     import onnx
-    from torch.onnx import _constants          # torch's own bounds of `opset_version` (no public name for them)
+    from torch.onnx import _constants  # torch's own bounds of `opset_version` (no public name for them)
 
     return range(_constants.ONNX_MIN_OPSET, min(_constants.ONNX_MAX_OPSET, onnx.defs.onnx_opset_version()) + 1)
 

@@ -23,6 +23,7 @@ from pathlib import Path
 from bodyschema.errors import must_be
 from bodyschema.models import kinds
 from bodyschema.models.capabilities import GPMemory
+
 # Network fits (float32, Adam): measured copies, rounded up, of the weights at the peak (weights, gradients, Adam's
 # two moments, the best weights kept for early stopping, the checkpoint, the float64 inference copy) and of one
 # minibatch's activations (kept for the backward pass, their gradients): see the module doc.
