@@ -79,6 +79,15 @@ class ActionConfig:
             raise ValueError(must_be("drive", "at least one modality", self.drive, "Use ('joints',)."))
 
 
+def per_tick(perception: PerceptionConfig) -> PerceptionConfig:
+    """perception with "auto" resolved for a control tick: the flow, without descent control. A tick takes a few
+    updates warm-started at the belief: LM and Adam would restart their step sizes (λ, lr) every tick, and the
+    attractor moves F every tick, so a step that raises F is the loop working, not a step to undo."""
+    method = "flow" if perception.method == "auto" else perception.method
+    control = "none" if perception.flow.step_control == "auto" else perception.flow.step_control
+    return replace(perception, method=method, flow=replace(perception.flow, step_control=control))
+
+
 class VelocityController:
     """Batched active-inference controller: B episodes, belief μ (B, Dq) rad → joint velocity commands (B, Dq) rad/s.
 
@@ -90,11 +99,9 @@ class VelocityController:
 
     def __init__(self, models: Sequence, perception: PerceptionConfig = PerceptionConfig(),
                  action: ActionConfig = ActionConfig(), precisions: Mapping[str, float] | None = None):
-        # "auto" step control is no descent control here: the attractor moves F every tick, so a step that raises
-        # F is the loop working, not a step to undo
-        control = "none" if perception.step_control == "auto" else perception.step_control
-        self._perception_config = replace(perception, prior="attractor", attractor_gain=action.attractor_gain,
-                                          max_steps=action.perception_steps, record=False, step_control=control)
+        self._perception_config = replace(per_tick(perception), prior="attractor",
+                                          attractor_gain=action.attractor_gain, max_steps=action.perception_steps,
+                                          record=False)
         self._precision_overrides = dict(precisions or {})
         self.perception = Perception(models, self._perception_config, self._precision_overrides)
         self.models = self.perception.models

@@ -37,7 +37,7 @@ def infer_multistart(perception: Perception, observations: Mapping[str, torch.Te
     if screen_steps < 1:
         raise ValueError(must_be("screen_steps", "at least 1", screen_steps))
     cfg = perception.config
-    screen = _with_config(perception, replace(cfg, max_steps=screen_steps, record=False))
+    screen = perception.with_config(replace(cfg, max_steps=screen_steps, record=False))
     tiled = {name: x.repeat_interleave(s, dim=0) for name, x in observations.items()}
     first = screen.infer(tiled, starts.reshape(b * s, dz))                 # (B·S) trials
     screen_F = torch.where(first.diverged, torch.inf, first.F).reshape(b, s)
@@ -56,10 +56,3 @@ def infer_multistart(perception: Perception, observations: Mapping[str, torch.Te
                               None if res.trajectory is None else
                               {k: v[:, idx] for k, v in res.trajectory.items()})
     return MultiStartResult(picked, chosen, screen_F, first.evaluations + final.evaluations)
-
-
-def _with_config(perception: Perception, config) -> Perception:
-    clone = object.__new__(Perception)
-    clone.__dict__.update(perception.__dict__)
-    clone.config = config
-    return clone

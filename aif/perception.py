@@ -1,22 +1,13 @@
-"""Perception by generalized filtering: a batch of beliefs μ̃ over the joints descends the Laplace free energy.
+"""Perception: a batch of beliefs μ̃ over the joints descends the Laplace free energy of any set of SensoryModels.
 
-    dμ̃/dt = Dμ̃ − k_z ∂F/∂μ̃                              (Friston et al. 2010, "Generalised filtering", eq. 5)
     F = Σ_m ½ ε_mᵀ Π_m ε_m + ½ ε_zᵀ Π_z ε_z − ½ ln|Π|      (free_energy.py, priors.py)
 
-Integration: "local_linear" (default) takes Ozaki's step Δt φ₁(Δt 𝓙) u̇ with the Gauss–Newton flow Jacobian
-𝓙 = D ⊗ I − k_z H (generalized.py): each step is precision-normalised — a damped Newton step that needs no
-tuning of Δt to the sensory precision — and converges in tens of steps; "implicit" is the linearly implicit
-Euler step (same limits, a solve instead of an exponential); "euler" is the plain Δt·u̇ of the Pixel-AIF
-protocol. With step_control "descent" (order 0: F is then a Lyapunov function of the flow) a step that raises F
-is undone and that trial's Δt shrinks ×0.1 (it regrows ×2 on accepted steps, up to config.dt): the Gauss–Newton
-step becomes Levenberg–Marquardt-like, monotone, and a trial stops once even a step below `tol` does not
-descend, instead of jittering at the float32 noise floor of a learned model. A step of the joints is capped
-at `max_step` rad (trust region), the belief is clamped to the joint limits, and every trial stops on its own:
-trials that converged (moved < tol) or diverged (F or the step not finite, an Euler step > divergence_step rad, or
-the precision-weighted prediction error E = F + ½ln|Π| grown above divergence_ratio · max(E at the start, 1) — an
-unstable update bouncing between the joint limits) leave the active batch and are never evaluated again. Batched
-and per-trial runs perform the same arithmetic row by row (bit-equal for float64 models; a float32 network may
-round differently at another batch size).
+`Perception.infer` checks the inputs, resolves the sensors once (precisions, broken sensors, goals) and runs the
+update of its config, "auto" resolved from its models (perception_config.py): generalized filtering (flow.py, any
+order) or, at order 0, Levenberg–Marquardt or Adam (descent.py), all on the same F, gradient and Gauss–Newton
+curvature (`_terms`). Every trial stops on its own, converged or diverged. Batched and per-trial runs perform the
+same arithmetic row by row (bit-equal for float64 models; a float32 network may round differently at another batch
+size).
 """
 
 from __future__ import annotations
@@ -27,93 +18,13 @@ from dataclasses import dataclass
 import torch
 
 from bodyschema.aif import descent
-from bodyschema.aif.descent import record_step
+from bodyschema.aif.flow import FlowRun
 from bodyschema.aif.free_energy import (JACOBIAN_MAX_OUTPUTS, check_models, check_observations, model_input,
                                          sensory_terms)
-from bodyschema.aif.generalized import implicit_step, local_linear_step, shift, shift_matrix
-from bodyschema.aif.priors import PRIORS, attractor, prior_terms
+from bodyschema.aif.perception_config import PerceptionConfig, resolve
+from bodyschema.aif.priors import attractor, prior_terms
 from bodyschema.errors import must_be
 from bodyschema.models.contract import as_input
-
-INTEGRATORS = ("local_linear", "implicit", "euler")
-STEPS = {"local_linear": local_linear_step, "implicit": implicit_step}
-STEP_CONTROLS = ("auto", "descent", "none")
-METHODS = ("flow", *descent.DESCENT_METHODS)
-DESCENT_SLACK = 1e-7     # relative rise of F still accepted: float32 models evaluate F to ~1e-7
-DT_GROW, DT_SHRINK = 2.0, 0.1   # Δt of a trial after an accepted / a rejected step (never above config.dt)
-
-
-@dataclass(frozen=True)
-class PerceptionConfig:
-    dt: float = 1e3                # s; local_linear is stable for any Δt; Δt·k·λ ≫ 1 → Gauss–Newton steps
-    k_z: float = 1.0               # gain on ∂F/∂μ̃
-    order: int = 0                 # n: generalized coordinates μ, μ', …, μ^(n); n ∈ {0, 1, 2}
-    max_steps: int = 300           # per trial
-    tol: float = 1e-5              # rad (6e-4°); converged when no coordinate moves more in a step: float32
-                                   # decoders jitter near 1e-6 rad, so a tighter tol never stops them
-    prior: str = "none"            # "none" | "damping" | "attractor" (priors.py)
-    prior_precision: float = 1.0   # Π_z, same for every joint and order
-    attractor_gain: float = 1.0    # β in f(μ) = β Jᵀ (x_d − g(μ)): Π_goal = β I
-    goal_precisions: tuple[tuple[str, float], ...] = ()   # Π_goal per goal modality instead of β, for goals of
-                                                          # several modalities in their own units (e.g. a pixel goal
-                                                          # with a joint-space depth cue): f = Σ_goals Jᵀ Π (x_d − g)
-    integrator: str = "local_linear"
-    max_step: float | None = 0.2   # rad; trust region on one step of the joints (None: off)
-    divergence_step: float = 1e3   # rad; an Euler step larger than this marks the trial diverged
-    divergence_ratio: float | None = 100.0   # E growing this much above max(E_start, 1) marks it diverged
-    precisions: tuple[tuple[str, float], ...] = ()   # per-modality overrides, e.g. (("ee_xyz", 1e4),)
-    precision_update: str = "step"  # "step": Π from model.precision(μ) at every step; "initial": at μ0 only
-    record: bool = False           # keep the trajectory of μ̃, F and the prediction errors
-    step_control: str = "auto"     # "descent": a step that raises F is undone and that trial's Δt shrinks (order 0);
-                                   # "none": every step is taken; "auto": descent at order 0 (the default of
-                                   # `evaluate levels`: monotone, no jitter at the noise floor), none above
-    method: str = "flow"           # "flow": generalized filtering (integrator above); order 0 only: "lm"
-                                   # (Levenberg–Marquardt), "adam" (adaptive first-order flow) or "adam+lm"
-                                   # (Adam, then LM once in a basin): descent.py
-    damping: float = 1.0           # lm: initial λ relative to diag H; large = short gradient-like first steps
-    lr: float = 0.02               # adam: initial step per joint, rad
-    patience: int = 5              # adam: steps without a new best F before the step halves
-    handover: float = 1e-2         # adam+lm: Adam's step (rad) below which LM takes over (one halving of lr)
-
-    @property
-    def descends(self) -> bool:
-        """Whether steps are under descent control ("auto" resolved by the order)."""
-        return self.step_control == "descent" or (self.step_control == "auto" and self.order == 0)
-
-    def __post_init__(self):
-        for name in ("dt", "k_z", "prior_precision", "attractor_gain", "tol", "divergence_step"):
-            value = getattr(self, name)
-            if not value > 0 and not (name == "tol" and value == 0):
-                raise ValueError(must_be(name, "positive", value))
-        if self.order not in (0, 1, 2):
-            raise ValueError(must_be("order", "0, 1 or 2", self.order))
-        if self.max_steps < 1:
-            raise ValueError(must_be("max_steps", "at least 1", self.max_steps))
-        if self.prior not in PRIORS:
-            raise ValueError(must_be("prior", f"one of {PRIORS}", self.prior))
-        if self.integrator not in INTEGRATORS:
-            raise ValueError(must_be("integrator", f"one of {INTEGRATORS}", self.integrator))
-        if self.divergence_ratio is not None and not self.divergence_ratio > 1:
-            raise ValueError(must_be("divergence_ratio", "greater than 1 or None", self.divergence_ratio))
-        if self.max_step is not None and not self.max_step > 0:
-            raise ValueError(must_be("max_step", "positive or None", self.max_step))
-        if self.step_control not in STEP_CONTROLS:
-            raise ValueError(must_be("step_control", f"one of {STEP_CONTROLS}", self.step_control))
-        if self.step_control == "descent" and self.order > 0:
-            raise ValueError(must_be("step_control", "'none' when order > 0", self.step_control,
-                                     "With generalized motion the Dμ̃ term makes F no Lyapunov function of the flow."))
-        if self.method not in METHODS:
-            raise ValueError(must_be("method", f"one of {METHODS}", self.method))
-        if self.method != "flow" and self.order > 0:
-            raise ValueError(must_be("method", "'flow' when order > 0", self.method,
-                                     "lm and adam minimise F at order 0 (static perception)."))
-        for name in ("damping", "lr", "handover"):
-            if not getattr(self, name) > 0:
-                raise ValueError(must_be(name, "positive", getattr(self, name)))
-        if self.patience < 1:
-            raise ValueError(must_be("patience", "at least 1", self.patience))
-        if self.precision_update not in ("step", "initial"):
-            raise ValueError(must_be("precision_update", "'step' or 'initial'", self.precision_update))
 
 
 @dataclass
@@ -138,34 +49,6 @@ def as_inputs(named):
     return {k: as_input(v) for k, v in named.items()} if isinstance(named, Mapping) else named
 
 
-class _Cache:
-    """F, ∂F/∂μ̃, H and prediction errors at every trial's accepted belief: a rejected step falls back on them."""
-
-    def __init__(self, b: int, n: int, need_h: bool):
-        self.free = torch.zeros(b, dtype=torch.float64)
-        self.grad = None
-        self.hess = torch.zeros(b, n, n, dtype=torch.float64) if need_h else None
-        self.errors: dict[str, torch.Tensor] = {}
-
-    def store(self, rows, free, grad, hess, errors):
-        if self.grad is None:
-            self.grad = torch.zeros(self.free.shape[0], *grad.shape[1:], dtype=grad.dtype)
-        self.free[rows], self.grad[rows] = free, grad
-        if hess is not None:
-            self.hess[rows] = hess
-        for name, e in errors.items():
-            self.errors.setdefault(name, torch.zeros_like(self.free))[rows] = e
-
-    def merge(self, rows, ok, free, grad, hess, errors):
-        """The new terms where the step was accepted (ok), the cached ones where it was rejected."""
-        free = torch.where(ok, free, self.free[rows])
-        grad = torch.where(ok[:, None, None], grad, self.grad[rows])
-        if hess is not None:
-            hess = torch.where(ok[:, None, None], hess, self.hess[rows])
-        errors = {name: torch.where(ok, e, self.errors[name][rows]) for name, e in errors.items()}
-        return free, grad, hess, errors
-
-
 @dataclass
 class _Sensors:                    # what one run needs about its observations, resolved once
     observations: dict[str, torch.Tensor]
@@ -174,9 +57,10 @@ class _Sensors:                    # what one run needs about its observations, 
 
 
 class Perception:
-    """Batched generalized filtering over any set of SensoryModels of the same body.
+    """Batched perception over any set of SensoryModels of the same body.
 
     models: one model per modality, all over the same robot and joints (checked).
+    config: what to run; its "auto" method and step control are resolved for these models (`self.config`).
     precisions: modality → float or tensor (broadcast to (B, *out)) overriding `model.precision`; 0 = broken
         sensor, its observation may then be omitted. Overrides here win over `config.precisions`.
     limits: (low, high) rad per joint; defaults to the models' `body.q_low / q_high`.
@@ -187,9 +71,10 @@ class Perception:
                  limits: tuple[Sequence[float], Sequence[float]] | None = None):
         self.models = list(models)
         self.body = check_models(self.models)
-        self.config = config
         known = {m.modality for m in self.models}
-        merged = {**dict(config.precisions), **dict(precisions or {})}
+        self.config = resolve(config, known)                               # "auto" → the update for these models
+        self._overrides = dict(precisions or {})
+        merged = {**dict(config.precisions), **self._overrides}
         for name in merged:
             if name not in known:
                 raise ValueError(must_be("precision override key", f"one of the models' modalities {sorted(known)}",
@@ -206,6 +91,11 @@ class Perception:
     def latent_dim(self) -> int:
         return self.body.latent_dim
 
+    def with_config(self, config: PerceptionConfig) -> Perception:
+        """The same models, precision overrides and limits under another config, e.g. a `dataclasses.replace` of
+        `self.config` (multi-start screens its starts with fewer steps)."""
+        return Perception(self.models, config, self._overrides, (self.low, self.high))
+
     # ---- public -----------------------------------------------------------------------------------------
     def infer(self, observations: Mapping[str, torch.Tensor], mu0: torch.Tensor,
               goal: Mapping[str, torch.Tensor] | None = None) -> PerceptionResult:
@@ -216,105 +106,35 @@ class Perception:
         Inference is deterministic: no generator is needed. numpy arrays are accepted for every input.
         """
         observations, mu0, goal = as_inputs(observations), as_input(mu0), as_inputs(goal)
-        cfg = self.config
         u = self._initial_belief(mu0)                                      # (B, K, Dz)
-        b, k, dz = u.shape
         sensors = self._resolve(observations, u[:, 0], goal)
-        if cfg.method != "flow":
+        if self.config.method != "flow":
             return self._descend(sensors, u[:, 0])
-        dmat = shift_matrix(cfg.order, dz)                                 # (K·Dz, K·Dz)
-        need_h = cfg.integrator != "euler"
-        steps = torch.zeros(b, dtype=torch.long)
-        converged = torch.zeros(b, dtype=torch.bool)
-        diverged = torch.zeros(b, dtype=torch.bool)
-        diverged_step = torch.full((b,), -1, dtype=torch.long)
-        free = torch.full((b,), float("nan"), dtype=torch.float64)
-        start_error = torch.zeros(b, dtype=torch.float64)                  # E at the first step, per trial
-        active = torch.arange(b)
-        trajectory = {"mu": [], "F": []} if cfg.record else None
-        evaluations = 0
-        descent = cfg.descends
-        dt = torch.full((b,), cfg.dt, dtype=torch.float64)                 # per trial: shrinks on rejected steps
-        cand = u.clone()                                                   # the point each trial evaluates next
-        cache = _Cache(b, k * dz, need_h) if descent else None
-        for t in range(cfg.max_steps):
-            if active.numel() == 0:
-                break
-            ua = cand[active]                                              # (b_a, K, Dz)
-            f_a, grad, hess, errors = self._terms(sensors, ua, active, need_h)
-            evaluations += active.numel()
-            if descent and t > 0:                                          # accept where F did not rise
-                ok = torch.isfinite(f_a) & (f_a <= free[active] + DESCENT_SLACK * free[active].abs())
-                moved = (ua - u[active]).abs().amax(dim=(1, 2))
-                u[active[ok]] = ua[ok]
-                dt[active] = torch.where(ok, (dt[active] * DT_GROW).clamp(max=cfg.dt), dt[active] * DT_SHRINK)
-                f_a, grad, hess, errors = cache.merge(active, ok, f_a, grad, hess, errors)
-                done = moved < cfg.tol                                     # rejected too: no descent left
-                                                                           # within tol of this belief
-                converged[active[done]] = True
-                keep = ~done
-                active, f_a, grad = active[keep], f_a[keep], grad[keep]
-                hess = hess[keep] if hess is not None else None
-                errors = {name: e[keep] for name, e in errors.items()}
-                if active.numel() == 0:
-                    break
-                ua = u[active]
-            if descent:
-                cache.store(active, f_a, grad, hess, errors)
-            energy = sum(errors.values(), torch.zeros_like(f_a))           # (b_a,) E = Σ ½ εᵀΠε
-            if t == 0:
-                start_error[active] = energy
-            flow = shift(ua) - cfg.k_z * grad                              # (b_a, K, Dz) u̇ = Dμ̃ − k ∂F/∂μ̃
-            if need_h:
-                hess = 0.5 * (hess + hess.transpose(1, 2))                 # exactly symmetric (eigh fast path)
-                jac_flow = dmat[None] - cfg.k_z * hess                     # (b_a, K·Dz, K·Dz) 𝓙
-                du = STEPS[cfg.integrator](flow.reshape(-1, k * dz), jac_flow, dt[active]).reshape(ua.shape)
-            else:
-                du = dt[active, None, None] * flow
-            raw = du.abs().amax(dim=(1, 2))                                # (b_a,)
-            # Divergence. Only for Euler is a huge step the instability itself; a Newton-like step near a singular
-            # pose is legitimate and is cut by the trust region below. Under descent control a step too large is
-            # undone when evaluated, never taken.
-            bad = ~torch.isfinite(f_a) | ~torch.isfinite(raw)
-            if not need_h and not descent:
-                bad |= raw > cfg.divergence_step
-            if cfg.divergence_ratio is not None and not descent:
-                bad |= energy > cfg.divergence_ratio * start_error[active].clamp_min(1.0)
-            if cfg.max_step is not None:
-                scale = (cfg.max_step / du[:, 0].abs().amax(-1).clamp_min(1e-300)).clamp(max=1.0)
-                du = du * torch.where(bad, 0.0, scale)[:, None, None]
-            new = ua + du
-            new[:, 0] = torch.minimum(torch.maximum(new[:, 0], self.low), self.high)
-            moved = (new - ua).abs().amax(dim=(1, 2))                      # (b_a,)
-            if descent:                                                    # a step whose predicted gain is below
-                step = (new - ua).reshape(len(ua), -1)                     # F's float noise cannot be verified:
-                gain = -(grad.reshape(len(ua), -1) * step).sum(-1)         # converged (−gᵀΔ − ½ ΔᵀHΔ)
-                if hess is not None:
-                    gain = gain - 0.5 * torch.einsum("bi,bij,bj->b", step, hess, step)
-                moved = torch.where(gain <= DESCENT_SLACK * f_a.abs(), torch.zeros_like(moved), moved)
-            if trajectory is not None:
-                record_step(trajectory, b, active, ua, f_a, errors)
-            free[active] = torch.where(torch.isfinite(f_a), f_a, free[active])
-            cand[active[~bad]] = new[~bad]
-            if not descent:
-                u[active[~bad]] = new[~bad]
-            steps[active] = t + 1
-            diverged[active[bad]] = True
-            diverged_step[active[bad]] = t
-            done = ~bad & (moved < cfg.tol)                                # descent: judged when evaluated
-            converged[active[done]] = True
-            active = active[~bad & ~done]
-        keep = torch.nonzero(~diverged).squeeze(-1)
-        if keep.numel() and not descent:                                   # descent: F at u is already known
-            free[keep] = self._terms(sensors, u[keep], keep, False, need_grad=False)[0]
-            evaluations += keep.numel()
-        traj = None
-        if trajectory is not None:
-            traj = {name: torch.stack(rows) if rows else torch.empty(0, b) for name, rows in trajectory.items()}
-        return PerceptionResult(u[:, 0].clone(), u, steps, converged, diverged, diverged_step, free,
-                                evaluations, traj)
+        return self._flow(sensors, u)
 
     # ---- internals --------------------------------------------------------------------------------------
+    def _flow(self, sensors: _Sensors, u: torch.Tensor) -> PerceptionResult:
+        """Generalized filtering from beliefs u (B, K, Dz) (flow.py): each step evaluates the active trials'
+        candidates, lets descent control accept or undo them, and steps the trials still active."""
+        run = FlowRun(u, self.config, self.low, self.high)
+        for t in range(self.config.max_steps):
+            if run.active.numel() == 0:
+                break
+            ua = run.cand[run.active]                                      # (b_a, K, Dz)
+            terms = self._terms(sensors, ua, run.active, run.need_h)
+            run.evaluations += run.active.numel()
+            if run.descent and t > 0:
+                ua, terms = run.accept(ua, terms)
+                if run.active.numel() == 0:
+                    break
+            run.step(t, ua, terms)
+        keep = torch.nonzero(~run.diverged).squeeze(-1)
+        if keep.numel() and not run.descent:                               # descent: F at u is already known
+            run.free[keep] = self._terms(sensors, run.u[keep], keep, False, need_grad=False)[0]
+            run.evaluations += keep.numel()
+        return PerceptionResult(run.u[:, 0].clone(), run.u, run.steps, run.converged, run.diverged,
+                                run.diverged_step, run.free, run.evaluations, run.trajectory_tensors())
+
     def _descend(self, sensors: _Sensors, mu0: torch.Tensor) -> PerceptionResult:
         """Order 0 by Levenberg–Marquardt or Adam (descent.py) on the same F, gradient and curvature."""
         cfg = self.config
@@ -325,12 +145,13 @@ class Perception:
 
         common = dict(max_steps=cfg.max_steps, tol=cfg.tol, max_step=cfg.max_step, record=cfg.record)
         if cfg.method == "lm":
-            r = descent.levenberg_marquardt(objective, mu0, self.low, self.high, damping=cfg.damping, **common)
+            r = descent.levenberg_marquardt(objective, mu0, self.low, self.high, damping=cfg.lm.damping, **common)
         elif cfg.method == "adam":
-            r = descent.adam(objective, mu0, self.low, self.high, lr=cfg.lr, patience=cfg.patience, **common)
+            r = descent.adam(objective, mu0, self.low, self.high, lr=cfg.adam.lr, patience=cfg.adam.patience,
+                             **common)
         else:
-            r = descent.adam_then_lm(objective, mu0, self.low, self.high, lr=cfg.lr, patience=cfg.patience,
-                                     handover=cfg.handover, **common)
+            r = descent.adam_then_lm(objective, mu0, self.low, self.high, lr=cfg.adam.lr,
+                                     patience=cfg.adam.patience, handover=cfg.adam.handover, **common)
         traj = None if r.trajectory is None else \
             {name: torch.stack(rows) if rows else torch.empty(0, len(mu0)) for name, rows in r.trajectory.items()}
         diverged_step = torch.where(r.diverged, 0, -1)

@@ -4,7 +4,7 @@ Both sizes are trained in this run on the same store and split (`training.data.l
   * parameters, training seconds per epoch (median), held-out MSE per pixel (intensity in [0, 1]) and that MSE
     relative to predicting the mean validation image;
   * µs per sample of one batched `vjp` at batch 500 and of `predict_and_vjp` (what an AIF step needs), float32;
-  * the start-at-truth floor: perception (`PerceptionConfig(step_control="descent")`) started at the *true*
+  * the start-at-truth floor: perception (the flow under descent control) started at the *true*
     pose of `--floor` held-out images. A perfect decoder would stay there; the mean |joint error| (deg) it
     drifts to is the error the decoder alone imposes on image-only perception.
 Ratios are pixel_aif / lean. VJP times are the minimum over repeats, the two models taking turns in every
@@ -23,6 +23,7 @@ import time
 import torch
 
 from bodyschema.aif.perception import Perception, PerceptionConfig
+from bodyschema.aif.perception_config import FlowSettings
 from bodyschema.models.pixel import SIZES, PixelDecoder
 from bodyschema.training.data import as_float, load_dataset
 
@@ -74,7 +75,8 @@ def floor_deg(model: PixelDecoder, data, n: int) -> dict[str, float]:
     q = torch.as_tensor(data.val.q[:n], dtype=torch.float64)                              # (n, Dz) rad
     x = as_float(data.val.x[:n])                                                          # (n, H, W) in [0, 1]
     start = time.perf_counter()
-    result = Perception(models=[model], config=PerceptionConfig(step_control="descent")).infer({"image": x}, mu0=q)
+    config = PerceptionConfig(method="flow", flow=FlowSettings(step_control="descent"))
+    result = Perception(models=[model], config=config).infer({"image": x}, mu0=q)
     err = (result.mu - q).abs().rad2deg()                                                 # (n, Dz) deg
     return {"mean": float(err.mean()), "median": float(err.median()), "p90_pose": float(err.mean(1).quantile(0.9)),
             "steps": float(result.steps.float().mean()), "seconds": time.perf_counter() - start}

@@ -79,7 +79,7 @@ def test_api_defaults_equal_the_clis():
 
     cli = dataclasses.replace(LevelsConfig().perception, record=False)
     api = bodyschema.PerceptionConfig()
-    assert api.descends == cli.descends and dataclasses.replace(api, step_control=cli.step_control) == cli
+    assert api.descends == cli.descends and dataclasses.replace(api, flow=cli.flow) == cli
     import inspect
     for name, kind in kinds.KINDS.items():
         if kind.config is None:

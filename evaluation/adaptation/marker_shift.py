@@ -24,7 +24,7 @@ import numpy as np
 import torch
 
 from bodyschema.aif.action import ActionConfig, VelocityController
-from bodyschema.aif.perception import PerceptionConfig
+from bodyschema.aif.perception_config import FlowSettings, PerceptionConfig
 from bodyschema.errors import must_be
 from bodyschema.evaluation.adaptation import marker_shift_report as report
 from bodyschema.evaluation.core.config import TrialsConfig
@@ -64,7 +64,7 @@ class MarkerShiftConfig(TrialsConfig):
     goal: str = "ee_pixel"             # "ee_pixel": marker pixel at the goal pose | "joints": the pose | "image"
     action: ActionConfig = ActionConfig(drive=("joints", "ee_pixel"))   # vision drives action too: driven by
                                        # joints alone the conflict stays in the belief and the hand barely moves
-    perception: PerceptionConfig = PerceptionConfig(step_control="none")   # the velocity controller's per tick
+    perception: PerceptionConfig = PerceptionConfig(flow=FlowSettings(step_control="none"))   # the controller's
 
     def __post_init__(self):
         super().__post_init__()

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import typing
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -85,13 +86,20 @@ def check_numbers(config, prefix: str = "") -> None:
     for field in dataclasses.fields(config):
         name, value = prefix + field.name, getattr(config, field.name)
         if dataclasses.is_dataclass(value) and not isinstance(value, type):
-            check_numbers(value, prefix=f"{name}.")
+            check_numbers(value, prefix=prefix if _unprefixed(config, field.name) else f"{name}.")
             continue
         if field.name in LIMITS and value is not None:
             within(name, value, field.name)
         if any(_bad(x) for x in _numbers(value)):
             expected = "finite numbers ≥ 0" if isinstance(value, tuple) else "a finite number ≥ 0"
             raise ValueError(must_be(name, expected, value))
+
+
+def _unprefixed(config, name: str) -> bool:
+    """Whether the CLI spells the nested group `name` of config without a prefix of its own (tyro `name=""`, e.g.
+    PerceptionConfig's per-algorithm settings: `--perception.dt`), so the error names the flag as it is typed."""
+    hint = typing.get_type_hints(type(config), include_extras=True)[name]
+    return any(getattr(meta, "name", None) == "" for meta in getattr(hint, "__metadata__", ()))
 
 
 def within(name: str, value: float, limit: str) -> None:

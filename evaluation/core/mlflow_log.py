@@ -21,15 +21,21 @@ def metric_name(text: str) -> str:
 
 
 def config_params(config, models: Sequence = ()) -> dict[str, str]:
-    """A frozen dataclass config as MLflow params; nested configs become `<field>.<name>`; models add their kinds."""
-    params = {}
-    for key, value in asdict(config).items():
-        if isinstance(value, dict):
-            params.update({f"{key}.{k}": str(v) for k, v in value.items()})
-        else:
-            params[key] = str(value)
+    """A frozen dataclass config as MLflow params; nested configs become `<field>.<name>` at any depth (e.g.
+    `perception.flow.dt`); models add their kinds."""
+    params = _flat(asdict(config))
     if models:
         params["model_kinds"] = ",".join(f"{getattr(m, 'kind', type(m).__name__)}:{m.modality}" for m in models)
+    return params
+
+
+def _flat(fields: dict, prefix: str = "") -> dict[str, str]:
+    params = {}
+    for key, value in fields.items():
+        if isinstance(value, dict):
+            params.update(_flat(value, f"{prefix}{key}."))
+        else:
+            params[prefix + key] = str(value)
     return params
 
 

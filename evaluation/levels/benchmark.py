@@ -24,7 +24,8 @@ import numpy as np
 import torch
 
 from bodyschema.aif.multistart import infer_multistart
-from bodyschema.aif.perception import METHODS, Perception, PerceptionConfig
+from bodyschema.aif.perception import Perception
+from bodyschema.aif.perception_config import METHODS, FlowSettings, PerceptionConfig
 from bodyschema.errors import must_be
 from bodyschema.datagen.samplers import uniform
 from bodyschema.evaluation.core.config import TrialsConfig
@@ -51,10 +52,8 @@ class PerceptionRunConfig(TrialsConfig):
     trials: int = 500                  # per run, as in Pixel-AIF
     runs: int = 5                      # runs with different target seeds
     noise: tuple[tuple[str, float], ...] = ()   # observation noise σ per modality (m, px, rad, intensity)
-    perception: PerceptionConfig = PerceptionConfig(record=True, step_control="descent")  # monotone: see perception.py
-    # "auto": "adam+lm" with an image model (its F has shallow local minima that Gauss–Newton jumps land in;
-    # bench/aif.py [2]), else "flow" (Gauss–Newton descent: exact in ~5–20 steps on kinematics)
-    update: str = "auto"               # perception.method; "auto": adam+lm with an image model, else flow
+    perception: PerceptionConfig = PerceptionConfig(record=True, flow=FlowSettings(step_control="descent"))  # monotone
+    update: str = "auto"               # perception.method; "auto": adam+lm with an image model, else flow (aif decides)
     success_deg: float = 1.0           # a trial succeeds when its mean |joint error| is below this
     device: str = "cpu"                # where networks run: "cpu", "cuda" or "cuda:N" (the belief stays on the CPU)
     image_size: tuple[int, int] | None = None   # robot camera (H, W); default: the image model's, else the robot's
@@ -99,12 +98,10 @@ class LevelsSummary:
 
 
 # ---- models ------------------------------------------------------------------------------------------
-def levels_update(config: LevelsConfig, models: Sequence) -> PerceptionConfig:
-    """config.perception with the update method of this run (config.update, "auto" resolved per model kind)."""
-    method = config.update
-    if method == "auto":
-        method = "adam+lm" if any(m.modality == "image" for m in models) else "flow"
-    return replace(config.perception, method=method)
+def levels_update(config: PerceptionRunConfig) -> PerceptionConfig:
+    """config.perception with the update method of this run: --update, else --perception.method; "auto" (both's
+    default) is resolved by the Perception for its models (aif/perception_config.py)."""
+    return replace(config.perception, method=config.update if config.update != "auto" else config.perception.method)
 
 
 
@@ -194,7 +191,7 @@ def measure_levels(config: LevelsConfig, models: Sequence) -> tuple[LevelsSummar
         recorded.check_enough(config.trials, config.runs)
     encoder = resolve_encoder(config.encoder, robot, config.tracking_uri)
     on_device(models + ([encoder] if encoder else []), config.device)
-    perception = Perception(models, levels_update(config, models))
+    perception = Perception(models, levels_update(config))
     has_image = any(m.modality == "image" for m in models) or encoder is not None
     rows, per_trial, curves = [], {}, {}
     jobs = [(run, level, ms, enc) for run in range(config.runs) for level in config.levels

@@ -14,10 +14,11 @@ from dataclasses import replace
 
 import torch
 
-from bodyschema.aif.perception import Perception, PerceptionConfig
+from bodyschema.aif.perception import Perception
+from bodyschema.aif.perception_config import FlowSettings, PerceptionConfig
 
-PLAIN = PerceptionConfig(integrator="euler", dt=0.1, k_z=1.0, max_steps=5000, tol=0.0, max_step=None, record=True,
-                         step_control="none")
+PLAIN = PerceptionConfig(method="flow", flow=FlowSettings(integrator="euler", dt=0.1, k_z=1.0, step_control="none"),
+                         max_steps=5000, tol=0.0, max_step=None, record=True)
 PLAIN_STEPS = PLAIN.max_steps
 PLAIN_LABEL = "plain Pixel-AIF"        # the row's label after the level number
 CHUNK = 100                            # Euler steps between level-3 precision checks
@@ -27,7 +28,8 @@ MSE_SWITCH = 0.01                      # level 3: the image MSE below which Σ_v
 def pixel_aif_plain(level: int) -> PerceptionConfig:
     """Pixel-AIF's own update at `level`: Euler Δt 0.1 on F with its visual precision 1/Σ_v."""
     sigma_v = 2e3 if level == 3 else 2e4
-    return replace(PLAIN, precisions=(("image", 1.0 / sigma_v),), record=False, divergence_ratio=None)
+    return replace(PLAIN, precisions=(("image", 1.0 / sigma_v),), record=False,
+                   flow=replace(PLAIN.flow, divergence_ratio=None))
 
 
 def plain_infer(models, obs, mu0, level: int, steps: int = PLAIN_STEPS, chunk: int = CHUNK):

@@ -37,7 +37,7 @@ import torch
 from bodyschema.aif.action import ActionConfig, VelocityController
 from bodyschema.aif.aic import AICConfig, AICController
 from bodyschema.aif.goal_inference import goal_precision
-from bodyschema.aif.perception import PerceptionConfig
+from bodyschema.aif.perception_config import FlowSettings, PerceptionConfig
 from bodyschema.datagen.reach import arm_reach
 from bodyschema.datagen.robot_record import check_robot_ref
 from bodyschema.datagen.samplers import uniform
@@ -70,7 +70,7 @@ class ReachingRunConfig(TrialsConfig):
     duration: float | None = None          # s per episode; None: the robot record's [reaching] duration_s
     control_hz: float | None = None        # must divide into whole MuJoCo steps; None: the record's control_hz
     action: ActionConfig = ActionConfig()  # the velocity controller; left at its default: the robot record's
-    perception: PerceptionConfig = PerceptionConfig(step_control="none")   # servo robots: per tick (attractor prior)
+    perception: PerceptionConfig = PerceptionConfig(flow=FlowSettings(step_control="none"))   # servo robots: per tick
     aic: AICConfig = AICConfig()           # torque robots: the AIC's gains and precisions
     panda_controller: str = "velocity"     # torque robots: "velocity" (the velocity controller on the arm's joint
                                            # impedance servo, like nao_arm's servos) | "aic" (torques, aif/aic.py)

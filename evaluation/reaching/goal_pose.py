@@ -29,9 +29,8 @@ def imagine(config, models, robot, episodes, rng: np.random.Generator, ranges: n
     overrides, and the depth cue's when there is one) from the start pose, the encoder's guess of an image goal
     and random poses of `ranges`."""
     goal_models = [m for m in models if m.modality in episodes.goal]
-    image = any(m.modality == "image" for m in goal_models)
     given = {**dict(config.perception.precisions), **episodes.extra.get("goal_precisions", {})}
-    perception = Perception(goal_models, PerceptionConfig(method="adam+lm" if image else "flow"),
+    perception = Perception(goal_models, PerceptionConfig(),     # "auto": the update of perception proper
                             {name: pi for name, pi in given.items() if name in episodes.goal})
     guesses = []
     if encoder is not None and "image" in episodes.goal:

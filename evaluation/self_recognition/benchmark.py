@@ -26,7 +26,8 @@ import numpy as np
 import torch
 
 from bodyschema.aif.free_energy import sensory_terms
-from bodyschema.aif.perception import METHODS, Perception, PerceptionConfig
+from bodyschema.aif.perception import Perception
+from bodyschema.aif.perception_config import METHODS, FlowSettings, PerceptionConfig
 from bodyschema.datagen.robot_record import check_robot_ref
 from bodyschema.errors import must_be
 from bodyschema.evaluation.core.config import TrialsConfig, check_names, within
@@ -64,7 +65,8 @@ class SelfRecognitionConfig(TrialsConfig):
     visual_noise: tuple[tuple[str, float], ...] = (  # σ per visual modality: px, m, intensity in [0, 1]
         ("ee_pixel", 2.0), ("ee_xyz", 0.004), ("image", 0.02))   # 2 px: at 1 px an exact model's AUC is 1
     score: str = "contingency"         # F(one body) − F(two bodies); "visual"/"total": F of those modalities
-    perception: PerceptionConfig = PerceptionConfig(max_steps=10, tol=1e-4, step_control="none")   # ≤ 10 per frame
+    perception: PerceptionConfig = PerceptionConfig(max_steps=10, tol=1e-4,
+                                                    flow=FlowSettings(step_control="none"))   # ≤ 10 per frame
     # "auto": "adam+lm" with an image model (≤ 10 Adam then ≤ 10 LM steps: monotone; the flow's undamped Gauss–Newton
     # jumps left 3 % of own-body episodes off the pose), else "flow" (exact on kinematics in a few steps)
     update: str = "auto"               # perception.method; "auto": adam+lm with an image model, else flow
@@ -138,7 +140,7 @@ def prepare(config: SelfRecognitionConfig, models: Sequence):
     another robot or of a modality that has no visual stream."""
     robot, used = body_and_senses(models, config.robot, VISUAL)    # checks joints; camera of the image model
     sensors, precisions = sensors_of(config, used)
-    perception = Perception(sensors, perception_config(config, [m.modality for m in used]), precisions)
+    perception = Perception(sensors, perception_config(config), precisions)
     return robot, perception, [m.modality for m in used[1:]]
 
 

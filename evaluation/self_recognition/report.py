@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bodyschema.aif.perception_config import resolve
 from bodyschema.evaluation.core.tables import markdown_table, write_csv
 from bodyschema.evaluation.self_recognition.sensors import perception_config
 from bodyschema.evaluation.self_recognition.streams import SELF
@@ -150,7 +151,7 @@ def summary_notes(config, robot: str, visual: Sequence[str], period: float, rows
 
 def _updates(config, visual: Sequence[str]) -> str:
     """The perception updates of one hypothesis per frame, e.g. "≤ 10 + 10 adam+lm updates"."""
-    perception = perception_config(config, visual)
+    perception = resolve(perception_config(config), visual)
     steps = perception.max_steps
     return f"≤ {steps} + {steps} adam+lm updates" if perception.method == "adam+lm" else \
         f"≤ {steps} {perception.method} updates"

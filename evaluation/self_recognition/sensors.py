@@ -1,5 +1,5 @@
 """What the self-recognition robot perceives through: its models seen through noisy sensors (`NoisySensor`), the
-perception update (`perception_config`: adam+lm for images, as in the levels), and the two hypotheses it compares:
+perception update (`perception_config`: "auto" as in the levels), and the two hypotheses it compares:
 one body behind the joints and the visual stream (the benchmark's Perception), or a visual stream of its own
 (`visual_only`: the same visual models, their belief free of the joints)."""
 
@@ -11,13 +11,10 @@ from dataclasses import replace
 from bodyschema.aif.perception import Perception
 
 
-def perception_config(config, modalities: Sequence[str]):
-    """config.perception with the update of this run: config.update, "auto" resolved as the levels benchmark does
-    ("adam+lm" with an image model: its F has local minima that Gauss–Newton jumps land in; else "flow")."""
-    method = config.update
-    if method == "auto":
-        method = "adam+lm" if "image" in modalities else "flow"
-    return replace(config.perception, method=method)
+def perception_config(config):
+    """config.perception with the update of this run: --update, else --perception.method; "auto" (both's default) is
+    resolved by the Perception for its models (aif/perception_config.py: adam+lm with an image model, else flow)."""
+    return replace(config.perception, method=config.update if config.update != "auto" else config.perception.method)
 
 
 def sensors_of(config, models: Sequence) -> tuple[list, dict[str, float]]:

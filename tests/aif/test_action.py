@@ -9,7 +9,8 @@ import pytest
 import torch
 
 from bodyschema.aif.action import ActionConfig, VelocityController, action_rate
-from bodyschema.aif.perception import Perception, PerceptionConfig
+from bodyschema.aif.perception import Perception
+from bodyschema.aif.perception_config import FlowSettings, PerceptionConfig
 from bodyschema.aif.priors import attractor, prior_terms
 from tests.aif.toys import ToyBlobImage, ToyJoints, other_robot_joints, perturb, planar_poses
 from tests.toy_models import ToyPlanarArm
@@ -151,9 +152,9 @@ def attractor_case(seed: int = 11):
 
 def prior_only(order: int) -> Perception:
     """Perception whose F is the attractor alone (its sensor broken), one Euler step of Δt = 1e-7 s."""
-    cfg = PerceptionConfig(order=order, prior="attractor", prior_precision=PI_Z, attractor_gain=BETA, k_z=K_Z,
-                           integrator="euler", dt=1e-7, max_steps=1, max_step=None, step_control="none",
-                           divergence_ratio=None)
+    flow = FlowSettings(k_z=K_Z, integrator="euler", dt=1e-7, step_control="none", divergence_ratio=None)
+    cfg = PerceptionConfig(order=order, prior="attractor", prior_precision=PI_Z, attractor_gain=BETA, flow=flow,
+                           max_steps=1, max_step=None)
     return Perception([ToyPlanarArm()], cfg, precisions={"ee_xyz": 0.0})
 
 
@@ -233,7 +234,7 @@ def test_image_goals_use_vjps_only():
     image, joints = ToyBlobImage(), ToyJoints(precision=10.0)
     q = planar_poses(6, seed=41)
     goal = {"image": image.predict(perturb(q, seed=42, max_rad=0.1))}             # blobs overlap: a gradient
-    cfg = PerceptionConfig(prior="attractor", attractor_gain=1e3, max_steps=30)
+    cfg = PerceptionConfig(prior="attractor", attractor_gain=1e3, max_steps=30, method="flow")
     image.calls = {"vjp": 0, "jacobian": 0}
     moved = Perception([image, joints], cfg, precisions={"image": 0.0}).infer({"joints": q}, q, goal=goal)
     assert image.calls["jacobian"] == 0 and image.calls["vjp"] > 0, image.calls

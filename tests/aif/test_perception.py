@@ -7,7 +7,9 @@ import math
 import pytest
 import torch
 
-from bodyschema.aif.perception import DESCENT_SLACK, Perception, PerceptionConfig
+from bodyschema.aif.flow import DESCENT_SLACK
+from bodyschema.aif.perception import Perception
+from bodyschema.aif.perception_config import FlowSettings, PerceptionConfig
 from tests.aif.toys import ToyJoints, other_robot_joints, perturb, planar_poses
 from tests.toy_models import ToyPlanarArm
 
@@ -20,7 +22,8 @@ def arm():
 
 
 @pytest.mark.parametrize("config", [PerceptionConfig(), PerceptionConfig(order=1, prior="damping"),
-                                    PerceptionConfig(order=2, prior="damping"), PerceptionConfig(integrator="implicit")],
+                                    PerceptionConfig(order=2, prior="damping"),
+                                    PerceptionConfig(flow=FlowSettings(integrator="implicit"))],
                          ids=["n0", "n1-damping", "n2-damping", "n0-implicit"])
 def test_recovers_true_joints_from_perturbed_belief(arm, config):
     q = planar_poses(100, seed=0)
@@ -33,7 +36,8 @@ def test_recovers_true_joints_from_perturbed_belief(arm, config):
 
 def test_plain_euler_protocol_also_recovers(arm):
     q = planar_poses(50, seed=2)
-    config = PerceptionConfig(integrator="euler", dt=0.1, k_z=1e-3, max_steps=3000, tol=0.0, max_step=None)
+    config = PerceptionConfig(flow=FlowSettings(integrator="euler", dt=0.1, k_z=1e-3), max_steps=3000, tol=0.0,
+                              max_step=None)
     result = Perception([arm], config).infer({"ee_xyz": arm.predict(q)}, perturb(q, seed=3))
     assert (result.mu - q).abs().max() / DEG < 0.1
 
@@ -41,8 +45,9 @@ def test_plain_euler_protocol_also_recovers(arm):
 @pytest.mark.parametrize("integrator", ["local_linear", "euler"])
 def test_free_energy_decreases_along_the_trajectory(arm, integrator):
     q = planar_poses(64, seed=4)
-    config = PerceptionConfig(integrator=integrator, record=True, max_steps=300,
-                              **({"dt": 0.1, "k_z": 1e-3} if integrator == "euler" else {}))
+    config = PerceptionConfig(flow=FlowSettings(integrator=integrator,
+                                                **({"dt": 0.1, "k_z": 1e-3} if integrator == "euler" else {})),
+                              record=True, max_steps=300)
     result = Perception([arm], config).infer({"ee_xyz": arm.predict(q)}, perturb(q, seed=5))
     f = result.trajectory["F"]                                             # (T, B), NaN once a trial stopped
     steps = torch.diff(f, dim=0)
@@ -83,7 +88,8 @@ def test_zero_precision_modality_is_ignored(arm):
 def test_absurd_dt_marks_trials_diverged_and_the_run_goes_on(arm):
     q = planar_poses(6, seed=11)
     precision = torch.tensor([1e4, 1e4, 1e4, 1e-8, 1e-8, 1e-8], dtype=torch.float64)[:, None].expand(6, 3)
-    config = PerceptionConfig(integrator="euler", dt=1e6, k_z=1.0, max_steps=50, max_step=None, step_control="none")
+    config = PerceptionConfig(flow=FlowSettings(integrator="euler", dt=1e6, k_z=1.0, step_control="none"),
+                              max_steps=50, max_step=None)
     result = Perception([arm], config, precisions={"ee_xyz": precision}).infer({"ee_xyz": arm.predict(q)},
                                                                                 perturb(q, seed=12))
     assert result.diverged[:3].all() and (result.diverged_step[:3] == 0).all()
@@ -96,10 +102,15 @@ def test_descent_step_control_never_raises_F_and_tames_an_absurd_euler_step(arm)
     q = planar_poses(32, seed=21)
     mu0 = perturb(q, seed=22)
     obs = {"ee_xyz": arm.predict(q)}
-    wild = dict(integrator="euler", dt=1e3, k_z=1.0, max_steps=400, max_step=None, record=True)
-    plain = Perception([arm], PerceptionConfig(**wild, step_control="none")).infer(obs, mu0)
+    wild = dict(integrator="euler", dt=1e3, k_z=1.0)
+
+    def config(control):
+        return PerceptionConfig(flow=FlowSettings(**wild, step_control=control), max_steps=400, max_step=None,
+                                record=True)
+
+    plain = Perception([arm], config("none")).infer(obs, mu0)
     assert plain.diverged.all(), "without step control this Euler step must blow up"
-    result = Perception([arm], PerceptionConfig(**wild, step_control="descent")).infer(obs, mu0)
+    result = Perception([arm], config("descent")).infer(obs, mu0)
     f = result.trajectory["F"]                                             # (T, B) at the accepted beliefs
     rises = torch.diff(f, dim=0) - DESCENT_SLACK * f[:-1].abs()           # the float32 allowance of a model
     assert (rises[torch.isfinite(rises)] <= 0).all(), "an accepted step never raises F"
@@ -111,14 +122,15 @@ def test_descent_step_control_matches_the_plain_update_where_every_step_descends
     q = planar_poses(16, seed=23)
     mu0 = perturb(q, seed=24)
     obs = {"ee_xyz": arm.predict(q)}
-    plain = Perception([arm], PerceptionConfig(step_control="none")).infer(obs, mu0)
-    descent = Perception([arm], PerceptionConfig(step_control="descent")).infer(obs, mu0)
+    plain = Perception([arm], PerceptionConfig(flow=FlowSettings(step_control="none"))).infer(obs, mu0)
+    descent = Perception([arm], PerceptionConfig(flow=FlowSettings(step_control="descent"))).infer(obs, mu0)
     assert (descent.mu - q).abs().max() < 0.1 * DEG and (plain.mu - q).abs().max() < 0.1 * DEG
     assert descent.converged.all()
 
 
 @pytest.mark.parametrize("config", [PerceptionConfig(order=1, prior="damping"),
-                                    PerceptionConfig(integrator="euler", dt=1e3, max_step=None, step_control="descent")],
+                                    PerceptionConfig(flow=FlowSettings(integrator="euler", dt=1e3,
+                                                                       step_control="descent"), max_step=None)],
                          ids=["n1-damping", "euler-descent"])
 def test_batched_result_equals_per_trial_loop(arm, config):
     q = planar_poses(12, seed=13)
@@ -187,15 +199,15 @@ def test_bad_mu0_and_config_raise(arm):
     with pytest.raises(ValueError, match="order must be 0, 1 or 2"):
         PerceptionConfig(order=3)
     with pytest.raises(ValueError, match="step_control must be 'none' when order > 0"):
-        PerceptionConfig(order=1, step_control="descent")
+        PerceptionConfig(order=1, flow=FlowSettings(step_control="descent"))
     with pytest.raises(ValueError, match="precision override key must be"):
         Perception([arm], precisions={"image": 1.0})
 
 
 def test_unstable_update_bouncing_between_limits_is_flagged_diverged(arm):
     q = planar_poses(50, seed=22)                                          # Euler with Δt·λ_max ≈ 30: unstable,
-    config = PerceptionConfig(integrator="euler", dt=0.01, max_steps=300, max_step=None,   # steps stay < 1e3 rad
-                              step_control="none")
+    config = PerceptionConfig(flow=FlowSettings(integrator="euler", dt=0.01, step_control="none"),   # steps stay
+                              max_steps=300, max_step=None)                                        # < 1e3 rad
     result = Perception([arm], config).infer({"ee_xyz": arm.predict(q)}, perturb(q, seed=23))
     assert result.n_diverged > 25 and not (result.converged & result.diverged).any()
     assert (result.diverged_step[result.diverged] < 20).all()
@@ -206,18 +218,19 @@ def test_image_model_gradient_uses_vjp_or_the_curvature_jacobian_and_recovers_th
     image = ToyBlobImage()
     q = planar_poses(30, seed=24)
     obs, mu0 = {"image": image.predict(q)}, perturb(q, seed=25, max_rad=0.1)
-    result = Perception([image]).infer(obs, mu0)
+    result = Perception([image], PerceptionConfig(method="flow")).infer(obs, mu0)
     assert (result.mu - q).abs().max() / DEG < 0.1
     assert image.calls["jacobian"] > 0 and image.calls["vjp"] == 0, \
         "the local-linear step builds the image Jacobian (in chunks) for its curvature and takes the gradient from it"
     image.calls = {"vjp": 0, "jacobian": 0}
-    Perception([image], PerceptionConfig(integrator="euler", dt=1e-6, max_steps=5)).infer(obs, mu0)
+    Perception([image], PerceptionConfig(method="flow", flow=FlowSettings(integrator="euler", dt=1e-6),
+                                         max_steps=5)).infer(obs, mu0)
     assert image.calls == {"vjp": 5, "jacobian": 0}, "Euler never builds the image Jacobian"
 
 
 def test_the_default_step_control_is_descent_at_order_0_and_none_above():
     """As `evaluate levels` (the CLI's perception): monotone descent for static perception; generalized motion
     (order > 0) cannot use it (F is no Lyapunov function of that flow), and needs no opt-out to be valid."""
-    assert PerceptionConfig().descends and PerceptionConfig(step_control="descent").descends
+    assert PerceptionConfig().descends and PerceptionConfig(flow=FlowSettings(step_control="descent")).descends
     assert not PerceptionConfig(order=1, prior="damping").descends
-    assert not PerceptionConfig(step_control="none").descends
+    assert not PerceptionConfig(flow=FlowSettings(step_control="none")).descends

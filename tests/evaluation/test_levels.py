@@ -8,7 +8,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from bodyschema.aif.perception import Perception, PerceptionConfig
+from bodyschema.aif.perception import Perception
+from bodyschema.aif.perception_config import FlowSettings, PerceptionConfig
 from bodyschema.evaluation.core.seeds import eval_rng
 from bodyschema.evaluation.core.specs import load_robot
 from bodyschema.evaluation.levels.report import plot_sweep
@@ -169,7 +170,7 @@ def test_level3_runs_from_the_encoder_alone_and_as_a_multistart_seed(planar2_xyz
 def test_levels_1_2_with_the_encoder_keep_the_lower_free_energy_of_both_starts(planar2_xyz, planar2, tmp_path):
     from bodyschema.models import load_model
     encoder = load_model(_encoder("planar2", planar2.image_size, tmp_path).removeprefix("trusted:"))
-    perception = Perception([planar2_xyz], PerceptionConfig(step_control="descent"))
+    perception = Perception([planar2_xyz], PerceptionConfig(flow=FlowSettings(step_control="descent")))
     targets = make_targets(planar2, 16, eval_rng(0, 0, "targets"), True, {}, eval_rng(0, 0, "noise"))
     for level in (1, 2):
         own = evaluate_level(perception, planar2, targets, level, eval_rng(0, 0, "beliefs", level))
