@@ -129,7 +129,8 @@ CASES = [   # (id, argv): a bad value of a grouped knob, named as the flag is ty
     ("levels-grouped-spelling", "evaluate levels --perception.adam.lr 0.1 --out {W}/res"),
 ]
 NAMED = {"levels-perception-lr-inf": "perception.lr must be", "levels-perception-damping-negative": "damping must be",
-         "levels-perception-step-control-typo": "step_control must be", "levels-perception-method-typo": "method must be"}
+         "levels-perception-step-control-typo": "step_control must be",
+         "levels-perception-method-typo": "method must be"}
 
 
 @pytest.fixture(scope="module")
