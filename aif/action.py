@@ -35,6 +35,7 @@ import torch
 
 from bodyschema.aif.free_energy import JACOBIAN_MAX_OUTPUTS, model_input
 from bodyschema.aif.perception import Perception, PerceptionConfig
+from bodyschema.aif.perception_config import DEFAULTS
 from bodyschema.errors import must_be
 
 
@@ -97,7 +98,7 @@ class VelocityController:
     After `reset`, `act` is called once per control tick. State: `belief`, `velocity`, `failed`, `reasons`.
     """
 
-    def __init__(self, models: Sequence, perception: PerceptionConfig = PerceptionConfig(),
+    def __init__(self, models: Sequence, perception: PerceptionConfig = DEFAULTS,
                  action: ActionConfig = ActionConfig(), precisions: Mapping[str, float] | None = None):
         self._perception_config = replace(per_tick(perception), prior="attractor",
                                           attractor_gain=action.attractor_gain, max_steps=action.perception_steps,

@@ -187,7 +187,7 @@ class AICController:
         (b, 3, Dq), sensors q, qd (b, Dq) and the extra models' observations (b, *out); float64. → (b, Dq) N·m/s."""
         cfg = self.config
         rate = cfg.pi_q * (q - mu_tilde[:, 0]) + cfg.pi_qd * (qd - mu_tilde[:, 1])
-        for m, eps, pi, jac in self._extra_errors(mu_tilde[:, 0], observations):
+        for _model, eps, pi, jac in self._extra_errors(mu_tilde[:, 0], observations):
             rate = rate + torch.einsum("bod,bo->bd", jac, pi * eps)
         return -cfg.k_a * rate
 

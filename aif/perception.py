@@ -19,9 +19,14 @@ import torch
 
 from bodyschema.aif import descent
 from bodyschema.aif.flow import FlowRun
-from bodyschema.aif.free_energy import (JACOBIAN_MAX_OUTPUTS, check_models, check_observations, model_input,
-                                         sensory_terms)
-from bodyschema.aif.perception_config import PerceptionConfig, resolve
+from bodyschema.aif.free_energy import (
+    JACOBIAN_MAX_OUTPUTS,
+    check_models,
+    check_observations,
+    model_input,
+    sensory_terms,
+)
+from bodyschema.aif.perception_config import DEFAULTS, PerceptionConfig, resolve
 from bodyschema.aif.priors import attractor, prior_terms
 from bodyschema.errors import must_be
 from bodyschema.models.contract import as_input
@@ -37,7 +42,8 @@ class PerceptionResult:
     diverged_step: torch.Tensor    # (B,) int, step at which F or the step went non-finite; −1 if never
     F: torch.Tensor                # (B,) free energy at the final belief (at divergence: the last finite one)
     evaluations: int = 0           # model-evaluation rounds × trials (a round = predict + Jacobian/VJP per model)
-    trajectory: dict[str, torch.Tensor] | None = None  # "mu" (T, B, K, Dz), "F" (T, B), "error:<m>" (T, B); NaN once stopped
+    trajectory: dict[str, torch.Tensor] | None = None  # "mu" (T, B, K, Dz), "F" (T, B), "error:<m>" (T, B);
+                                                       # NaN once a trial stopped
 
     @property
     def n_diverged(self) -> int:
@@ -66,7 +72,7 @@ class Perception:
     limits: (low, high) rad per joint; defaults to the models' `body.q_low / q_high`.
     """
 
-    def __init__(self, models: Sequence, config: PerceptionConfig = PerceptionConfig(),
+    def __init__(self, models: Sequence, config: PerceptionConfig = DEFAULTS,
                  precisions: Mapping[str, float | torch.Tensor] | None = None,
                  limits: tuple[Sequence[float], Sequence[float]] | None = None):
         self.models = list(models)

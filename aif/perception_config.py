@@ -131,6 +131,9 @@ class PerceptionConfig:
             raise ValueError(must_be("precision_update", "'step' or 'initial'", self.precision_update))
 
 
+DEFAULTS = PerceptionConfig()           # the default of every `config` argument (frozen: one instance serves all)
+
+
 def resolve(config: PerceptionConfig, modalities: Iterable[str]) -> PerceptionConfig:
     """config with "auto" replaced by the update for models of these modalities (module docstring)."""
     method, control = config.method, config.flow.step_control

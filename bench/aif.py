@@ -44,7 +44,8 @@ def problem(models, n: int, level: int = 2, seed: int = 0, noise=None):
     robot = load_robot(models)
     image = any(m.modality == "image" for m in models)
     targets = make_targets(robot, n, eval_rng(seed, 0, "targets"), image, noise, eval_rng(seed, 0, "noise"))
-    mu0 = torch.from_numpy(initial_beliefs(level, targets.q, robot.sampling_ranges, eval_rng(seed, 0, "beliefs", level)))
+    rng = eval_rng(seed, 0, "beliefs", level)
+    mu0 = torch.from_numpy(initial_beliefs(level, targets.q, robot.sampling_ranges, rng))
     return targets, mu0
 
 
@@ -118,7 +119,8 @@ def compare_updates(models, n, levels=(1, 2, 3), plain_n=100, plain_steps=5000):
 
 def full_levels(models_spec, n, runs, out, label, precisions=(), noise=()):
     config = LevelsConfig(models=tuple(models_spec), trials=n, runs=runs, out=out / label, mlflow=False,
-                          noise=tuple(noise), perception=replace(LevelsConfig().perception, precisions=tuple(precisions)))
+                          noise=tuple(noise),
+                          perception=replace(LevelsConfig().perception, precisions=tuple(precisions)))
     t = time.perf_counter()
     summary = run_levels(config)
     wall = time.perf_counter() - t
@@ -146,8 +148,9 @@ def train_pixel(robot_name: str, n: int, size: tuple[int, int], epochs: int):
     t = time.perf_counter()
     model.fit(torch.from_numpy(q[:split]).float(), images[:split], val=(torch.from_numpy(q[split:]).float(),
                                                                           images[split:]), progress=False)
-    print(f"[4] pixel decoder on {robot_name} {size}: {n} renders {t_render:.1f} s, fit {time.perf_counter() - t:.1f} s, "
-          f"validation residual variance {model.residual_var_:.2e} (precision {model.precision_:.3g})")
+    print(f"[4] pixel decoder on {robot_name} {size}: {n} renders {t_render:.1f} s, "
+          f"fit {time.perf_counter() - t:.1f} s, validation residual variance {model.residual_var_:.2e} "
+          f"(precision {model.precision_:.3g})")
     return model
 
 
@@ -190,7 +193,8 @@ def main():
         if any(m.modality == "image" for m in extra):   # 5000 plain steps per trial: a subset of the trials
             compare_updates(extra, n, plain_n=min(n, args.plain_trials), plain_steps=plain_steps)
         else:
-            print("[2] skipped: give an image decoder with --model (e.g. models:/bodyschema-nao_arm-image-pixel@champion)")
+            print("[2] skipped: give an image decoder with --model "
+                  "(e.g. models:/bodyschema-nao_arm-image-pixel@champion)")
     if 3 not in args.skip:
         full_levels(["analytic:planar2:ee_xyz"], n, runs, args.out, "planar2 ee_xyz")
         full_levels(["analytic:nao_arm:ee_xyz"], n, runs, args.out, "nao_arm ee_xyz")

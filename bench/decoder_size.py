@@ -65,8 +65,8 @@ def vjp_us(models: dict[str, PixelDecoder], batch: int, repeats: int) -> dict[st
     times = {name: ([], []) for name in models}
     for _ in range(repeats):
         for name, model in models.items():
-            times[name][0].append(seconds(lambda: model.vjp(z, v), 1, warmup=1))
-            times[name][1].append(seconds(lambda: both(model), 1, warmup=0))
+            times[name][0].append(seconds(lambda model=model: model.vjp(z, v), 1, warmup=1))   # bound per turn
+            times[name][1].append(seconds(lambda model=model: both(model), 1, warmup=0))
     return {name: (min(a) * 1e6 / batch, min(b) * 1e6 / batch) for name, (a, b) in times.items()}
 
 

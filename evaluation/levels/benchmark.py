@@ -26,20 +26,18 @@ import torch
 from bodyschema.aif.multistart import infer_multistart
 from bodyschema.aif.perception import Perception
 from bodyschema.aif.perception_config import METHODS, FlowSettings, PerceptionConfig
-from bodyschema.errors import must_be
 from bodyschema.datagen.samplers import uniform
+from bodyschema.errors import must_be
 from bodyschema.evaluation.core.config import TrialsConfig
 from bodyschema.evaluation.core.mlflow_log import table_metrics
 from bodyschema.evaluation.core.publish import publish
 from bodyschema.evaluation.core.runs import new_run
 from bodyschema.evaluation.core.seeds import eval_rng
-from bodyschema.evaluation.core.specs import (load_robot, models_field, on_device, resolve_encoder,
-                                              resolve_models)
+from bodyschema.evaluation.core.specs import load_robot, models_field, on_device, resolve_encoder, resolve_models
 from bodyschema.evaluation.levels import report as level_report
 from bodyschema.evaluation.levels.plain import PLAIN_LABEL, PLAIN_STEPS, PlainPixelAIF
 from bodyschema.evaluation.levels.recorded import RecordedTargets, plain_verdict
 from bodyschema.evaluation.levels.targets import initial_beliefs, make_targets
-
 
 DEFAULT_MODELS = ("analytic:planar2:ee_xyz",)
 

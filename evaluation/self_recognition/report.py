@@ -39,7 +39,7 @@ def auc(self_scores: np.ndarray, other_scores: np.ndarray) -> float:
     side is empty."""
     if np.size(self_scores) == 0 or np.size(other_scores) == 0:
         return float("nan")
-    from sklearn.metrics import roc_auc_score                   # seconds to import: only when scoring
+    from sklearn.metrics import roc_auc_score  # seconds to import: only when scoring
     return float(roc_auc_score(*_labelled(self_scores, other_scores)))
 
 
@@ -159,7 +159,7 @@ def _updates(config, visual: Sequence[str]) -> str:
 
 # ---- plots ---------------------------------------------------------------------------------------------
 def plot_roc(curves: Mapping[str, Mapping[str, np.ndarray]], rows: Sequence[Mapping], path: Path) -> Path:
-    from bodyschema.evaluation.core.plots import plt, save_figure   # matplotlib only when plotting
+    from bodyschema.evaluation.core.plots import plt, save_figure  # matplotlib only when plotting
     fig, ax = plt.subplots(figsize=(4.8, 4.6))
     aucs = {r["comparison"]: r["auc"] for r in rows}
     for name, roc in curves.items():

@@ -12,9 +12,8 @@ from bodyschema.aif.perception import Perception
 from bodyschema.aif.perception_config import FlowSettings, PerceptionConfig
 from bodyschema.evaluation.core.seeds import eval_rng
 from bodyschema.evaluation.core.specs import load_robot
+from bodyschema.evaluation.levels.benchmark import LevelsConfig, broken_sweep, evaluate_level, noise_sweep, run_levels
 from bodyschema.evaluation.levels.report import plot_sweep
-from bodyschema.evaluation.levels.benchmark import (LevelsConfig, broken_sweep, evaluate_level, noise_sweep,
-                                                    run_levels)
 from bodyschema.evaluation.levels.targets import OFFSET_DEG, initial_beliefs, make_targets
 from bodyschema.models import analytic
 from tests.toy_models import ToyPlanarArm

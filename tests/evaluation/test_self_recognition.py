@@ -12,13 +12,24 @@ import pytest
 import torch
 
 from bodyschema.aif.perception import Perception
-from bodyschema.evaluation.self_recognition.benchmark import (SelfRecognitionConfig, _free_energy, prepare,
-                                                             run_self_recognition, score_episodes)
-from bodyschema.evaluation.self_recognition.report import (auc, balanced_accuracy, best_threshold, roc_curve,
-                                                          roc_table, time_to)
+from bodyschema.evaluation.core.sensing import sense
+from bodyschema.evaluation.self_recognition.benchmark import (
+    SelfRecognitionConfig,
+    _free_energy,
+    prepare,
+    run_self_recognition,
+    score_episodes,
+)
+from bodyschema.evaluation.self_recognition.report import (
+    auc,
+    balanced_accuracy,
+    best_threshold,
+    roc_curve,
+    roc_table,
+    time_to,
+)
 from bodyschema.evaluation.self_recognition.sensors import NoisySensor, perception_config, visual_only
 from bodyschema.evaluation.self_recognition.streams import episode_conditions, imitate, make_episodes, mirror
-from bodyschema.evaluation.core.sensing import sense
 from bodyschema.models.analytic import AnalyticModel
 from tests.threads import one_thread
 
