@@ -278,7 +278,7 @@ def _done_digests(root: zarr.Group, n_shards, problems: list[str]) -> np.ndarray
         return None
     try:
         digests = np.asarray(root[DONE][:])
-    except Exception as e:  # noqa: BLE001
+    except Exception as e:  # noqa: BLE001 — any damage to the marker chunk is reported as a problem, not raised
         problems.append(must_be(DONE, "readable", f"{type(e).__name__}: {e}",
                                 "A marker chunk is damaged: " + REPAIR_HINT))
         return None

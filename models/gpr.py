@@ -56,11 +56,15 @@ def build_exact_gp(train_u: torch.Tensor, train_y: torch.Tensor, noise_floor: fl
         batch_shape=torch.Size([n_out]), noise_constraint=gpytorch.constraints.GreaterThan(noise_floor))
     gp = BatchExactGP(train_u.expand(n_out, *train_u.shape), train_y, likelihood).double()
     likelihood.double()
-    as_t = lambda v, shape: torch.as_tensor(v, dtype=torch.float64).expand(shape).clone()  # noqa: E731
-    gp.covar_module.base_kernel.lengthscale = as_t(lengthscale, (n_out, 1, train_u.shape[-1]))
-    gp.covar_module.outputscale = as_t(outputscale, (n_out,))
-    likelihood.noise = as_t(noise, (n_out, 1)).clamp_min(noise_floor * 1.0001)
+    gp.covar_module.base_kernel.lengthscale = _filled(lengthscale, (n_out, 1, train_u.shape[-1]))
+    gp.covar_module.outputscale = _filled(outputscale, (n_out,))
+    likelihood.noise = _filled(noise, (n_out, 1)).clamp_min(noise_floor * 1.0001)
     return gp
+
+
+def _filled(value, shape) -> torch.Tensor:
+    """A float64 tensor of `shape` holding `value` (a scalar or a broadcastable array), one per output GP."""
+    return torch.as_tensor(value, dtype=torch.float64).expand(shape).clone()
 
 
 @register_kind

@@ -18,8 +18,15 @@ from __future__ import annotations
 import importlib
 from dataclasses import dataclass
 
-from bodyschema.models.configs import (EncoderConfig, GPRConfig, MDNConfig, ModelConfig, MultimodalConfig,
-                                       PixelConfig, SklearnGPRConfig)
+from bodyschema.models.configs import (
+    EncoderConfig,
+    GPRConfig,
+    MDNConfig,
+    ModelConfig,
+    MultimodalConfig,
+    PixelConfig,
+    SklearnGPRConfig,
+)
 
 
 @dataclass(frozen=True)

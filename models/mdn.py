@@ -15,8 +15,15 @@ import torch
 from torch import nn
 
 from bodyschema.errors import must_be
-from bodyschema.models._nn_fit import (NetModel, TrainSettings, build, check_fit_data, check_val,
-                                       output_standardizer, train)
+from bodyschema.models._nn_fit import (
+    NetModel,
+    TrainSettings,
+    build,
+    check_fit_data,
+    check_val,
+    output_standardizer,
+    train,
+)
 from bodyschema.models.contract import BaseSensoryModel, register_kind
 from bodyschema.models.scaling import BodySpec
 

@@ -20,8 +20,16 @@ import torch
 from torch import nn
 
 from bodyschema.errors import must_be
-from bodyschema.models._nn_fit import (LeafParams, NetModel, TrainSettings, build, check_fit_data, check_val,
-                                       output_standardizer, train)
+from bodyschema.models._nn_fit import (
+    LeafParams,
+    NetModel,
+    TrainSettings,
+    build,
+    check_fit_data,
+    check_val,
+    output_standardizer,
+    train,
+)
 from bodyschema.models.capabilities import Capabilities
 from bodyschema.models.contract import BaseSensoryModel, load_model, register_kind
 from bodyschema.models.pixel import PixelDecoderNet, fast_layout

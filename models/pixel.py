@@ -23,11 +23,9 @@ import torch
 from torch import nn
 
 from bodyschema.errors import must_be
-from bodyschema.models._nn_fit import (NetModel, TrainSettings, build, check_fit_data, check_val, evaluate,
-                                       train)
+from bodyschema.models._nn_fit import NetModel, TrainSettings, build, check_fit_data, check_val, evaluate, train
 from bodyschema.models.contract import BaseSensoryModel, register_kind
 from bodyschema.models.scaling import BodySpec
-
 
 SIZES = {   # name → capacity; an explicit fc_hidden / channels / refine overrides the preset's value
     "lean": {"fc_hidden": 64, "channels": (32, 16, 8), "refine": False},      # 56×80: 7×10×32 → … → 56×80

@@ -78,7 +78,7 @@ class TrainConfig(Generic[M]):
         if not isinstance(self.experiment, str) or not self.experiment:
             problems.append(must_be("experiment", "a non-empty name", self.experiment))
         try:
-            from bodyschema.models.device import check_device   # imports torch: only when a config is built
+            from bodyschema.models.device import check_device  # imports torch: only when a config is built
 
             check_device(self.device)
         except ValueError as error:

@@ -7,8 +7,8 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")   # files only, no display; set before pyplot is imported
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt  # noqa: E402 — pyplot after matplotlib.use, so no display backend is tried
+import numpy as np  # noqa: E402 — in the same block as pyplot
 
 
 def loss_curves(history: dict[int, dict[str, float]], path: Path, title: str) -> Path | None:

@@ -37,8 +37,15 @@ from mlflow.models import ModelSignature
 from mlflow.types import ParamSchema, ParamSpec
 
 from bodyschema.errors import must_be
-from bodyschema.training.digest import (DIGEST_TAG, MODEL_ID, digest_is_recorded, directory_sha256,
-                                        logged_model_digest, verify_directory, version_digest)
+from bodyschema.training.digest import (
+    DIGEST_TAG,
+    MODEL_ID,
+    digest_is_recorded,
+    directory_sha256,
+    logged_model_digest,
+    verify_directory,
+    version_digest,
+)
 
 LOADER_MODULE = __name__      # "bodyschema.training.pyfunc_loader"
 OUTPUTS = ("predict", "jacobian", "precision")

@@ -36,8 +36,14 @@ from bodyschema.training.config import NON_IDENTITY_FIELDS, TrainConfig, build_m
 from bodyschema.training.data import Dataset, Split, as_float, load_dataset
 from bodyschema.training.digest import DIGEST_TAG
 from bodyschema.training.pyfunc_loader import log_sensory_model
-from bodyschema.training.registry import CHAMPION, METRIC, ensure_experiment, register_version, registered_name, \
-    use_tracking
+from bodyschema.training.registry import (
+    CHAMPION,
+    METRIC,
+    ensure_experiment,
+    register_version,
+    registered_name,
+    use_tracking,
+)
 
 PREDICT_BATCH = 256       # validation prediction batch: bounded memory for image decoders
 FINAL_METRICS = ("val_rmse", "val_mean_error", "train_rmse", "train_mean_error", "fit_seconds")

@@ -21,8 +21,7 @@ from bodyschema.evaluation.core.runs import new_run
 from bodyschema.evaluation.core.specs import resolve_models
 from bodyschema.evaluation.core.tables import markdown_table, write_csv
 from bodyschema.evaluation.reaching import report as reaching_report
-from bodyschema.evaluation.reaching.benchmark import (ReachingConfig, ReachingRunConfig, builtin_sensors,
-                                                      simulate)
+from bodyschema.evaluation.reaching.benchmark import ReachingConfig, ReachingRunConfig, builtin_sensors, simulate
 from bodyschema.evaluation.reaching.robot_defaults import reaching_defaults
 from bodyschema.evaluation.robustness.units import noise_label
 
@@ -101,12 +100,13 @@ def _markdown(rows, config: LoopRobustnessConfig) -> str:
     text = (f"Closed-loop AIF reaching on {config.robot} ({config.trials} targets, {config.seconds:g} s at "
             f"{config.rate:g} Hz, seed {config.seed}) with Gaussian noise σ on {config.modality} ({unit}) and with "
             "each sensor broken: precision 0 (the controller ignores it) or its stream frozen at the first reading "
-            f"(it trusts a stale value). `success`: final ee error < {config.success_mm:g} mm; `goal_success`: within the goal tolerance.")
+            f"(it trusts a stale value). `success`: final ee error < {config.success_mm:g} mm; `goal_success`: "
+            "within the goal tolerance.")
     return markdown_table(rows, COLUMNS, "case") + "\n" + text + "\n"
 
 
 def plot_noise(rows, path: Path) -> Path:
-    from bodyschema.evaluation.core.plots import plt, save_figure   # matplotlib only when plotting
+    from bodyschema.evaluation.core.plots import plt, save_figure  # matplotlib only when plotting
     fig, ax = plt.subplots(figsize=(5, 3.5))
     sigma = [r["sigma"] for r in rows]
     ax.plot(sigma, [r["success"] for r in rows], "o-", label="success (ee)")
@@ -119,7 +119,7 @@ def plot_noise(rows, path: Path) -> Path:
 
 
 def plot_broken(rows, path: Path) -> Path:
-    from bodyschema.evaluation.core.plots import plt, save_figure   # matplotlib only when plotting
+    from bodyschema.evaluation.core.plots import plt, save_figure  # matplotlib only when plotting
     fig, ax = plt.subplots(figsize=(1.5 + 1.1 * len(rows), 3.8))
     x = np.arange(len(rows))
     ax.bar(x - 0.2, [r["success"] for r in rows], 0.4, label="success (ee)")

@@ -10,7 +10,6 @@ import torch
 from bodyschema.models import kinds, load_model
 from tests.models.test_multimodal import BODY, TINY, joint_angles, one_thread, toy_modalities
 
-
 SHIPPED = [name for name, kind in kinds.KINDS.items() if kind.module.startswith("bodyschema.models.")]
 
 

@@ -6,7 +6,7 @@ import torch
 
 from bodyschema.models.sklearn_gpr import SklearnGPRModel
 from tests.models.contract import SensoryModelContract
-from tests.models.test_gpr import TOY, single_thread, toy_data  # noqa: F401  (fixture re-used)
+from tests.models.test_gpr import TOY, single_thread, toy_data  # noqa: F401 — fixtures, used by name
 
 
 def fit_sk(n: int, seed: int = 0, **hyper) -> SklearnGPRModel:
