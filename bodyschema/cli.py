@@ -43,7 +43,7 @@ import tyro
 from bodyschema import log
 from bodyschema.datagen.config import DatagenConfig
 from bodyschema.datagen.importers.config import ImportConfig
-from bodyschema.datagen.robot_commands import RUNNERS as ROBOT_RUNNERS, RobotInitArgs, RobotShowArgs
+from bodyschema.datagen.robot_commands import RUNNERS as ROBOT_RUNNERS, RobotCameraArgs, RobotInitArgs, RobotShowArgs
 from bodyschema.demo import DemoConfig
 from bodyschema.errors import expected_types, explain, must_be
 from bodyschema.evaluation import registry
@@ -180,7 +180,8 @@ def commands(words: list[str] | None = None):
         _command("show", ShowArgs, "Summarize a dataset store and draw a contact sheet of its images (PNG)."),
         _group("robot", "A robot from a model file: write its record, look at it.",
                ("init", RobotInitArgs, "Write the robot record of an MJCF/URDF file with inferred values, to edit."),
-               ("show", RobotShowArgs, "A robot's joints, sites, cameras, record and view of its ee, and a sheet.")),
+               ("show", RobotShowArgs, "A robot's joints, sites, cameras, record and view of its ee, and a sheet."),
+               ("camera", RobotCameraArgs, "Place a record's camera anew for its (edited) workspace.")),
         _command("import", ImportConfig, "Import recordings (images + CSV of angles, HDF5, LeRobot v3.0) into a "
                                          "dataset store."),
         _group("train", "Fit one sensory model on a dataset, log it to MLflow and register it. "

@@ -3,6 +3,7 @@
     bodyschema robot init arm.urdf --mesh-dir meshes/     writes arm.toml beside it with the inferred values
     bodyschema robot show arm.urdf                        joints, limits, sites, bodies, cameras, the record, the
                                                           fraction of poses whose ee is in view, a contact sheet
+    bodyschema robot camera arm.toml                      places the record's camera anew for its edited workspace
 
 The configs are light (the CLI imports them at start-up); the runners import MuJoCo when they run.
 """
@@ -43,6 +44,15 @@ class RobotShowArgs:
     visual: Literal["mesh", "collision"] = "mesh"   # URDF without a record: as `robot init --visual`
 
 
+@dataclass(frozen=True)
+class RobotCameraArgs:
+    """Place a record's camera anew from sampled forward kinematics, framing the ee over one of its workspaces
+    (after you narrowed it, or changed image_size), and rewrite the record in place."""
+
+    record: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RECORD")]   # a robot record (.toml)
+    workspace: str = "camera"          # the joint box whose ee positions the camera frames
+
+
 def run_init(args: RobotInitArgs) -> int:
     from bodyschema.datagen.robot_infer import infer_record
     from bodyschema.datagen.robot_record import MODEL_SUFFIXES, dumps_toml, write_record
@@ -59,6 +69,35 @@ def run_init(args: RobotInitArgs) -> int:
                               "values: edit them (see datagen/robot_record.py).")
     print(dumps_toml(record.to_toml_dict()))
     print(f"record: {out}")
+    return 0
+
+
+def run_camera(args: RobotCameraArgs) -> int:
+    import dataclasses
+
+    import numpy as np
+
+    from bodyschema.datagen.robot import Robot
+    from bodyschema.datagen.robot_infer import ee_samples, place_camera, view_fraction
+    from bodyschema.datagen.robot_record import RECORD_SUFFIX, read_record, write_record
+
+    if args.record.suffix.lower() != RECORD_SUFFIX or not args.record.is_file():
+        raise ValueError(must_be("RECORD", "an existing robot record (.toml)", str(args.record),
+                                 "`bodyschema robot init FILE` writes one."))
+    record = read_record(args.record)
+    if args.workspace not in record.workspaces:
+        raise ValueError(must_be("--workspace", f"one of the record's {sorted(record.workspaces)}", args.workspace))
+    box = np.array(record.workspaces[args.workspace])
+    with Robot.load(record) as robot:
+        camera = place_camera(ee_samples(robot, box), record.image_size)
+    placed = dataclasses.replace(record, camera=camera)
+    with Robot.load(placed) as robot:
+        fraction = view_fraction(robot, box)
+    header = "".join(line[2:] + "\n" for line in args.record.read_text().splitlines() if line.startswith("# "))
+    write_record(placed, args.record, header.rstrip("\n"))
+    print(f"camera {record.camera.get('pos')} → {camera['pos']} (m), framing the ee over workspace "
+          f"{args.workspace!r}: ee in view {fraction:.1%}")
+    print(f"record: {args.record}")
     return 0
 
 
@@ -120,4 +159,4 @@ def robot_sheet(robot, out: Path, n: int) -> Path:
         return write_contact_sheet(Path(tmp) / "poses.zarr", out, n=n)
 
 
-RUNNERS = {RobotInitArgs: run_init, RobotShowArgs: run_show}
+RUNNERS = {RobotInitArgs: run_init, RobotShowArgs: run_show, RobotCameraArgs: run_camera}

@@ -1,6 +1,7 @@
 """A robot from a file: inferred records, welding held joints, a placed camera, `robot init/show`, datagen on a file
 robot, and a store that rebuilds its robot from its attrs alone (issue 20 parts 1-3). Toy MJCFs written here."""
 
+import dataclasses
 import shutil
 
 import mujoco
@@ -117,6 +118,29 @@ def test_robot_init_writes_the_inferred_record_and_show_draws_the_robot(toy, tmp
     out = capsys.readouterr().out
     assert "shoulder: [-1.5000, 1.5000] rad" in out and "ee in view: 100.0%" in out and "sites: tip" in out
     assert (tmp_path / "toy_robot_sheet.png").stat().st_size > 0
+
+
+def test_robot_camera_frames_a_narrowed_workspace_closer_and_keeps_the_rest(toy, tmp_path, capsys):
+    shutil.copy(toy, tmp_path / "toy.xml")
+    assert main(["robot", "init", str(tmp_path / "toy.xml")]) == 0
+    path = tmp_path / "toy.toml"
+    narrow = ((-0.3, 0.3), (0.2, 0.8), (-0.3, 0.3))
+    path.write_text(path.read_text().replace("[workspaces]", f"[workspaces]\nnear = {_toml({'x': narrow})[4:]}"))
+    before = read_record(path)
+    assert main(["robot", "camera", str(path), "--workspace", "near"]) == 0
+    after = read_record(path)
+    with Robot.load(after) as robot:
+        centre = robot.fk(np.array(narrow).mean(axis=1)[None])[0]
+        assert view_fraction(robot, np.array(narrow)) > 0.95
+    far, near = (np.linalg.norm(np.array(r.camera["pos"]) - centre) for r in (before, after))
+    assert near < 0.7 * far                                              # a smaller box is framed from nearer
+    assert dataclasses.replace(after, camera=before.camera) == before    # nothing else in the record moved
+    assert path.read_text().startswith("# Robot record of toy.xml")      # the header is kept
+    text = path.read_text()
+    assert main(["robot", "camera", str(path), "--workspace", "far"]) == 2
+    assert "--workspace must be one of the record's ['camera', 'full', 'near']" in capsys.readouterr().err
+    assert main(["robot", "camera", str(tmp_path / "toy.xml")]) == 2
+    assert path.read_text() == text                                      # refused: the record is untouched
 
 
 def _toml(values):
