@@ -49,6 +49,18 @@ def check_training_data(q, x, body: BodySpec, output_shape: tuple[int, ...], pre
     return q, x.reshape(x.shape[0], -1)
 
 
+def training_subset(model, q, x, val, seed: int) -> tuple[torch.Tensor, torch.Tensor, tuple | None,
+                                                         torch.Generator]:
+    """A GP's training data checked, and its random subset of at most `model.max_points`: (u (n, Dz) in the unit box,
+    y (n, O)), the checked `val` pair (or None), and the generator the hyper-parameter subset is drawn with next."""
+    q, y = check_training_data(q, x, model.body, model.output_shape)            # (N, Dz), (N, O)
+    if val is not None:
+        val = check_training_data(*val, model.body, model.output_shape, prefix="val ")
+    gen = torch.Generator().manual_seed(int(seed))
+    keep = random_subset(q.shape[0], model.max_points, gen)
+    return model.body.to_unit(q[keep]), y[keep], val, gen
+
+
 def random_subset(n: int, size: int, gen: torch.Generator) -> torch.Tensor:
     """Indices of a uniform random subset of `size` out of `n` (all of them, in order, when size ≥ n). # (m,)"""
     if size >= n:

@@ -105,13 +105,8 @@ class GPRModel(BaseSensoryModel):
         over outputs), then {"val_mean_error", "val_rmse"} (output units: mean per-sample Euclidean error, RMSE over all
         output elements, as training.train.score) when val is given.
         """
-        q, y = _gp_data.check_training_data(q, x, self.body, self.output_shape)        # (N, Dz), (N, O)
-        if val is not None:
-            val = _gp_data.check_training_data(*val, self.body, self.output_shape, prefix="val ")
-        gen = torch.Generator().manual_seed(int(seed))
-        keep = _gp_data.random_subset(q.shape[0], self.max_points, gen)
-        u = self.body.to_unit(q[keep])                                                # (n, Dz)
-        ys, y_mean, y_std = _gp_data.standardize(y[keep])                             # (O, n), (O,), (O,)
+        u, y, val, gen = _gp_data.training_subset(self, q, x, val, seed)              # (n, Dz), (n, O)
+        ys, y_mean, y_std = _gp_data.standardize(y)                                  # (O, n), (O,), (O,)
         sub = _gp_data.random_subset(u.shape[0], self.hyper_points, gen)
         lengthscale, outputscale, noise, step = self._fit_hyper(u[sub], ys[:, sub], on_epoch, progress)
 

@@ -77,12 +77,7 @@ class SklearnGPRModel(BaseSensoryModel):
         {"val_mean_error", "val_rmse"} (output units: mean per-sample Euclidean error, RMSE over all
         output elements, as training.train.score) when val is given.
         """
-        q, y = _gp_data.check_training_data(q, x, self.body, self.output_shape)        # (N, Dz), (N, O)
-        if val is not None:
-            val = _gp_data.check_training_data(*val, self.body, self.output_shape, prefix="val ")
-        gen = torch.Generator().manual_seed(int(seed))
-        keep = _gp_data.random_subset(q.shape[0], self.max_points, gen)
-        u, y = self.body.to_unit(q[keep]), y[keep]                                    # (n, Dz), (n, O)
+        u, y, val, gen = _gp_data.training_subset(self, q, x, val, seed)              # (n, Dz), (n, O)
         sub = _gp_data.random_subset(u.shape[0], self.hyper_points, gen)
 
         bar = tqdm(total=None, desc="sklearn_gpr hyper-parameters", disable=not progress)
