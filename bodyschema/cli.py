@@ -429,9 +429,10 @@ def _bug(command: str, error: BaseException) -> int:
 
 
 def _command_words(argv: list[str]) -> list[str]:
+    known = COMMAND_WORDS | {w for b in registry.BENCHMARKS for w in b.words}   # a benchmark registered since import
     words = []
     for arg in argv:
-        if arg not in COMMAND_WORDS:
+        if arg not in known:
             break
         words.append(arg)
     return words
