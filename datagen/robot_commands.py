@@ -47,7 +47,8 @@ class RobotShowArgs:
 @dataclass(frozen=True)
 class RobotCameraArgs:
     """Place a record's camera anew from sampled forward kinematics, framing the ee over one of its workspaces
-    (after you narrowed it, or changed image_size), and rewrite the record in place."""
+    (after you narrowed it, or changed image_size), and rewrite the record in place (its leading comment kept,
+    other comments not)."""
 
     record: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RECORD")]   # a robot record (.toml)
     workspace: str = "camera"          # the joint box whose ee positions the camera frames
@@ -74,6 +75,7 @@ def run_init(args: RobotInitArgs) -> int:
 
 def run_camera(args: RobotCameraArgs) -> int:
     import dataclasses
+    import itertools
 
     import numpy as np
 
@@ -93,8 +95,9 @@ def run_camera(args: RobotCameraArgs) -> int:
     placed = dataclasses.replace(record, camera=camera)
     with Robot.load(placed) as robot:
         fraction = view_fraction(robot, box)
-    header = "".join(line[2:] + "\n" for line in args.record.read_text().splitlines() if line.startswith("# "))
-    write_record(placed, args.record, header.rstrip("\n"))
+    lines = args.record.read_text().splitlines()
+    header = list(itertools.takewhile(lambda line: line.startswith("#"), lines))   # the leading comment is kept
+    write_record(placed, args.record, "\n".join(line.lstrip("#").removeprefix(" ") for line in header))
     print(f"camera {record.camera.get('pos')} → {camera['pos']} (m), framing the ee over workspace "
           f"{args.workspace!r}: ee in view {fraction:.1%}")
     print(f"record: {args.record}")
