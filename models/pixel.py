@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 from bodyschema.errors import must_be
@@ -70,6 +71,48 @@ class PixelDecoderNet(nn.Module):
         y = y[:, :, top:top + self.h, left:left + self.w].sigmoid()      # (B, C, H, W), centre crop
         y = y.permute(0, 2, 3, 1)                                        # (B, H, W, C): free in channels_last
         return y.reshape(-1, *self.output_shape)
+
+    def forward_and_jacobian(self, u):
+        """g(u) and ∂g/∂u by forward mode written out: the B primal rows and the B·Dz unit tangents go through
+        each layer as one batch (a layer's linear part once on all rows, its bias on the primal rows only; an
+        activation's derivative at the primal scales the tangents). Exact (autograd's JVPs, same float rounding)
+        at the cost of one forward of batch B·(1 + Dz), ~6× cheaper than vmap(jacfwd), whose batching rules add
+        a per-layer overhead that dwarfs these small convolutions (bench/tracking_jacobian.py).
+        # u (B, Dz) → (B, *output_shape), (B, O, Dz)"""
+        b, dz = u.shape
+        eye = torch.eye(dz, dtype=u.dtype, device=u.device)
+        x = torch.cat([u, eye.repeat_interleave(b, 0)])                 # ((1+Dz)·B, Dz): row (1+j)·B + i is ∂u_i/∂u_ij
+        x = _with_tangents(self.fc, x, b).reshape(-1, self.c0, self.h0, self.w0)
+        x = _with_tangents(self.up, x, b)                                # ((1+Dz)·B, C, H', W')
+        top, left = (x.shape[2] - self.h) // 2, (x.shape[3] - self.w) // 2
+        x = x[:, :, top:top + self.h, left:left + self.w]
+        y = x[:b].sigmoid()                                              # (B, C, H, W)
+        tangents = x[b:].unflatten(0, (dz, b)) * (y * (1 - y))          # (Dz, B, C, H, W): σ' = σ(1 − σ)
+        jac = tangents.permute(1, 3, 4, 2, 0).reshape(b, -1, dz)         # (B, O, Dz), O in (H, W, C) order
+        return y.permute(0, 2, 3, 1).reshape(-1, *self.output_shape), jac
+
+
+def _with_tangents(layers: nn.Sequential, x: torch.Tensor, b: int) -> torch.Tensor:
+    """Push the primal rows x[:b] and the tangent rows x[b:] through Linear / (transposed) convolution / ELU layers."""
+    for layer in layers:
+        if isinstance(layer, nn.ELU):
+            primal = x[:b]
+            act = F.elu(primal, layer.alpha)
+            slope = torch.where(primal > 0, torch.ones_like(act), act + layer.alpha)   # ELU' = α eˣ = ELU + α
+            x = torch.cat([act, (x[b:].unflatten(0, (-1, b)) * slope).flatten(0, 1)])
+            continue
+        if isinstance(layer, nn.Linear):
+            x = F.linear(x, layer.weight)
+        elif isinstance(layer, nn.ConvTranspose2d):
+            x = F.conv_transpose2d(x, layer.weight, None, layer.stride, layer.padding, layer.output_padding,
+                                   layer.groups, layer.dilation)
+        elif isinstance(layer, nn.Conv2d):
+            x = F.conv2d(x, layer.weight, None, layer.stride, layer.padding, layer.dilation, layer.groups)
+        else:
+            raise TypeError(must_be("layer", "Linear, Conv2d, ConvTranspose2d or ELU", type(layer).__name__))
+        if layer.bias is not None:
+            x[:b] += layer.bias.reshape(-1, *([1] * (x.ndim - 2)))     # the bias moves the primal only
+    return x
 
 
 def fast_layout(net: nn.Module) -> nn.Module:
@@ -134,6 +177,19 @@ class PixelDecoder(NetModel, BaseSensoryModel):
     # ---- hooks ----------------------------------------------------------------------------------------
     def _outputs(self, net, u):
         return net(u)
+
+    def _jacobian(self, z):
+        return self._predict_and_jacobian(z)[1]
+
+    def predict_and_jacobian(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """g(z) and its Jacobian from one pass: a Gauss–Newton step needs both. # (B, Dz) → (B, *out), (B, O, Dz)"""
+        return self._predict_and_jacobian(self._check_z(z))
+
+    def _predict_and_jacobian(self, z):
+        net, z_dev = self._net(z.dtype), z.to(self.device)
+        with torch.no_grad():
+            y, jac = net.forward_and_jacobian(self.body.to_unit(z_dev))
+        return y.to(z.device), (jac * self.body.unit_per_rad(z_dev)).to(z.device)   # chain rule through to_unit
 
     def _precision(self, z):
         return torch.full((z.shape[0], *self.output_shape), self.precision_, dtype=z.dtype, device=z.device)
