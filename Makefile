@@ -8,7 +8,7 @@ EXTRAS   ?= test
 export MUJOCO_GL ?= egl
 export PYOPENGL_PLATFORM ?= egl
 
-.PHONY: demo test test-all lint bench system-deps clean
+.PHONY: demo test test-all lint bench reproduce system-deps clean
 
 demo: $(VENV)/.installed system-deps
 	$(BIN)/bodyschema demo
@@ -24,6 +24,9 @@ lint: $(VENV)/.installed   ## ruff (pinned in the test extra; config in pyprojec
 
 bench: $(VENV)/.installed system-deps
 	for script in bench/*.py; do echo "== $$script"; $(BIN)/python $$script || exit 1; done
+
+reproduce: $(VENV)/.installed system-deps   ## the README's tables from its own commands (hours); ONLY=levels: one
+	$(BIN)/bodyschema reproduce $(if $(ONLY),--only $(ONLY)) $(ARGS)
 
 system-deps:
 	@bash .ci/system_deps.sh

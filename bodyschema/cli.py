@@ -11,6 +11,7 @@
     bodyschema evaluate reaching --robot nao_arm | evaluate adaptation jupiter | evaluate self-recognition
     bodyschema report
     bodyschema demo
+    bodyschema reproduce --only levels   (the README's tables from its own commands, beside its figures)
     bodyschema --debug ...    (or BODYSCHEMA_DEBUG=1): show the traceback behind an error message
     bodyschema --quiet ... | --verbose ...   (before or after the subcommand): warnings only, no progress bars |
                               debug lines (configs resolved, steps timed) and MLflow's own logging (bodyschema/log.py)
@@ -51,6 +52,7 @@ from bodyschema.errors import expected_types, explain, must_be
 from bodyschema.evaluation import registry
 from bodyschema.evaluation.report import ReportConfig, write_report
 from bodyschema.export_commands import RUNNERS as EXPORT_RUNNERS, ExportDatasetArgs, ExportOnnxArgs, ShowArgs
+from bodyschema.reproduce.config import ReproduceConfig
 from bodyschema.training.config import TrainConfig, train_commands
 from bodyschema.training.sweep_config import SweepConfig
 
@@ -203,6 +205,8 @@ def commands(words: list[str] | None = None):
         _command("report", ReportConfig, "Gather the latest run of every benchmark on each robot into "
                                           "results/report.md and .html, key figures first."),
         _command("demo", DemoConfig, "The end-to-end demo: babble, fit, register, perceive, reach, recognise, report."),
+        _command("reproduce", ReproduceConfig, "Regenerate the README's measured tables with its own commands, "
+                                               "each beside the README's figures; resumable (hours on 2 cores)."),
     )]
 
 
@@ -270,6 +274,10 @@ def run(config) -> int:
         from bodyschema.demo import run_demo
 
         run_demo(config)
+    elif isinstance(config, ReproduceConfig):
+        from bodyschema.reproduce.run import reproduce
+
+        reproduce(config)
     return 0
 
 
@@ -389,6 +397,15 @@ def progress_flag(argv: list[str]) -> bool:
 
 
 # ---- the error boundary ----------------------------------------------------------------------------------
+def parse_command(argv: list[str]):
+    """The config a command line (after `bodyschema`, without the logging flags) stands for; a parsing error is
+    tyro's message box and exit 2, a config's own check the house error."""
+    check_train_flags(argv)
+    check_renamed_flags(argv)
+    with _config_errors_as_ours():
+        return tyro.cli(commands(_command_words(argv)), prog="bodyschema", args=argv, description=DESCRIPTION)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv or os.environ.get("BODYSCHEMA_DEBUG", "") not in ("", "0")
@@ -399,11 +416,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         verbosity, argv = log.split_flags(argv)
         log.configure(verbosity)
-        check_train_flags(argv)
-        check_renamed_flags(argv)
-        with _config_errors_as_ours():            # a parsing error: tyro's message box, exit 2
-            config = tyro.cli(commands(_command_words(argv)), prog="bodyschema", args=argv, description=DESCRIPTION)
-        config = log.progress_of(config, progress_flag(argv))   # a config's own default is the library's (off)
+        config = log.progress_of(parse_command(argv), progress_flag(argv))   # a config's own default: the library's
         logger.debug("%s: %r", command, config)
         with log.timed(logger, command):
             return run(config)
@@ -422,7 +435,7 @@ def main(argv: list[str] | None = None) -> int:
         return _bug(command, error)
 
 
-RESUMING = ("datagen", "train", "sweep")   # they keep finished shards / checkpoints and pick them up again
+RESUMING = ("datagen", "train", "sweep", "reproduce")   # they keep finished shards / checkpoints / steps
 ATOMIC = ("export", "import", "show")       # they write beside OUT and rename: an interrupted one left nothing
 
 

@@ -1,0 +1,45 @@
+"""One step: its command line parsed by the CLI itself (the same flags and checks a user meets), run in-process,
+and its product: a dataset's path, a registered model's `models:/<name>/<version>`, a benchmark's run folder."""
+
+from __future__ import annotations
+
+import shlex
+from dataclasses import dataclass
+
+from bodyschema import log
+
+
+@dataclass(frozen=True)
+class Done:
+    product: str
+    fit_seconds: float | None = None    # a training step's fit alone (its MLflow logging excluded)
+    work_seconds: float | None = None   # a benchmark's trials alone (its rows' wall_s), without loading and plots
+
+
+def parse(command: str):
+    """The config `bodyschema <command>` stands for."""
+    from bodyschema.cli import parse_command
+
+    return parse_command(shlex.split(command))
+
+
+def run(config, progress: bool) -> Done:
+    from bodyschema.datagen.config import DatagenConfig
+    from bodyschema.training.config import TrainConfig
+
+    config = log.progress_of(config, progress)
+    if isinstance(config, DatagenConfig):
+        from bodyschema.datagen.generate import generate
+
+        return Done(str(generate(config, progress=progress)))
+    if isinstance(config, TrainConfig):
+        from bodyschema.training.train import train
+
+        result = train(config)
+        return Done(f"models:/{result.registered_name}/{result.model_version}", result.metrics.get("fit_seconds"))
+    from bodyschema.cli import BENCHMARKS
+
+    written = BENCHMARKS[type(config)](config)
+    paths = getattr(written, "paths", written)
+    work = sum(float(row.get("wall_s", 0.0)) for row in getattr(written, "rows", []))
+    return Done(str(next(iter(paths.values())).parent), None, work or None)
