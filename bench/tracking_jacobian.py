@@ -1,0 +1,88 @@
+"""The pixel decoder's Jacobian, the tracker's per-frame cost: four ways side by side in one run.
+
+    .venv/bin/python bench/tracking_jacobian.py [--decoder DIR] [--batches 1 2 8] [--threads 1] [--repeats 200]
+
+- predict: one forward of B latents (the unit every other figure is divided by);
+- vmap(jacfwd): autograd forward mode, Dz JVPs under vmap (the generic NetModel path, the baseline);
+- forward_and_jacobian: the same JVPs written out, primal and tangents as one batch of B·(1 + Dz) per layer
+  (what `PixelDecoder.jacobian` runs; the prediction comes with it);
+- forward differences: one forward of B·(1 + Dz) latents, h = 1e-3 rad (float32: ~1e-2 relative error).
+The lean decoder at 56×80 on nao_arm's joints; `--decoder` times a saved one instead (weights do not change the
+cost). Prints medians interleaved per repeat (fair under a varying load), ratios to vmap(jacfwd), and the largest
+relative difference of each Jacobian to it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import torch
+
+from bodyschema.models._nn_fit import NetModel, build
+from bodyschema.models.contract import load_model
+from bodyschema.models.pixel import PixelDecoder, fast_layout
+from bodyschema.models.scaling import BodySpec
+
+FD_STEP = 1e-3    # rad: float32 forward differences, truncation ~h, rounding ~1e-7/h
+
+
+def lean_decoder() -> PixelDecoder:
+    body = BodySpec("nao_arm", ("LShoulderPitch", "LShoulderRoll", "LElbowYaw", "LElbowRoll"),
+                    (-0.115, 0.07, -1.585, -0.88), (0.58, 0.815, 1.07, -0.044))
+    model = PixelDecoder(body, "image", (56, 80))
+    model._set_net(fast_layout(build(model._factory, torch.Generator().manual_seed(0))))
+    model.precision_ = 1.0
+    return model
+
+
+def forward_differences(model, z: torch.Tensor) -> torch.Tensor:
+    b, dz = z.shape
+    shifted = (z[None] + FD_STEP * torch.eye(dz, dtype=z.dtype)[:, None]).reshape(-1, dz)   # (Dz·B, Dz)
+    out = model.predict(torch.cat([z, shifted])).reshape(1 + dz, b, -1)                     # (1+Dz, B, O)
+    return ((out[1:] - out[0]) / FD_STEP).permute(1, 2, 0)                                  # (B, O, Dz)
+
+
+def methods(model, z: torch.Tensor) -> dict:
+    return {"predict": lambda: model.predict(z), "vmap(jacfwd)": lambda: NetModel._jacobian(model, z),
+            "forward_and_jacobian": lambda: model.jacobian(z),
+            "forward differences": lambda: forward_differences(model, z)}
+
+
+def medians(fns: dict, repeats: int) -> dict[str, float]:
+    for fn in fns.values():
+        fn()
+    times = {name: [] for name in fns}
+    for _ in range(repeats):
+        for name, fn in fns.items():
+            start = time.perf_counter()
+            fn()
+            times[name].append(time.perf_counter() - start)
+    return {name: statistics.median(t) for name, t in times.items()}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--decoder", default=None, help="a saved pixel decoder directory (default: an untrained one)")
+    parser.add_argument("--batches", type=int, nargs="+", default=[1, 2, 8])
+    parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--repeats", type=int, default=200)
+    args = parser.parse_args()
+    torch.set_num_threads(args.threads)
+    model = load_model(args.decoder) if args.decoder else lean_decoder()
+    gen = torch.Generator().manual_seed(1)
+    print(f"{'B':>3} {'method':<22} {'ms':>8} {'vs jacfwd':>10} {'vs predict':>11} {'max rel. diff':>14}")
+    for b in args.batches:
+        z = model.body.from_unit(torch.rand(b, model.latent_dim, generator=gen) * 2 - 1)   # (B, Dz) rad, float32
+        fns = methods(model, z)
+        ms = {k: 1e3 * v for k, v in medians(fns, args.repeats).items()}
+        reference = NetModel._jacobian(model, z)
+        scale = float(reference.abs().max())
+        for name, t in ms.items():
+            diff = "" if name == "predict" else f"{float((fns[name]() - reference).abs().max()) / scale:14.1e}"
+            print(f"{b:>3} {name:<22} {t:8.2f} {ms['vmap(jacfwd)'] / t:9.1f}x {t / ms['predict']:10.1f}x {diff}")
+
+
+if __name__ == "__main__":
+    main()
