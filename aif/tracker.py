@@ -188,13 +188,13 @@ class Tracker:
         obs, command, dt = self._check_frame(as_inputs(observations), as_input(command), dt)
         b = next(iter(obs.values())).shape[0]
         predicted = self._predicted(command, dt)                             # (B, Dz) or None: acquire
-        timings, steps, evaluations = {}, self._budgeted_steps(), 0
+        timings, steps, evaluations, guess = {}, self._budgeted_steps(), 0, None
         if predicted is None:
             mu, free = predicted, torch.full((b,), torch.inf, dtype=torch.float64)
         else:
             tick = time.perf_counter()
             if self.proposes:
-                predicted = self._proposed(obs, predicted)
+                predicted, guess = self._proposed(obs, predicted)
                 evaluations += PROPOSAL_EVALUATIONS * b
             result = self._run(steps).infer(obs, predicted)
             timings["perceive"] = 1e3 * (time.perf_counter() - tick)
@@ -204,7 +204,7 @@ class Tracker:
         restart = ~torch.isfinite(free) if self.threshold is None else ~(free <= self.threshold)
         if restart.any():
             tick = time.perf_counter()
-            mu, free, extra = self._restarted(obs, mu, free, predicted, restart)
+            mu, free, extra = self._restarted(obs, mu, free, predicted, restart, guess)
             timings["restart"] = 1e3 * (time.perf_counter() - tick)
             evaluations += extra
         lost = ~torch.isfinite(free) if self.threshold is None else ~(free <= self.threshold)
@@ -261,13 +261,14 @@ class Tracker:
             mu = mu + 0.5 * dt ** 2 * u[:, 2]
         return self._clamp(mu)
 
-    def _proposed(self, obs, predicted) -> torch.Tensor:
-        """Per stream the lower-F start of the predicted belief and the encoder's guess (B, Dz) rad."""
+    def _proposed(self, obs, predicted) -> tuple[torch.Tensor, torch.Tensor]:
+        """Per stream the lower-F start of the predicted belief and the encoder's guess, and the guess (a restart of
+        this frame reuses it). → (B, Dz), (B, Dz) rad"""
         guess = self._clamp(self.encoder.encode(obs["image"]).to(torch.float64))          # (B, Dz) rad
         twice = {m: torch.cat([x, x]) for m, x in obs.items()}
         both = self.perception.free_energy(twice, torch.cat([predicted, guess]))          # (2B,)
         worse = ~(both[len(guess):] < both[:len(guess)])                                  # NaN-safe: predicted wins
-        return torch.where(worse[:, None], predicted, guess)
+        return torch.where(worse[:, None], predicted, guess), guess
 
     def _budgeted_steps(self) -> int:
         """The updates of this frame: the evaluation budget, cut to the millisecond budget once a cost is known."""
@@ -288,15 +289,19 @@ class Tracker:
                                                                     record=False))
         return self._runs[steps]
 
-    def _restarted(self, obs, mu, free, predicted, rows_mask):
+    def _restarted(self, obs, mu, free, predicted, rows_mask, guess=None):
         """Restart the streams in rows_mask from the encoder's guess or several starts; per stream the lower F of
-        the restart and its tracked belief. → (μ, F, evaluations)."""
+        the restart and its tracked belief. guess: this frame's encoder guess (B, Dz) rad, else None (asked here).
+        From the guess, not from the lower F of it and the frame's belief: from the belief, the lower in most
+        restarts, the restart stays in its local basin (measured, nao_arm 30 Hz: 1.96° against 1.84° mean error).
+        → (μ, F, evaluations)."""
         rows = torch.nonzero(rows_mask).squeeze(-1)
         sub = {name: x[rows] for name, x in obs.items()}
         run = self._restarts
         if self.restart == "encoder":
-            guess = self._clamp(self.encoder.encode(sub["image"]).to(torch.float64))      # (b, Dz) rad
-            result = run.infer(sub, guess)
+            start = guess[rows] if guess is not None else \
+                self._clamp(self.encoder.encode(sub["image"]).to(torch.float64))          # (b, Dz) rad
+            result = run.infer(sub, start)
             new_mu, new_free, evaluations = result.mu, torch.where(result.diverged, torch.inf, result.F), \
                 result.evaluations
         else:

@@ -128,6 +128,24 @@ def test_the_encoders_proposal_catches_a_jump_on_its_frame_without_a_restart():
     assert ((mu[6:] - q[6:]).abs().amax(-1) < 5 * DEG).all()
 
 
+class CountingEncoder(GridEncoder):
+    calls = 0
+
+    def encode(self, images):
+        self.calls += 1
+        return super().encode(images)
+
+
+def test_a_restart_reuses_its_frames_encoder_guess():
+    image = ToyBlobImage()
+    q = trajectory(6, 3, seed=5)
+    encoder = CountingEncoder(image)
+    tracker = Tracker([image], TrackerConfig(budget=4, lost_threshold=-1e12), encoder)   # every frame is lost
+    tracker.reset(q[0])
+    _, restarted = run(tracker, q, image)
+    assert restarted.all() and encoder.calls == len(q), "one encoder call per frame: proposal and restart share it"
+
+
 def test_the_first_frame_is_acquired_by_a_restart():
     image = ToyBlobImage()
     q = trajectory(5, 3, seed=4)
