@@ -201,7 +201,8 @@ def run_tracking(config: TrackingConfig = TrackingConfig(), models: Sequence | N
     rows, curves = measure(config, models, robot, encoder)
     wall = time.perf_counter() - start
     folder = new_run(config)
-    paths = report.write_all(folder, rows, curves, report.notes(config, robot, models, wall), config.plots)
+    paths = report.write_all(folder, rows, curves, report.notes(config, robot, models, wall), config.plots,
+                             report.title(robot, models, encoder))
     publish(config, folder, "tracking", {**table_metrics(rows, _label), "wall_s": wall}, paths, models)
     return paths
 

@@ -96,21 +96,30 @@ def notes(config, robot, models, wall: float) -> list[str]:
             f"network_share in % of it. Run wall time {wall:.0f} s."]
 
 
+def title(robot, models, encoder) -> str:
+    """What the plot shows, for a reader who sees only the picture: robot, models (kind and size), encoder."""
+    def name(m):
+        size = getattr(m, "size", None)
+        return f"{m.kind} {m.modality}" + (f" ({size})" if size else "")
+    seen = " + ".join(name(m) for m in models)
+    return f"{robot.name}: {seen}" + (" + image encoder" if encoder is not None else "")
+
+
 def write_all(folder: Path, rows: Sequence[Mapping], curves: Sequence[Mapping], lines: Sequence[str],
-              plots: bool = True) -> dict[str, Path]:
-    """summary.csv, curves.csv, summary.md and (plots) error_vs_time.png in folder."""
+              plots: bool = True, heading: str = "") -> dict[str, Path]:
+    """summary.csv, curves.csv, summary.md and (plots) error_vs_time.png, titled `heading`, in folder."""
     paths = {"summary_csv": write_csv(rows, folder / "summary.csv"),
              "curves_csv": write_csv(curves, folder / "curves.csv"), "summary_md": folder / "summary.md"}
     table = markdown_table(display(rows), COLUMNS, "case", digits=3)
     paths["summary_md"].write_text("# Tracking\n\n" + table + "\n" + "\n\n".join(lines) + "\n")
     if plots:
-        paths["error_vs_time"] = plot_error_vs_time(curves, folder / "error_vs_time.png")
+        paths["error_vs_time"] = plot_error_vs_time(curves, folder / "error_vs_time.png", heading)
     return paths
 
 
-def plot_error_vs_time(curves: Sequence[Mapping], path: Path) -> Path:
-    """Mean joint error vs time per method, one panel per rate × condition; the tracker's lost-track restarts (▼) and
-    the frames where some stream went off track (×, any method's colour) marked."""
+def plot_error_vs_time(curves: Sequence[Mapping], path: Path, heading: str = "") -> Path:
+    """Mean joint error vs time per method, one panel per rate × condition (frame rate in its title); the tracker's
+    lost-track restarts (▼) and the frames where some stream went off track (×, any method's colour) marked."""
     from bodyschema.evaluation.core.plots import plt, save_figure
     rates = sorted({c["rate_hz"] for c in curves})
     conds = list(dict.fromkeys(c["condition"] for c in curves))
@@ -131,10 +140,11 @@ def plot_error_vs_time(curves: Sequence[Mapping], path: Path) -> Path:
                 restart = np.array([c["restarts"] > 0 for c in pts], bool)
                 ax.plot(t[restart], np.full(restart.sum(), 0.05), "v", ms=5, color=colours[method])
         ax.set_yscale("log")
-        ax.set_title(f"{rate:g} Hz · {cond}", fontsize=9)
+        ax.set_title(f"{rate:g} Hz camera · {cond}", fontsize=9)
         ax.set_xlabel("time (s)")
         if j == 0:
             ax.set_ylabel("mean |joint error| (deg)")
     axes[0][0].legend(fontsize=7)
-    fig.suptitle("Error vs time (mean over streams); × a stream lost track, ▼ the tracker restarted", fontsize=9)
+    fig.suptitle(f"{heading + chr(10) if heading else ''}Joint error vs time (mean over streams); × a stream lost "
+                 "track (hand > lost_mm off), ▼ the tracker restarted", fontsize=9)
     return save_figure(fig, path, dpi=110)
