@@ -8,7 +8,7 @@ apart (equal F, e.g. elbow-up and elbow-down under an end-effector sensor), no s
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import torch
@@ -56,3 +56,33 @@ def infer_multistart(perception: Perception, observations: Mapping[str, torch.Te
                               None if res.trajectory is None else
                               {k: v[:, idx] for k, v in res.trajectory.items()})
     return MultiStartResult(picked, chosen, screen_F, first.evaluations + final.evaluations)
+
+
+def lowest_free_energy(results: Sequence[PerceptionResult]) -> tuple[PerceptionResult, torch.Tensor]:
+    """Per trial, the result of lowest final F among results of the same B trials from different starts (a diverged
+    trial counts as F = inf), e.g. the level's own start and an encoder's guess, each run to convergence apart.
+    → (the picked result, evaluations summed over all; its trajectory, if recorded, the picked start's column padded
+    with NaN to the longest), (B,) index of the picked result per trial."""
+    free = torch.stack([torch.where(r.diverged, torch.inf, r.F) for r in results])   # (S, B)
+    chosen = free.argmin(dim=0)                                                       # (B,)
+    rows = torch.arange(free.shape[1])
+
+    def pick(name):
+        return torch.stack([getattr(r, name) for r in results])[chosen, rows]
+
+    trajectory = None
+    if all(r.trajectory is not None for r in results):
+        steps = max(len(r.trajectory["F"]) for r in results)
+        trajectory = {name: _padded([r.trajectory[name] for r in results], steps)[chosen, :, rows].movedim(0, 1)
+                      for name in results[0].trajectory}                          # (T, B, ...)
+    picked = PerceptionResult(pick("mu"), pick("mu_tilde"), pick("steps"), pick("converged"), pick("diverged"),
+                              pick("diverged_step"), pick("F"), sum(r.evaluations for r in results), trajectory)
+    return picked, chosen
+
+
+def _padded(rows: Sequence[torch.Tensor], steps: int) -> torch.Tensor:
+    """Trajectories (T_s, B, ...) NaN-padded to `steps` and stacked. → (S, steps, B, ...)"""
+    out = torch.full((len(rows), steps, *rows[0].shape[1:]), float("nan"), dtype=rows[0].dtype)
+    for s, r in enumerate(rows):
+        out[s, :len(r)] = r
+    return out

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from bodyschema.aif.multistart import infer_multistart
+from bodyschema.aif.multistart import infer_multistart, lowest_free_energy
 from bodyschema.aif.perception import Perception
 from bodyschema.aif.perception_config import METHODS, FlowSettings, PerceptionConfig
 from bodyschema.datagen.samplers import uniform
@@ -37,6 +37,7 @@ from bodyschema.evaluation.core.seeds import eval_rng
 from bodyschema.evaluation.core.specs import load_robot, models_field, on_device, resolve_encoder, resolve_models
 from bodyschema.evaluation.levels import report as level_report
 from bodyschema.evaluation.levels.plain import PLAIN_LABEL, PLAIN_STEPS, PlainPixelAIF
+from bodyschema.evaluation.levels.pool import map_runs
 from bodyschema.evaluation.levels.recorded import RecordedTargets, plain_verdict
 from bodyschema.evaluation.levels.targets import initial_beliefs, make_targets
 
@@ -79,6 +80,8 @@ class LevelsConfig(PerceptionRunConfig):
     encoder: str | None = None         # an image encoder spec (kind "encoder"): extra "+enc" rows start from its guess
     targets: Path | None = None        # a store (e.g. imported): score its recorded frames instead of rendering
     plain_steps: int = PLAIN_STEPS     # --targets with an image model: Euler steps of the plain Pixel-AIF row (0: off)
+    workers: int = 1                   # processes the runs are spread over (torch threads split among them); on 2
+                                       # cores 2–3 beat one process with 2 threads (bench/levels_speed.py)
 
     def __post_init__(self):
         super().__post_init__()
@@ -109,35 +112,59 @@ def levels_update(config: PerceptionRunConfig) -> PerceptionConfig:
 # ---- one level ----------------------------------------------------------------------------------------
 def evaluate_level(perception: Perception, robot, targets, level: int, rng: np.random.Generator,
                    success_deg: float = 1.0, multistart: int = 0, screen_steps: int = 20, keep: int = 2,
-                   encoder=None):
+                   encoder=None, shared: dict | None = None):
     """Infer every target from its level-`level` belief; returns (metrics row, per-trial arrays, result).
 
     encoder: an image encoder; its estimate from the target images is a start. Level 3 (the belief knows nothing
     of the pose): the start, the level's own one becoming the second multi-start seed. Levels 1–2 (the belief is
-    near the pose): a second start beside the level's own; both run to convergence and the lower F wins."""
-    models = perception.models
-    obs = targets.tensors([m.modality for m in models if m.modality not in _broken(perception)])
+    near the pose): a second start beside the level's own; both run to convergence and the lower F wins.
+    shared: one dict for the calls of one run (same targets, each level's rng drawn afresh from the same seed): the
+    encoder's guess and the inference from each start are computed once and reused by every row that starts there
+    ("1" and "1+enc" share the level's start, every "+enc" row the guess's). A row's evaluations and wall time are
+    those of the inferences its result needed, reused or not."""
+    shared = {} if shared is None else shared
+    obs = targets.tensors([m.modality for m in perception.models if m.modality not in _broken(perception)])
     mu0 = initial_beliefs(level, targets.q, robot.sampling_ranges, rng)   # (N, Dq) rad
-    start = time.perf_counter()
     label = str(level) + ("+enc" if encoder is not None else "") + ("+ms" if multistart else "")
-    seeds = [mu0]
-    if encoder is not None:
-        low, high = robot.sampling_ranges.T
-        guess = np.clip(encoder.encode(targets.observations["image"]).double().numpy(), low, high)
-        seeds = [guess, mu0] if level == 3 else [mu0, guess]
-        mu0 = seeds[0]
-        if level != 3 and not multistart:
-            multistart, screen_steps, keep = 2, 1, 2                     # both starts refined, the lower F wins
+    guess = None if encoder is None else _encoder_start(shared, encoder, robot, targets)
     if multistart:
+        start = time.perf_counter()
+        seeds = [mu0] if guess is None else [guess, mu0]
         extra = uniform(rng, robot.sampling_ranges, len(mu0) * max(multistart - len(seeds), 0))
         starts = np.concatenate([s[:, None] for s in seeds] + [extra.reshape(len(mu0), -1, mu0.shape[1])],
                                 axis=1)[:, :multistart]                    # (N, S, Dq) rad
         ms = infer_multistart(perception, obs, torch.from_numpy(starts), screen_steps, keep)
-        result, evaluations = ms.result, ms.evaluations
+        result, evaluations, wall = ms.result, ms.evaluations, time.perf_counter() - start
     else:
+        runs = [] if guess is not None and level == 3 else [_inferred(shared, level, perception, obs, mu0)]
+        if guess is not None:
+            runs.append(_inferred(shared, "encoder", perception, obs, guess))
+        result = runs[0][0] if len(runs) == 1 else lowest_free_energy([r for r, _ in runs])[0]
+        evaluations, wall = result.evaluations, sum(w for _, w in runs)
+    return (*_scored(perception.models, robot, targets, label, result, evaluations, wall, success_deg), result)
+
+
+def _encoder_start(shared: dict, encoder, robot, targets) -> np.ndarray:
+    """The encoder's guess from the target images, clipped to the sampling box; once per run. # (N, Dq) rad"""
+    if "guess" not in shared:
+        start = time.perf_counter()
+        low, high = robot.sampling_ranges.T
+        shared["guess"] = np.clip(encoder.encode(targets.observations["image"]).double().numpy(), low, high)
+        shared["guess_s"] = time.perf_counter() - start
+    return shared["guess"]
+
+
+def _inferred(shared: dict, key, perception: Perception, obs, mu0: np.ndarray):
+    """(result, wall s) of inferring from mu0, the start named `key` in this run; once per run and key."""
+    if key not in shared:
+        start = time.perf_counter()
         result = perception.infer(obs, torch.from_numpy(mu0))
-        evaluations = result.evaluations
-    wall = time.perf_counter() - start
+        shared[key] = result, time.perf_counter() - start + (shared.get("guess_s", 0.0) if key == "encoder" else 0)
+    return shared[key]
+
+
+def _scored(models, robot, targets, label: str, result, evaluations: int, wall: float, success_deg: float):
+    """The metrics row of a level's final beliefs and its per-trial arrays (deg, mm)."""
     mu = result.mu.numpy()                                                 # (N, Dq) rad
     err = np.rad2deg(np.abs(mu - targets.q))                               # (N, Dq) deg
     mean_err = err.mean(axis=1)
@@ -156,7 +183,7 @@ def evaluate_level(perception: Perception, robot, targets, level: int, rng: np.r
         with torch.no_grad():
             pred = image.predict(result.mu.to(torch.float32)).double()
         row["image_mse"] = float((pred - torch.from_numpy(targets.observations["image"])).pow(2).mean())
-    return row, {"mean_err_deg": mean_err, "ee_err_mm": ee_mm}, result
+    return row, {"mean_err_deg": mean_err, "ee_err_mm": ee_mm}
 
 
 def _broken(perception: Perception) -> set[str]:
@@ -184,46 +211,67 @@ def run_levels(config: LevelsConfig = LevelsConfig(), models: Sequence | None = 
 
 
 def measure_levels(config: LevelsConfig, models: Sequence) -> tuple[LevelsSummary, dict[str, np.ndarray]]:
-    """The levels × runs of config on resolved models, nothing written: (summary, F(t) curves per level)."""
+    """The levels × runs of config on resolved models, nothing written: (summary, F(t) curves per level, first
+    run). Runs are independent (seeded by their index): with config.workers > 1 they are spread over processes."""
     from tqdm import tqdm
-    recorded = None if config.targets is None else RecordedTargets(config.targets, models, config.encoder is not None)
-    robot = load_robot(models, config.image_size) if recorded is None else recorded.body
-    if recorded is not None:
-        recorded.check_enough(config.trials, config.runs)
+    robot, recorded = _setting(config, models)
     encoder = resolve_encoder(config.encoder, robot, config.tracking_uri)
     on_device(models + ([encoder] if encoder else []), config.device)
-    perception = Perception(models, levels_update(config))
-    has_image = any(m.modality == "image" for m in models) or encoder is not None
+    workers = min(config.workers, config.runs)
+    done = (map_runs(measure_run, config, models, encoder, workers) if workers > 1 else
+            (measure_run(config, models, encoder, run, robot, recorded) for run in range(config.runs)))
     rows, per_trial, curves = [], {}, {}
-    jobs = [(run, level, ms, enc) for run in range(config.runs) for level in config.levels
-            for enc in ((False, True) if encoder else (False,))
-            for ms in ((0, config.multistart) if level == 3 and config.multistart else (0,))]
-    targets = None
-    for run, level, ms, enc in tqdm(jobs, desc="levels", disable=not config.progress or len(jobs) < 2):
-        if targets is None or targets[0] != run:
-            noise_rng = eval_rng(config.seed, run, "noise")
-            targets = (run, make_targets(robot, config.trials, eval_rng(config.seed, run, "targets"), has_image,
-                                         dict(config.noise), noise_rng) if recorded is None else
-                       recorded.run(run, config.trials, dict(config.noise), noise_rng))
-        rng = eval_rng(config.seed, run, "beliefs", level)                 # same μ0 with and without multi-start
-        start = time.perf_counter()
-        row, trial, result = evaluate_level(perception, robot, targets[1], level, rng, config.success_deg, ms,
-                                            config.screen_steps, config.keep, encoder if enc else None)
-        _log.debug("run %d level %s%s%s: %d trials, %.2f s", run, level, f" multistart {ms}" if ms else "",
-                   " +encoder" if enc else "", config.trials, time.perf_counter() - start)
-        rows.append({"run": run, **row})
-        per_trial.setdefault(row["level"], []).append(trial["mean_err_deg"])
-        if result.trajectory is not None and not ms and row["level"] not in curves:   # ms: refinement only
-            curves[row["level"]] = result.trajectory["F"].numpy()          # (T, N), first run
-        if recorded is not None and not ms and not enc and config.plain_steps and \
-                any(m.modality == "image" for m in models):              # the reference row, same frames and μ0
-            plain, trial, _ = evaluate_level(PlainPixelAIF(models, level, config.plain_steps), robot, targets[1],
-                                             level, eval_rng(config.seed, run, "beliefs", level), config.success_deg)
-            rows.append({"run": run, **plain, "level": f"{level} {PLAIN_LABEL}"})
-            per_trial.setdefault(rows[-1]["level"], []).append(trial["mean_err_deg"])
+    for run_rows, run_trials, run_curves in tqdm(done, desc="levels runs", total=config.runs,
+                                                 disable=not config.progress or config.runs < 2):
+        rows += run_rows
+        for label, errors in run_trials:
+            per_trial.setdefault(label, []).append(errors)
+        curves = curves or run_curves
     summary = LevelsSummary(rows, level_report.aggregate(rows), {k: np.concatenate(v) for k, v in per_trial.items()},
                             targets=None if recorded is None else recorded.lineage())
     return summary, curves
+
+
+def _setting(config: LevelsConfig, models: Sequence):
+    """(robot, recorded targets or None) of a levels run: the models' simulated robot, or a store's body."""
+    recorded = None if config.targets is None else RecordedTargets(config.targets, models, config.encoder is not None)
+    if recorded is not None:
+        recorded.check_enough(config.trials, config.runs)
+    return (load_robot(models, config.image_size) if recorded is None else recorded.body), recorded
+
+
+def measure_run(config: LevelsConfig, models: Sequence, encoder, run: int, robot=None, recorded=None):
+    """Every level row of run `run`: (rows, [(level label, (N,) mean error deg)], F(t) curves if run 0). Each start
+    is inferred once (evaluate_level's `shared`); only run 0 records trajectories (the curves plot run 0)."""
+    if robot is None:
+        robot, recorded = _setting(config, models)
+    perception = Perception(models, replace(levels_update(config), record=config.perception.record and run == 0))
+    noise_rng = eval_rng(config.seed, run, "noise")
+    has_image = any(m.modality == "image" for m in models) or encoder is not None
+    targets = make_targets(robot, config.trials, eval_rng(config.seed, run, "targets"), has_image,
+                           dict(config.noise), noise_rng) if recorded is None else \
+        recorded.run(run, config.trials, dict(config.noise), noise_rng)
+    rows, per_trial, curves, shared = [], [], {}, {}
+    jobs = [(level, ms, enc) for level in config.levels for enc in ((False, True) if encoder else (False,))
+            for ms in ((0, config.multistart) if level == 3 and config.multistart else (0,))]
+    for level, ms, enc in jobs:
+        rng = eval_rng(config.seed, run, "beliefs", level)                 # same μ0 with and without multi-start
+        start = time.perf_counter()
+        row, trial, result = evaluate_level(perception, robot, targets, level, rng, config.success_deg, ms,
+                                            config.screen_steps, config.keep, encoder if enc else None, shared)
+        _log.debug("run %d level %s%s%s: %d trials, %.2f s", run, level, f" multistart {ms}" if ms else "",
+                   " +encoder" if enc else "", config.trials, time.perf_counter() - start)
+        rows.append({"run": run, **row})
+        per_trial.append((row["level"], trial["mean_err_deg"]))
+        if result.trajectory is not None and not ms:                       # ms: refinement only
+            curves[row["level"]] = result.trajectory["F"].numpy()          # (T, N)
+        if recorded is not None and not ms and not enc and config.plain_steps and \
+                any(m.modality == "image" for m in models):              # the reference row, same frames and μ0
+            plain, trial, _ = evaluate_level(PlainPixelAIF(models, level, config.plain_steps), robot, targets,
+                                             level, eval_rng(config.seed, run, "beliefs", level), config.success_deg)
+            rows.append({"run": run, **plain, "level": f"{level} {PLAIN_LABEL}"})
+            per_trial.append((rows[-1]["level"], trial["mean_err_deg"]))
+    return rows, per_trial, curves
 
 
 def noise_sweep(config: PerceptionRunConfig, modality: str, sigmas: Sequence[float], level: int = 2,
