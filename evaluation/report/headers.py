@@ -14,6 +14,11 @@ import re
 NAMES = {
     "all_joints_2deg": "all joints within 2°",
     "evaluations_per_trial": "evaluations per trial",
+    "evaluations_per_frame": "evaluations per frame",
+    "ms_median": "median time per frame (ms)",
+    "ms_p95": "p95 time per frame (ms)",
+    "network_share": "network share (%)",
+    "recovered_share": "share of lost events recovered",
     "fpr_at_tpr95": "FPR at 95 % TPR",
     "t95_s": "time to a 95 % decision (s)",
     "t_auc95_s": "time to AUC 0.95 (s)",

@@ -2,11 +2,12 @@
 section shows (only those the section accepted: never a stale or outside file).
 
 levels: mean joint error per level; robustness: joint error at the largest noise and with the worst broken sensor;
-reaching: AIF vs PD success; loop robustness: success at the largest noise and with the worst broken sensor;
-adaptation: error after the gravity switch per controller (Jupiter), the fraction of the marker shift corrected
-(marker shift); self-recognition: the pooled AUC; rubber hand: drift after synchronous vs asynchronous stroking;
-agency: the pooled AUC of own vs imposed movements at each delay. A benchmark without a rule here, or a run whose
-CSV lacks a column, gets a line that says so: the headline never hides a section.
+tracking: per frame rate and sensing condition, the tracker's mean joint error beside the other methods', its time
+per frame and lost-track events; reaching: AIF vs PD success; loop robustness: success at the largest noise and with
+the worst broken sensor; adaptation: error after the gravity switch per controller (Jupiter), the fraction of the
+marker shift corrected (marker shift); self-recognition: the pooled AUC; rubber hand: drift after synchronous vs
+asynchronous stroking; agency: the pooled AUC of own vs imposed movements at each delay. A benchmark without a rule
+here, or a run whose CSV lacks a column, gets a line that says so: the headline never hides a section.
 """
 
 from __future__ import annotations
@@ -104,6 +105,25 @@ def robustness(section: Section) -> str:
             f"{fmt(number(worst, 'joint_err_deg'), '°')}")
 
 
+def tracking(section: Section) -> str:
+    table = rows(section, "summary.csv")
+    cases = {}
+    for r in table:
+        cases.setdefault((cell(r, "rate_hz"), cell(r, "condition")), []).append(r)
+    return " · ".join(_tracked(rate, condition, mine) for (rate, condition), mine in cases.items())
+
+
+def _tracked(rate: str, condition: str, mine: list[dict[str, str]]) -> str:
+    """One rate and condition: the tracker's error, time per frame and lost track, the other methods' errors."""
+    tracker = next((r for r in mine if r.get("method") == "tracker"), None)
+    if tracker is None:
+        raise NoFigure(f"summary.csv lacks the tracker row at {rate} Hz, {condition}")
+    others = ", ".join(f"{cell(r, 'method')} {fmt(number(r, 'joint_err_deg'), '°')}" for r in mine if r is not tracker)
+    return (f"{rate} Hz, {condition}: tracker {fmt(number(tracker, 'joint_err_deg'), '°')} mean joint error"
+            f"{f' ({others})' if others else ''}, {fmt(1e3 * number(tracker, 'wall_s_frame_median'), 'ms')} per frame "
+            f"(median), {int(number(tracker, 'lost_events'))} lost-track events")
+
+
 def reaching(section: Section) -> str:
     by_controller = {r.get("controller", "").lower(): r for r in rows(section, "summary.csv")}
     if not {"aif", "pd"} <= by_controller.keys():
@@ -169,6 +189,7 @@ def agency(section: Section) -> str:
 
 
 RULES: dict[str, Callable[[Section], str]] = {
-    "levels": levels, "robustness": robustness, "reaching": reaching, "loop_robustness": loop_robustness,
+    "levels": levels, "robustness": robustness, "tracking": tracking, "reaching": reaching,
+    "loop_robustness": loop_robustness,
     "adaptation/jupiter": jupiter, "adaptation/marker_shift": marker_shift, "self_recognition": self_recognition,
     "rubber_hand": rubber_hand, "agency": agency}

@@ -1,6 +1,6 @@
 """Which benchmark a report section is, and where it goes: sections follow the pipeline as the README tells it (data →
-models → levels → robustness → reaching → adaptation → self-recognition → rubber hand → agency), then any other
-benchmark A→Z.
+models → levels → robustness → tracking → reaching → adaptation → self-recognition → rubber hand → agency), then any
+other benchmark A→Z.
 
 A run names its benchmark in its run.json (the config class, looked up in the registry), whatever folder `--out`
 chose; a run older than run.json by its folder's name, a variant's folder included (the demo's `levels_gpr`,
@@ -11,9 +11,11 @@ from __future__ import annotations
 
 from bodyschema.evaluation import registry
 
-# Closed-loop robustness (`loop_robustness`) is reaching under noise: it follows reaching, which it needs a reader
-# to know. `data` and `models`: plain folders holding a summary.md of the first stages, should a user add them.
-PIPELINE = ("data", "models", "levels", "robustness", "reaching", "loop_robustness", "adaptation",
+# Tracking is perception over a stream: it follows the levels (perception of one frame) and their robustness, before
+# the loop closes. Closed-loop robustness (`loop_robustness`) is reaching under noise: it follows reaching, which it
+# needs a reader to know. `data` and `models`: plain folders holding a summary.md of the first stages, should a user
+# add them.
+PIPELINE = ("data", "models", "levels", "robustness", "tracking", "reaching", "loop_robustness", "adaptation",
             "self_recognition", "rubber_hand", "agency")
 
 

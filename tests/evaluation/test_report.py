@@ -275,9 +275,9 @@ def test_sections_of_benchmarks_and_robots_follow_the_pipeline(tmp_path):
     reaching_run(results / "reaching", "panda", 0.0, 1.0)
     reaching_run(results / "reaching", "nao_arm", 0.0, 1.0)
     text = write_report(ReportConfig(results=results))["markdown"].read_text()
-    assert section_names(text) == ["levels", "levels_gpr", "robustness", "reaching · nao_arm", "reaching · panda",
-                                   "loop_robustness", "adaptation / jupiter", "self_recognition", "rubber_hand",
-                                   "agency", "tracking"]
+    assert section_names(text) == ["levels", "levels_gpr", "robustness", "tracking", "reaching · nao_arm",
+                                   "reaching · panda", "loop_robustness", "adaptation / jupiter", "self_recognition",
+                                   "rubber_hand", "agency"]
 
 
 # ---- the summary: one line per section with its key figure ------------------------------------------------------
@@ -293,6 +293,22 @@ def test_the_summary_has_one_line_per_section_with_its_key_figure(results):
     assert lines["reaching"] == "key figure unavailable (no number in column success)", "an older CSV"
     assert lines["robustness"] == "key figure unavailable (no noise_sweep.csv)"
     assert lines["zeta"] == "no key figure defined for this benchmark: see its section"
+
+
+def test_the_tracking_line_gives_the_trackers_error_time_and_lost_track_beside_the_other_methods(tmp_path):
+    results = tmp_path / "results"
+    write_benchmark(results, "tracking")
+    header = "rate_hz,condition,method,joint_err_deg,lost_events,wall_s_frame_median\n"
+    table = [("30", "image", "encoder", 9.5, 0, 0.001), ("30", "image", "flow", 4.25, 3, 0.004),
+             ("30", "image", "tracker", 2.5, 1, 0.0125), ("60", "image", "tracker", 1.75, 0, 0.01)]
+    (results / "tracking" / "summary.csv").write_text(header + "".join(",".join(map(str, r)) + "\n" for r in table))
+    line = summary_lines(write_report(ReportConfig(results=results))["markdown"].read_text())["tracking"]
+    assert line == ("30 Hz, image: tracker 2.5° mean joint error (encoder 9.5°, flow 4.25°), 12.5 ms per frame "
+                    "(median), 1 lost-track events · 60 Hz, image: tracker 1.75° mean joint error, 10 ms per frame "
+                    "(median), 0 lost-track events")
+    (results / "tracking" / "summary.csv").write_text(header + "30,image,flow,4.25,3,0.004\n")
+    line = summary_lines(write_report(ReportConfig(results=results))["markdown"].read_text())["tracking"]
+    assert line == "key figure unavailable (summary.csv lacks the tracker row at 30 Hz, image)"
 
 
 # ---- readable headers ---------------------------------------------------------------------------------------
