@@ -59,6 +59,8 @@ class TrackerConfig:
     # levels (Adam then LM with an image model: monotone in F, where undamped Gauss–Newton steps may bounce; measured
     # on nao_arm at 30 Hz: 1.7° mean joint error against 2.1° with Gauss–Newton restarts; 10 steps as good as 30)
     restart_starts: int = 8         # multistart: starts per lost stream (tracked, predicted, uniform draws)
+    settle_quantile: float | None = None   # with proposals: a stream whose start's F is already below this
+    # quantile of F at the calibration truths skips the frame's updates (its start is as good as a typical truth)
     proposals: bool = True          # with an encoder and an image model its guess competes with the predicted belief
     # every frame, the lower F starting the updates (2 F evaluations of the budget): a babbling arm moves up to ~20°
     # between frames at 30 Hz, farther than an image F's basin around the predicted pose
@@ -77,6 +79,8 @@ class TrackerConfig:
             raise ValueError(must_be("motion_gain", "in (0, 1]", self.motion_gain))
         if self.lost_threshold is not None and not math.isfinite(self.lost_threshold):
             raise ValueError(must_be("lost_threshold", "a finite free energy or None", self.lost_threshold))
+        if self.settle_quantile is not None and not 0 < self.settle_quantile < 1:
+            raise ValueError(must_be("settle_quantile", "in (0, 1) or None", self.settle_quantile))
         if not 0 < self.lost_quantile < 1 or not self.lost_slack >= 0:
             raise ValueError(must_be("lost_quantile, lost_slack", "in (0, 1) and ≥ 0",
                                      (self.lost_quantile, self.lost_slack)))
@@ -137,6 +141,7 @@ class Tracker:
         if self.restart == "encoder" and (encoder is None or "image" not in self._modalities):
             raise ValueError(must_be("restart", "'multistart' without an encoder and an image model", "encoder"))
         self.threshold = config.lost_threshold
+        self.settled: float | None = None       # F of a start good enough to skip a frame's updates (`calibrate`)
         self._runs: dict[int, Perception] = {}
         self._restarts = self.perception.with_config(replace(config.restart_perception, record=False))
         self.reset()
@@ -179,6 +184,8 @@ class Tracker:
                                      "Calibrate on frames the models explain (training frames)."))
         top = float(np.quantile(free, self.config.lost_quantile))
         self.threshold = top + self.config.lost_slack * (top - float(np.median(free)))
+        if self.config.settle_quantile is not None:
+            self.settled = float(np.quantile(free, self.config.settle_quantile))
         return self.threshold
 
     def step(self, observations, command=None, dt: float | None = None):
@@ -193,13 +200,13 @@ class Tracker:
             mu, free = predicted, torch.full((b,), torch.inf, dtype=torch.float64)
         else:
             tick = time.perf_counter()
+            mu, free = predicted, torch.full((b,), torch.inf, dtype=torch.float64)
             if self.proposes:
-                predicted, guess = self._proposed(obs, predicted)
+                mu, guess, free = self._proposed(obs, predicted)
                 evaluations += PROPOSAL_EVALUATIONS * b
-            result = self._run(steps).infer(obs, predicted)
+            mu, free, spent = self._perceived(obs, mu, free, steps)
             timings["perceive"] = 1e3 * (time.perf_counter() - tick)
-            mu, free = result.mu, torch.where(result.diverged, torch.inf, result.F)
-            evaluations += result.evaluations
+            evaluations += spent
             self._learn_cost(timings["perceive"], evaluations / b)
         restart = ~torch.isfinite(free) if self.threshold is None else ~(free <= self.threshold)
         if restart.any():
@@ -261,14 +268,28 @@ class Tracker:
             mu = mu + 0.5 * dt ** 2 * u[:, 2]
         return self._clamp(mu)
 
-    def _proposed(self, obs, predicted) -> tuple[torch.Tensor, torch.Tensor]:
-        """Per stream the lower-F start of the predicted belief and the encoder's guess, and the guess (a restart of
-        this frame reuses it). → (B, Dz), (B, Dz) rad"""
+    def _proposed(self, obs, predicted) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Per stream the lower-F start of the predicted belief and the encoder's guess, the guess (a restart of
+        this frame reuses it) and F at the start. → (B, Dz), (B, Dz) rad, (B,)"""
+        b = len(predicted)
         guess = self._clamp(self.encoder.encode(obs["image"]).to(torch.float64))          # (B, Dz) rad
         twice = {m: torch.cat([x, x]) for m, x in obs.items()}
         both = self.perception.free_energy(twice, torch.cat([predicted, guess]))          # (2B,)
-        worse = ~(both[len(guess):] < both[:len(guess)])                                  # NaN-safe: predicted wins
-        return torch.where(worse[:, None], predicted, guess), guess
+        worse = ~(both[b:] < both[:b])                                                    # NaN-safe: predicted wins
+        return torch.where(worse[:, None], predicted, guess), guess, torch.where(worse, both[:b], both[b:])
+
+    def _perceived(self, obs, start, start_free, steps: int) -> tuple[torch.Tensor, torch.Tensor, int]:
+        """The frame's updates from start (B, Dz) rad, for the streams whose F there (B,) is not settled already.
+        → (μ (B, Dz), F (B,), evaluations)"""
+        moving = torch.ones(len(start), dtype=torch.bool) if self.settled is None else ~(start_free <= self.settled)
+        if not moving.any():
+            return start, start_free, 0
+        rows = torch.nonzero(moving).squeeze(-1)
+        sub = obs if moving.all() else {m: x[rows] for m, x in obs.items()}
+        result = self._run(steps).infer(sub, start[rows])
+        mu, free = start.clone(), start_free.clone()
+        mu[rows], free[rows] = result.mu, torch.where(result.diverged, torch.inf, result.F)
+        return mu, free, result.evaluations
 
     def _budgeted_steps(self) -> int:
         """The updates of this frame: the evaluation budget, cut to the millisecond budget once a cost is known."""

@@ -154,15 +154,17 @@ def test_the_first_frame_is_acquired_by_a_restart():
     assert restarted[0].all() and (mu[-1] - q[-1]).abs().max() < 2 * DEG
 
 
-@pytest.mark.parametrize("proposals", [False, True], ids=["restarts", "proposals"])
-def test_batched_streams_equal_each_stream_alone(proposals):
+@pytest.mark.parametrize("proposals,settle", [(False, None), (True, None), (True, 0.5)],
+                         ids=["restarts", "proposals", "settled"])
+def test_batched_streams_equal_each_stream_alone(proposals, settle):
     image, joints = ToyBlobImage(), ToyJoints(precision=10.0)
     q = trajectory(12, 3, seed=5)
     q[6:, 1] += 0.8                                                          # stream 1 jumps: a restart in the mix
     calibration = trajectory(20, 2, seed=6).reshape(-1, 2)
 
     def fused_run(poses):
-        tracker = Tracker([image, joints], TrackerConfig(budget=4, proposals=proposals), GridEncoder(image))
+        config = TrackerConfig(budget=4, proposals=proposals, settle_quantile=settle)
+        tracker = Tracker([image, joints], config, GridEncoder(image))
         tracker.calibrate({"image": seen(image, calibration, NOISE), "joints": calibration + 0.01}, calibration)
         tracker.reset(poses[0])
         restarts = []
@@ -206,6 +208,23 @@ def test_a_bad_frame_raises_naming_it_and_leaves_the_state_unchanged(case):
     assert tracker.frames == 3
 
 
+def test_a_settled_start_skips_the_updates_and_loses_nothing_on_a_still_arm():
+    image = ToyBlobImage()
+    q = trajectory(1, 4, seed=7).expand(8, 4, 2)                             # the arm holds still
+    calibration = trajectory(50, 4, seed=3).reshape(-1, 2)
+    evaluations, errors = {}, {}
+    for settle in (None, 0.9):
+        tracker = Tracker([image], TrackerConfig(budget=4, settle_quantile=settle), GridEncoder(image),
+                          limits=ELBOW_BENT)
+        tracker.calibrate({"image": seen(image, calibration, NOISE, seed=9)}, calibration)
+        tracker.reset(q[0])
+        mu, _ = run(tracker, q, image, sigma=NOISE)
+        evaluations[settle] = tracker.last.evaluations
+        errors[settle] = float((mu[-1] - q[-1]).abs().mean() / DEG)
+    assert 2 <= evaluations[0.9] < evaluations[None], "a settled stream spends only the proposal's 2 evaluations"
+    assert errors[0.9] <= errors[None], errors   # still: updates only jitter at the noise floor (0.4° vs 1.1°)
+
+
 def test_bad_configs_raise():
     arm = ToyPlanarArm()
     with pytest.raises(ValueError, match="perception.order must be"):
@@ -214,6 +233,8 @@ def test_bad_configs_raise():
         Tracker([arm], TrackerConfig(perception=PerceptionConfig(method="adam+lm"), budget=4))
     with pytest.raises(ValueError, match="restart must be 'multistart'"):
         Tracker([arm], TrackerConfig(restart="encoder"))
+    with pytest.raises(ValueError, match="settle_quantile must be"):
+        TrackerConfig(settle_quantile=1.0)
     with pytest.raises(ValueError, match="mu0 must be"):
         Tracker([arm]).reset(torch.zeros(2, 3))
 
