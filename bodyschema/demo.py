@@ -41,18 +41,19 @@ class DemoConfig:
     n_small: int = 512                 # planar2 and panda samples: shows they work, kept cheap
     workers: int = 2                   # one per core of the reference machine
     pixel_epochs: int = 30             # pixel decoder epochs: a recognisable arm, not a converged decoder
-    encoder_epochs: int = 20           # image encoder epochs: at 10 its guesses (14° off) left the pixel levels 0.8°
-    # above the decoder's floor, at 20 (10° off) every level lands on it (measured on the demo's 2048 images)
+    # Measured on the demo's 2048 images (the pixel decoder's floor 6.6°): encoder guesses 14° off (10 epochs) left
+    # the +enc levels 0.8° above it, 10° off (20 epochs) put every level on it.
+    encoder_epochs: int = 20           # image encoder epochs: its guess starts the +enc levels and tracking's restarts
     trials: int = 100                  # per level and run with the GPR (the full benchmark uses 500 × 5 runs)
-    pixel_trials: int = 50             # per level with the pixel decoder: ~100 decoder evaluations per trial and
-    # row, and the encoder doubles the rows; 50 trials keep the mean within ~0.5° of 100's (its spread is the floor's)
-    runs: int = 1
+    # The pixel decoder costs ~100 evaluations per trial and row, and the encoder doubles the rows: half the GPR's.
+    pixel_trials: int = 50             # per level and run with the pixel decoder (and its +enc rows)
+    runs: int = 1                      # level runs with different targets (the full benchmark uses 5)
     streams: int = 2                   # tracking: babbling streams followed from the camera at 30 Hz
-    stream_seconds: float = 5.0        # s per stream: ~150 frames each, a few restarts and their recoveries
+    stream_seconds: float = 5.0        # tracking: s per stream (~150 frames each)
     reach_targets: int = 20            # closed-loop reaching episodes (the benchmark default is 100)
-    episodes: int = 15                 # self-recognition episodes per condition (self, 6 imitator delays, 2nd arm);
-    # 15, not 25: its time went to the encoder and tracking; 25 gave AUC 1 at every delay ≥ 50 ms and 0.80 at 0 ms
-    seed: int = 0
+    # 15 episodes, not 25: their time went to the encoder and tracking (25 gave AUC 1 at every imitator delay ≥ 50 ms).
+    episodes: int = 15                 # self-recognition episodes per condition (self, 6 imitator delays, 2nd arm)
+    seed: int = 0                      # every stage's seed: the same flags give the same datasets, models and tables
     tracking_uri: str | None = None    # None: $MLFLOW_TRACKING_URI, else sqlite:///<cwd>/mlflow.db
 
 
