@@ -7,8 +7,8 @@ import math
 import pytest
 import torch
 
-from bodyschema.aif.multistart import infer_multistart
-from bodyschema.aif.perception import Perception
+from bodyschema.aif.multistart import infer_multistart, lowest_free_energy
+from bodyschema.aif.perception import Perception, PerceptionConfig
 from tests.aif.toys import ToyJoints, planar_poses
 from tests.toy_models import ToyPlanarArm
 
@@ -37,3 +37,24 @@ def test_bad_starts_raise():
         infer_multistart(perception, {"ee_xyz": torch.zeros(2, 3, dtype=torch.float64)}, torch.zeros(2, 2))
     with pytest.raises(ValueError, match="keep must be"):
         infer_multistart(perception, {"ee_xyz": torch.zeros(2, 3, dtype=torch.float64)}, torch.zeros(2, 3, 2), keep=4)
+
+
+def test_lowest_free_energy_picks_per_trial_the_start_of_lower_F_and_counts_both_starts_work():
+    arm = ToyPlanarArm()
+    q = planar_poses(40, seed=0)
+    obs = {"ee_xyz": arm.predict(q)}
+    perception = Perception([arm], PerceptionConfig(record=True))
+    near, far = perception.infer(obs, q + 0.05), perception.infer(obs, planar_poses(40, seed=1))
+    picked, chosen = lowest_free_energy([near, far])
+    assert torch.equal(picked.F, torch.minimum(near.F, far.F))
+    for name in ("mu", "steps", "converged"):
+        assert torch.equal(getattr(picked, name), torch.where(
+            (chosen == 0).reshape(-1, *[1] * (getattr(near, name).ndim - 1)), getattr(near, name),
+            getattr(far, name))), name
+    assert picked.evaluations == near.evaluations + far.evaluations
+    steps = max(len(near.trajectory["F"]), len(far.trajectory["F"]))
+    assert picked.trajectory["F"].shape == (steps, 40) and picked.trajectory["mu"].shape[:2] == (steps, 40)
+    i = int(chosen.nonzero()[0]) if chosen.any() else 0
+    own = (near, far)[int(chosen[i])].trajectory["F"][:, i]
+    assert torch.equal(picked.trajectory["F"][:len(own), i].nan_to_num(-1), own.nan_to_num(-1))
+    assert picked.trajectory["F"][len(own):, i].isnan().all()

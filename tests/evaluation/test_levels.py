@@ -12,7 +12,13 @@ from bodyschema.aif.perception import Perception
 from bodyschema.aif.perception_config import FlowSettings, PerceptionConfig
 from bodyschema.evaluation.core.seeds import eval_rng
 from bodyschema.evaluation.core.specs import load_robot
-from bodyschema.evaluation.levels.benchmark import LevelsConfig, broken_sweep, evaluate_level, noise_sweep, run_levels
+from bodyschema.evaluation.levels.benchmark import (
+    LevelsConfig,
+    broken_sweep,
+    evaluate_level,
+    noise_sweep,
+    run_levels,
+)
 from bodyschema.evaluation.levels.report import plot_sweep
 from bodyschema.evaluation.levels.targets import OFFSET_DEG, initial_beliefs, make_targets
 from bodyschema.models import analytic
@@ -193,3 +199,25 @@ def test_cuda_without_cuda_is_the_house_error(planar2_xyz, tmp_path):
     config = LevelsConfig(levels=(1,), trials=4, runs=1, device="cuda", mlflow=False, plots=False, out=tmp_path)
     with pytest.raises(ValueError, match="device must be"):
         run_levels(config, models=[planar2_xyz])
+
+
+def test_each_start_is_inferred_once_per_run_and_the_encoder_rows_count_the_work_of_both(planar2_xyz, planar2,
+                                                                                       tmp_path, monkeypatch):
+    from bodyschema.evaluation.levels import benchmark
+    spec = _encoder("planar2", planar2.image_size, tmp_path)
+    calls, infer = [], Perception.infer
+
+    def counted(self, obs, mu0, goal=None):
+        calls.append(len(mu0))
+        return infer(self, obs, mu0, goal)
+
+    monkeypatch.setattr(Perception, "infer", counted)
+    config = LevelsConfig(trials=6, runs=2, multistart=0, encoder=spec, mlflow=False, plots=False, out=tmp_path / "o")
+    summary, _ = benchmark.measure_levels(config, [planar2_xyz])
+    assert len(calls) == 2 * 4, "per run: levels 1, 2, 3 and the encoder's guess, each once"
+    for run in (0, 1):
+        row = {r["level"]: r for r in summary.rows if r["run"] == run}
+        for level in (1, 2):
+            assert row[f"{level}+enc"]["evaluations_per_trial"] == pytest.approx(
+                row[str(level)]["evaluations_per_trial"] + row["3+enc"]["evaluations_per_trial"])
+
