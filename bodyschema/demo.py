@@ -64,7 +64,7 @@ def run_demo(config: DemoConfig) -> None:
     trained = clock("train", _train, config, stores["nao_arm"])
     gpr = f"models:/{trained['gpr'].registered_name}@champion"
     clock("levels (GPR)", _evaluate, config, gpr, "gpr")
-    decoder = clock("levels (pixel)", _evaluate_pixel, config, trained["pixel"], trained["encoder"])
+    decoder = clock("levels (pixel)", _evaluate_pixel, config, trained)
     clock("tracking", _track, config, decoder, _version_uri(trained["encoder"]))
     clock("reaching and self-recognition", _act, config, gpr)
     clock("rubber hand and agency", _body_and_agency, config, gpr)
@@ -205,21 +205,41 @@ def _evaluate(config: DemoConfig, uri: str, kind: str, models=None, encoder: str
     print("plots:", ", ".join(str(p) for k, p in summary.paths.items() if str(p).endswith(".png")))
 
 
-def _evaluate_pixel(config: DemoConfig, decoder_run, encoder_run):
+def _evaluate_pixel(config: DemoConfig, trained: dict):
     """The pixel decoder's levels, from the level's starts and from the encoder's guess ("+enc"), then what they are:
     how the decoder was trained, its floor (started at the truth) and the README's recipe. → the loaded decoder."""
     from bodyschema.evaluation.core.specs import resolve_models
 
-    uri = _version_uri(decoder_run)
+    uri = _version_uri(trained["pixel"])
     decoder = resolve_models((uri,), (), config.tracking_uri)
-    _evaluate(config, uri, "pixel", decoder, _version_uri(encoder_run))
-    floor = decoder_floor(_levels_config(config, uri, "pixel"), decoder)
-    (epochs, images), encoder_epochs = _fit_size(decoder_run, config.tracking_uri), len(_history(encoder_run))
-    print(f"The pixel decoder above: {epochs} epochs on {images} images in {decoder_run.metrics['fit_seconds']:.0f} s "
-          f"of fitting. Its floor, perception started at the true pose of the same targets: {floor:.2f}° mean "
-          f"(no start ends closer: the decoder's own error); the +enc rows start from the {encoder_epochs}-"
-          f"epoch encoder's guess. More images and epochs lower the floor: {RECIPE}.")
+    _evaluate(config, uri, "pixel", decoder, _version_uri(trained["encoder"]))
+    print(_models_section(config, trained, decoder_floor(_levels_config(config, uri, "pixel"), decoder)))
     return decoder[0]
+
+
+def _models_section(config: DemoConfig, trained: dict, floor: float) -> str:
+    """The report's "models" section (results/models: summary.md, models.csv): each trained model's samples, epochs,
+    fit seconds and held-out error, and what the pixel decoder is. → that note on the pixel decoder."""
+    from bodyschema.evaluation.core.tables import markdown_table, write_csv
+    from bodyschema.training.registry import use_tracking
+
+    client = use_tracking(config.tracking_uri)
+    rows = {kind: {"model": f"{r.registered_name} v{r.model_version}",
+                   "train_samples": int(client.get_run(r.run_id).data.params["n_train"]),
+                   **({"epochs": len(_history(r))} if kind != "gpr" else {}),      # a GP has no epochs
+                   "fit_s": r.metrics["fit_seconds"], "val_rmse": r.metrics["val_rmse"],
+                   **({"floor_deg": floor} if kind == "pixel" else {})} for kind, r in trained.items()}
+    pixel = rows["pixel"]
+    note = (f"The pixel decoder: {pixel['epochs']} epochs on {pixel['train_samples']} images in {pixel['fit_s']:.0f} s "
+            f"of fitting. Its floor, perception started at the true pose of its levels' targets: {floor:.2f}° mean "
+            f"joint error (where F's own minimum lies: the levels land there at best); the +enc rows start from the "
+            f"{rows['encoder']['epochs']}-epoch encoder's guess. More images and epochs lower the floor: {RECIPE}.")
+    folder = config.out / "results" / "models"
+    folder.mkdir(parents=True, exist_ok=True)
+    write_csv(list(rows.values()), folder / "models.csv")
+    table = markdown_table(list(rows.values()), ("train_samples", "epochs", "fit_s", "val_rmse", "floor_deg"), "model")
+    (folder / "summary.md").write_text(f"# The demo's models\n\n{table}\n{note}\n")
+    return note
 
 
 def decoder_floor(levels, models) -> float:
@@ -245,13 +265,6 @@ def decoder_floor(levels, models) -> float:
 def _history(result) -> list[str]:
     """The per-epoch lines of a network's fit (its run folder's history.jsonl)."""
     return (result.run_dir / "history.jsonl").read_text().splitlines()
-
-
-def _fit_size(result, tracking_uri: str | None) -> tuple[int, int]:
-    """(epochs run, training images) of a network's fit: its per-epoch history and the run's n_train parameter."""
-    from bodyschema.training.registry import use_tracking
-
-    return len(_history(result)), int(use_tracking(tracking_uri).get_run(result.run_id).data.params["n_train"])
 
 
 def _tracking_config(config: DemoConfig, decoder_uri: str, encoder_uri: str | None = None):

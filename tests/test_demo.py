@@ -2,6 +2,7 @@
 checked before any work (the flags' common bounds: tests/reliability/test_flag_bounds.py)."""
 
 import dataclasses
+import types
 
 import numpy as np
 import pytest
@@ -66,3 +67,28 @@ def test_the_pixel_levels_use_the_encoder_not_multistart_and_the_tracking_episod
     assert (tracking.models, tracking.encoder, tracking.trials, tracking.duration) == (
         ("models:/dec/1",), "models:/enc/1", config.streams, config.stream_seconds)
     assert tracking.out == tmp_path / "results" / "tracking", "its section in the demo's report"
+
+
+def test_the_models_section_says_what_each_trained_model_is_and_the_decoders_floor(tmp_path, monkeypatch):
+    import bodyschema.training.registry as registry
+
+    def trained(kind: str, epochs: int) -> types.SimpleNamespace:
+        run_dir = tmp_path / "runs" / kind
+        run_dir.mkdir(parents=True)
+        (run_dir / "history.jsonl").write_text("{}\n" * epochs)
+        return types.SimpleNamespace(registered_name=f"bodyschema-{kind}", model_version="3", run_id=kind,
+                                     run_dir=run_dir, metrics={"fit_seconds": 12.5, "val_rmse": 0.25})
+
+    runs = {"gpr": types.SimpleNamespace(data=types.SimpleNamespace(params={"n_train": "1500"}))}
+    runs["pixel"] = runs["encoder"] = types.SimpleNamespace(data=types.SimpleNamespace(params={"n_train": "1638"}))
+    monkeypatch.setattr(registry, "use_tracking", lambda uri: types.SimpleNamespace(get_run=runs.__getitem__))
+    config = demo.DemoConfig(out=tmp_path / "demo")
+    note = demo._models_section(config, {"gpr": trained("gpr", 0), "pixel": trained("pixel", 30),
+                                         "encoder": trained("encoder", 20)}, 2.345)
+    assert "30 epochs on 1638 images in 12 s" in note and "2.35°" in note and "20-epoch encoder" in note
+    assert demo.RECIPE in note
+    folder = tmp_path / "demo" / "results" / "models"
+    text = (folder / "summary.md").read_text()
+    assert "| bodyschema-gpr v3 | 1500 | – |" in text, "a GP has no epochs"
+    assert "| bodyschema-pixel v3 | 1638 | 30 |" in text and text.endswith(note + "\n")
+    assert (folder / "models.csv").read_text().splitlines()[0] == "model,train_samples,fit_s,val_rmse,epochs,floor_deg"

@@ -1,7 +1,8 @@
 """The report's headline: one line per section with the benchmark's key figure, read from the CSVs of the run the
 section shows (only those the section accepted: never a stale or outside file).
 
-levels: mean joint error per level; robustness: joint error at the largest noise and with the worst broken sensor;
+models (a plain folder, the demo's): the floor of each model that has one; levels: mean joint error per level;
+robustness: joint error at the largest noise and with the worst broken sensor;
 tracking: per frame rate and sensing condition, the tracker's mean joint error beside the other methods', its time
 per frame and lost-track events; reaching: AIF vs PD success; loop robustness: success at the largest noise and with
 the worst broken sensor; adaptation: error after the gravity switch per controller (Jupiter), the fraction of the
@@ -28,7 +29,7 @@ class NoFigure(Exception):
 
 def headline(section: Section) -> str:
     """The section's key figure as one line of Markdown (escaped)."""
-    rule = RULES.get(section.benchmark or "")
+    rule = RULES.get(section.benchmark or section.folder_name)       # a plain folder by its name (`models`)
     if rule is None:
         return "no key figure defined for this benchmark: see its section"
     try:
@@ -89,6 +90,15 @@ def percent(fraction: float) -> str:
 
 
 # ---- one rule per benchmark -----------------------------------------------------------------------------------
+def models(section: Section) -> str:
+    floors = [r for r in rows(section, "models.csv") if r.get("floor_deg")]
+    if not floors:
+        raise NoFigure("models.csv has no floor_deg")
+    return " · ".join(f"{cell(r, 'model')} ({int(number(r, 'epochs'))} epochs on {int(number(r, 'train_samples'))} "
+                      f"samples): floor {fmt(number(r, 'floor_deg'), '°')} mean joint error, started at the truth"
+                      for r in floors)
+
+
 def levels(section: Section) -> str:
     table = rows(section, "summary.csv")
     per_level = " · ".join(f"L{cell(r, 'level')} {fmt(number(r, 'joint_err_deg'), '°')}" for r in table)
@@ -189,7 +199,7 @@ def agency(section: Section) -> str:
 
 
 RULES: dict[str, Callable[[Section], str]] = {
-    "levels": levels, "robustness": robustness, "tracking": tracking, "reaching": reaching,
+    "models": models, "levels": levels, "robustness": robustness, "tracking": tracking, "reaching": reaching,
     "loop_robustness": loop_robustness,
     "adaptation/jupiter": jupiter, "adaptation/marker_shift": marker_shift, "self_recognition": self_recognition,
     "rubber_hand": rubber_hand, "agency": agency}

@@ -311,6 +311,15 @@ def test_the_tracking_line_gives_the_trackers_error_time_and_lost_track_beside_t
     assert line == "key figure unavailable (summary.csv lacks the tracker row at 30 Hz, image)"
 
 
+def test_a_plain_models_folder_gets_its_models_floor_as_its_line(tmp_path):
+    results = tmp_path / "results"
+    write_benchmark(results, "models")
+    (results / "models" / "models.csv").write_text("model,train_samples,epochs,floor_deg\ngp v1,1500,,\n"
+                                                   "dec v2,1638,30,2.5\n")
+    line = summary_lines(write_report(ReportConfig(results=results))["markdown"].read_text())["models"]
+    assert line == "dec v2 (30 epochs on 1638 samples): floor 2.5° mean joint error, started at the truth"
+
+
 # ---- readable headers ---------------------------------------------------------------------------------------
 @pytest.mark.parametrize("column, header", [
     ("mean_err_deg", "mean error (°)"), ("joint_err_median_deg", "median joint error (°)"),
