@@ -47,8 +47,8 @@ class TrackerConfig:
     # per frame (order 0): Gauss–Newton steps (local-linear flow) under descent control: a step that raises F is undone
     # and the next one shorter. Measured (nao_arm, 30 Hz, README-recipe decoder and encoder, 20 s): 0.70° mean joint
     # error and 3 % of frames restarted, against 0.86° and 8 % with every undamped step taken (step_control "none")
-    budget: int = 5                 # model evaluations per stream and frame (see the line below)
-    # with an encoder and an image model: its proposal (2) and three descent-controlled steps; else five steps
+    budget: int = 5                 # model evaluations per stream and frame, an encoder proposal's 2 included
+    # (with an encoder and an image model: the proposal and three descent-controlled steps; else five steps)
     budget_ms: float | None = None  # per frame, on top of `budget`; None: off (timing makes runs irreproducible)
     order: int = 1                  # motion of the belief: 0 still, 1 velocity, 2 velocity and acceleration
     motion_gain: float = 0.5        # α of the α-β filter: the share of a frame's finite difference taken into μ'
@@ -61,9 +61,9 @@ class TrackerConfig:
     # against 2.1° on nao_arm at 30 Hz). 3 steps each: a restart costs ≤ 12 evaluations instead of ≤ 24 with 10, and
     # its frame stays near the others' time (measured: 0.86° with 3, 0.84° with 10)
     restart_starts: int = 8         # multistart: starts per lost stream (tracked, predicted, uniform draws)
-    settle_quantile: float | None = 0.5   # no updates where F at the start is below this quantile (see below)
-    # of F at the calibration truths (known from the proposal, so with an encoder and an image model only): a start as
-    # good as a typical truth is not improved by steps that jitter at the noise floor (measured: 12 % fewer
+    settle_quantile: float | None = 0.5   # skip the updates where F at the start < this quantile of F at the truths
+    # of the calibration frames (F at the start is known from the proposal: with an encoder and an image model). A
+    # start as good as a typical truth is not improved by steps that jitter at the noise floor (measured: 12 % fewer
     # evaluations per frame, 0.62° against 0.60° mean joint error); None: every frame is updated
     proposals: bool = True          # with an encoder and an image model its guess competes with the predicted belief
     # every frame, the lower F starting the updates (2 F evaluations of the budget): a babbling arm moves up to ~20°
