@@ -88,6 +88,8 @@ class Followed:
     evaluations: np.ndarray            # (F,) model evaluations per stream, per followed frame (frames 1…)
     ms: np.ndarray                     # (F,) wall ms per stream, per followed frame (F = (T − 1) · streams unbatched)
     network_ms: np.ndarray             # (F,) of which inside the models and the encoder
+    cpu_ms: np.ndarray                 # (F,) CPU ms of the process per stream and frame: the frame's cost without the
+    # other processes of a shared machine (at one torch thread ≈ its wall time on an idle core)
 
 
 # ---- the sensing conditions ----------------------------------------------------------------------------
@@ -122,18 +124,19 @@ def follow(follower, streams: Streams, clock: Clock, rows: Sequence[int]) -> Fol
     mu = np.empty((n, t, q0.shape[1]))
     mu[:, 0] = q0
     restarted = np.zeros((n, t), bool)
-    evaluations, ms, network = (np.zeros(t) for _ in range(3))
+    evaluations, ms, network, cpu = (np.zeros(t) for _ in range(4))
     follower.start(q0)
     for k in range(1, t):
         obs = {m: torch.from_numpy(x) for m, x in streams.frame(k, rows).items()}
         command = torch.from_numpy(streams.qvel[rows, k - 1])
         clock.lap()
-        start = time.perf_counter()
+        start, cpu_start = time.perf_counter(), time.process_time()
         step = follower.frame(obs, command, streams.period)
         ms[k] = 1e3 * (time.perf_counter() - start) / n
+        cpu[k] = 1e3 * (time.process_time() - cpu_start) / n
         network[k] = clock.lap() / n
         mu[:, k], restarted[:, k], evaluations[k] = step.mu, step.restarted, step.evaluations
-    return Followed(mu, restarted, evaluations[1:], ms[1:], network[1:])
+    return Followed(mu, restarted, evaluations[1:], ms[1:], network[1:], cpu[1:])
 
 
 def follow_all(follower, streams: Streams, clock: Clock, batched: bool) -> Followed:
@@ -144,7 +147,7 @@ def follow_all(follower, streams: Streams, clock: Clock, batched: bool) -> Follo
     parts = [follow(follower, streams, clock, [i]) for i in range(n)]
     return Followed(np.concatenate([p.mu for p in parts]), np.concatenate([p.restarted for p in parts]),
                     np.concatenate([p.evaluations for p in parts]), np.concatenate([p.ms for p in parts]),
-                    np.concatenate([p.network_ms for p in parts]))
+                    np.concatenate([p.network_ms for p in parts]), np.concatenate([p.cpu_ms for p in parts]))
 
 
 def measure(config: TrackingConfig, models: Sequence, robot, encoder) -> tuple[list[dict], list[dict]]:

@@ -2,7 +2,9 @@
 track (the hand more than lost_mm off) and its recovery, the method's own restarts, evaluations and time per frame.
 
 Wall-clock columns start with `wall_s` (core.tables: they differ between two runs of one seed): wall_s_frame_median
-and _p95 are s per stream and frame, wall_s_network_share the part of it spent inside the models and the encoder.
+and _p95 are s per stream and frame, wall_s_network_share the part of it spent inside the models and the encoder,
+wall_s_frame_cpu_median and _p95 the process's CPU time per stream and frame (a frame's cost without the load of a
+shared machine; named wall_s_ as every timing column that differs between runs).
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import numpy as np
 from bodyschema.evaluation.core.tables import markdown_table, write_csv
 
 COLUMNS = ("joint_err_deg", "joint_err_median_deg", "ee_err_mm", "off_track_pct", "lost_events", "recovered_share",
-           "restarts", "evaluations_per_frame", "ms_median", "ms_p95", "network_share")
+           "restarts", "evaluations_per_frame", "ms_median", "ms_p95", "cpu_ms_median", "cpu_ms_p95", "network_share")
 
 
 def errors(robot, q: np.ndarray, mu: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -57,6 +59,8 @@ def score(robot, streams, done, lost_mm: float, recovery_frames: int) -> tuple[d
            "restarts": int(done.restarted[:, 1:].sum()), "evaluations_per_frame": float(done.evaluations.mean()),
            "wall_s_frame_median": float(np.median(done.ms)) / 1e3,
            "wall_s_frame_p95": float(np.quantile(done.ms, 0.95)) / 1e3,
+           "wall_s_frame_cpu_median": float(np.median(done.cpu_ms)) / 1e3,
+           "wall_s_frame_cpu_p95": float(np.quantile(done.cpu_ms, 0.95)) / 1e3,
            "wall_s_network_share": float(done.network_ms.sum() / max(done.ms.sum(), 1e-12))}
     onsets = np.zeros_like(off)
     onsets[:, 0] = off[:, 0]
@@ -72,6 +76,7 @@ def display(rows: Sequence[Mapping]) -> list[dict]:
     out = []
     for r in rows:
         d = {**r, "ms_median": 1e3 * r["wall_s_frame_median"], "ms_p95": 1e3 * r["wall_s_frame_p95"],
+             "cpu_ms_median": 1e3 * r["wall_s_frame_cpu_median"], "cpu_ms_p95": 1e3 * r["wall_s_frame_cpu_p95"],
              "network_share": 100 * r["wall_s_network_share"],
              "case": f"{r['rate_hz']:g} Hz · {r['condition']} · {r['method']}"}
         out.append(d)
@@ -92,7 +97,8 @@ def notes(config, robot, models, wall: float) -> list[str]:
             "tracker+command: moved by the joint velocity of the previous frame.",
             f"Off track: the hand > {config.lost_mm:g} mm from the truth; recovered_share: lost events back within "
             f"{config.recovery_frames} frames; restarts: the method's own lost-track detections. ms per stream and "
-            f"frame ({'batched: the batch time / streams' if config.batched else 'one stream at a time'}), "
+            f"frame ({'batched: the batch time / streams' if config.batched else 'one stream at a time'}; cpu_ms: the "
+            f"process's CPU time, the cost without other processes' load), "
             f"network_share in % of it. Run wall time {wall:.0f} s."]
 
 
