@@ -2,7 +2,9 @@
 
 For every run (seeded, held-out targets: targets.py) and level, all trials are inferred in one batch by
 `aif.Perception` over the given models; level 3 is also run with multi-start (aif/multistart.py), and with an image
-encoder every level also starts from its guess ("+enc" rows: see evaluate_level). Metrics per
+encoder every level also starts from its guess ("+enc" rows: see evaluate_level). A run infers from each start once
+(the levels' own and the guess, which the "+enc" rows share); runs are independent and may go to worker processes
+(`workers`, pool.py). Metrics per
 level and run: joint error (deg, per joint and mean), end-effector error (mm, simulator FK at the belief),
 image MSE (with an image model), success rate (mean |joint error| < success_deg), steps, convergence,
 divergence and wall time. Tables, plots (report.py) and one MLflow run with them as artifacts.
