@@ -82,8 +82,7 @@ class LevelsConfig(PerceptionRunConfig):
     encoder: str | None = None         # an image encoder spec (kind "encoder"): extra "+enc" rows start from its guess
     targets: Path | None = None        # a store (e.g. imported): score its recorded frames instead of rendering
     plain_steps: int = PLAIN_STEPS     # --targets with an image model: Euler steps of the plain Pixel-AIF row (0: off)
-    workers: int = 1                   # processes the runs are spread over (torch threads split among them); on 2
-                                       # cores 2–3 beat one process with 2 threads (bench/levels_speed.py)
+    workers: int = 1                   # processes the runs go to, torch threads split among them (2–3 on 2 cores)
 
     def __post_init__(self):
         super().__post_init__()
