@@ -8,7 +8,9 @@ now (a loaded machine gives a longer estimate).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import io
 import resource
 import tempfile
 import time
@@ -46,7 +48,7 @@ def estimate(steps, products: dict[str, str], values: dict[str, str], full_confi
             small, scale = _shrunk(execute.parse(step.command.format(**probe_values, **probe_products)),
                                    full_configs[step.name], full_configs)
             cpu0, wall0 = _cpu(), time.perf_counter()
-            with log.quiet_mlflow():
+            with log.quiet_mlflow(), _silenced():      # the small runs' own lines (MLflow prints to stderr)
                 done = execute.run(small, progress=False)
             cpu, wall = _cpu() - cpu0, time.perf_counter() - wall0
             probe_products[step.name] = done.product
@@ -89,6 +91,12 @@ def _training_rows(train, full_configs: dict) -> float:
     n = made[0].n if made else PROBE_ROWS
     rows = n * (1 - train.val_fraction)
     return min(rows, train.max_train) if train.max_train else rows
+
+
+@contextlib.contextmanager
+def _silenced():
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        yield
 
 
 def _cpu() -> float:
