@@ -1,20 +1,22 @@
 """A README table beside its reproduction: the figures of the table marked `<!-- reproduce: <marker> -->` and the
 same cells computed from a results CSV, with the difference, and whether it lies within the README's stated ±.
 
-A README cell's figure is its first number ("**0.59°** ± 0.01" → 0.59, ± 0.01; "82.7 %" → 82.7); a cell without
-one is skipped.
+A README cell's figures: its parts ("0.003 / 9.8 mm" → two, "72 % (91 % within 1 px)" → two), each part's figure
+its first number ("**0.59°** ± 0.01" → 0.59, ± 0.01; "82.7 %" → 82.7). A part without a figure is shown, not compared.
 """
 
 from __future__ import annotations
 
 import csv
 import re
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
 from bodyschema.errors import must_be
-from bodyschema.reproduce.recipes import Table
+from bodyschema.reproduce.recipes import Part, Row, Table
 
+PARTS = re.compile(r"\s+/\s+|\s+\(")      # "a / b", "a (b)": a cell of several figures
 NUMBER = re.compile(r"[-+]?\d+(?:\.\d+)?(?:e[-+]?\d+)?")
 SPREAD = re.compile(r"±\s*(\d+(?:\.\d+)?)")
 
@@ -58,34 +60,68 @@ def readme_table(readme: Path, marker: str) -> tuple[list[str], list[list[str]]]
 
 
 def figure(cell: str) -> tuple[float | None, float | None]:
-    """A README cell's figure and its ± (None when absent)."""
+    """A README cell's (or part's) figure and its ± (None when absent)."""
     text = cell.replace("*", "").replace("−", "-")
     spread = SPREAD.search(text)
     number = NUMBER.search(SPREAD.sub("", text))
     return (float(number.group()) if number else None), (float(spread.group(1)) if spread else None)
 
 
-def compare(table: Table, readme: Path, results_csv: Path) -> dict[str, dict[str, Cell]]:
-    """README row label → README column → Cell, for the rows and columns the recipe maps."""
+def figures(cell: str, n: int) -> list[tuple[float | None, float | None]]:
+    """The figures of a cell's first `n` parts; (None, None) for a part the cell does not have."""
+    parts = PARTS.split(cell.strip())
+    return [figure(parts[i]) if i < len(parts) else (None, None) for i in range(n)]
+
+
+def readme_row(table: Table, rows: list[list[str]], row: Row) -> list[str]:
+    """The README row whose first cell is `row.readme`, else the first that starts with it."""
+    labels = [r[0].replace("*", "") for r in rows]
+    found = labels.index(row.readme) if row.readme in labels else next(
+        (i for i, label in enumerate(labels) if label.startswith(row.readme)), None)
+    if found is None:
+        raise ValueError(must_be(f"the README table {table.marker!r}", f"a row starting {row.readme!r}", labels,
+                                 "Fix the recipe's rows (bodyschema/reproduce/recipes.py)."))
+    return rows[found]
+
+
+def labels(table: Table) -> list[str]:
+    """The compared cells' names: a column's header, numbered "(k)" when its cells hold several figures."""
+    return [c.readme if len(c.parts) == 1 else f"{c.readme} ({k})" for c in table.columns
+            for k in range(1, len(c.parts) + 1)]
+
+
+def part_location(table: Table, row: Row, part: Part) -> tuple[str, str, str, str]:
+    """(step, csv, key column(s), key) of the CSV value a part of `row` reads."""
+    return (row.step or table.step, part.csv or table.csv, part.key or table.key, part.row.replace("{}", row.key))
+
+
+def compare(table: Table, readme: Path, products: Mapping[str, str]) -> dict[str, dict[str, Cell]]:
+    """README row label → compared cell (`labels`) → Cell; `products` maps each step to its run folder."""
     header, rows = readme_table(readme, table.marker)
-    with open(results_csv, newline="") as f:
-        results = {row[table.key]: row for row in csv.DictReader(f)}
+    missing = [c.readme for c in table.columns if c.readme not in header]
+    if missing:
+        raise ValueError(must_be(f"the README table {table.marker!r}", f"columns {missing}", header))
+    loaded: dict[tuple[str, str, str], dict[str, dict]] = {}
     compared = {}
-    for prefix, key in table.rows:
-        row = next((r for r in rows if r[0].replace("*", "").startswith(prefix)), None)
-        if row is None:
-            raise ValueError(must_be(f"the README table {table.marker!r}", f"a row starting {prefix!r}",
-                                     [r[0] for r in rows], "Fix the recipe's rows (bodyschema/reproduce/recipes.py)."))
-        ours = results.get(key, {})
-        cells = {}
+    for row in table.rows:
+        cells_of_row = readme_row(table, rows, row)
+        values = []
         for column in table.columns:
-            if column.readme not in header:
-                raise ValueError(must_be(f"the README table {table.marker!r}", f"a column {column.readme!r}", header))
-            value, spread = figure(row[header.index(column.readme)])
-            got = ours.get(column.result)
-            cells[column.readme] = Cell(value, spread, float(got) * column.scale if got not in (None, "") else None)
-        compared[row[0]] = cells
+            for part, (value, spread) in zip(column.parts, figures(cells_of_row[header.index(column.readme)],
+                                                                   len(column.parts))):
+                step, name, key, wanted = part_location(table, row, part)
+                if (step, name, key) not in loaded:
+                    loaded[step, name, key] = _results(Path(products[step]) / name, key)
+                got = loaded[step, name, key].get(wanted, {}).get(part.result)
+                values.append(Cell(value, spread, float(got) * part.scale if got not in (None, "") else None))
+        compared[cells_of_row[0]] = dict(zip(labels(table), values))
     return compared
+
+
+def _results(path: Path, key: str) -> dict[str, dict]:
+    """A results CSV's rows by their key: one column's value, or several columns' joined by ","."""
+    with open(path, newline="") as f:
+        return {",".join(r[k] for k in key.split(",")): r for r in csv.DictReader(f)}
 
 
 def markdown(compared: dict[str, dict[str, Cell]]) -> str:
@@ -98,6 +134,8 @@ def markdown(compared: dict[str, dict[str, Cell]]) -> str:
 
 
 def _shown(cell: Cell) -> str:
+    if cell.reproduced is None and cell.readme is None:
+        return "—"
     if cell.reproduced is None:
         return f"{_num(cell.readme)} → (missing)"
     if cell.readme is None:

@@ -114,9 +114,8 @@ def _finish(folder: Path, record: dict, recipes: list[Recipe], readme: Path) -> 
     sections = [f"# Reproduction {folder.name}\n", f"Compared with {readme}. A cell reads README → reproduced "
                 "(difference); ✓/✗ where the README states a ± (the standard deviation over its runs).\n"]
     for recipe in recipes:
-        table = recipe.table
-        results = Path(record["steps"][table.step]["product"]) / table.csv
-        compared = readme_tables.compare(table, readme, results)
+        products = {name: done["product"] for name, done in record["steps"].items()}
+        compared = readme_tables.compare(recipe.table, readme, products)
         sections += [f"## {recipe.name}: {recipe.about}\n", readme_tables.markdown(compared) + "\n",
                      "Commands, and their wall time:\n"]
         sections += [f"- `{record['steps'][s.name]['command']}` ({record['steps'][s.name]['seconds'] / 60:.1f} min)"

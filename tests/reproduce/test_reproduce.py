@@ -11,7 +11,7 @@ import pytest
 
 from bodyschema.reproduce import execute, probe, readme_tables, run as reproduce_run, state
 from bodyschema.reproduce.config import ReproduceConfig
-from bodyschema.reproduce.recipes import RECIPES, Column, Recipe, Step, Table
+from bodyschema.reproduce.recipes import RECIPES, Recipe, Row, Step, Table, column
 
 README = Path(__file__).resolve().parents[2] / "README.md"
 
@@ -21,8 +21,8 @@ TINY = Recipe(
            Step("gp", "train gpr --data {data} --modality ee_xyz --run-root {run}/runs --tracking-uri {tracking}"),
            Step("levels", "evaluate levels --model {gp} --levels 1 --runs 2 --trials 4 --multistart 0 --no-plots "
                           "--out {run}/results/levels --tracking-uri {tracking}")),
-    table=Table(marker="tiny", step="levels", csv="summary.csv", key="level", rows=(("1 (", "1"),),
-                columns=(Column("mean", "joint_err_deg"), Column("evaluations", "evaluations_per_trial")),
+    table=Table(marker="tiny", step="levels", csv="summary.csv", key="level", rows=(Row("1 (", "1"),),
+                columns=(column("mean", "joint_err_deg"), column("evaluations", "evaluations_per_trial")),
                 spread="mean"))
 TINY_README = """# A project
 
@@ -43,26 +43,61 @@ def tiny(tmp_path, monkeypatch):
     return ReproduceConfig(only=("tiny",), out=tmp_path / "out", readme=readme, estimate=False)
 
 
-def test_every_recipe_matches_the_readme_it_reproduces(tmp_path):
-    """Each recipe's marker, rows and columns are in the README, and a results CSV holding the README's own figures
-    compares as zero difference, within its ±."""
-    for recipe in RECIPES.values():
-        header, rows = readme_tables.readme_table(README, recipe.table.marker)
-        fake = tmp_path / f"{recipe.name}.csv"
-        with open(fake, "w", newline="") as f:
-            writer = csv.DictWriter(f, [recipe.table.key, *(c.result for c in recipe.table.columns)])
+def _readme_as_results(table: Table, folder: Path) -> dict[str, str]:
+    """Results CSVs in `folder` holding the README's own figures where the table maps them; step → its folder."""
+    header, rows = readme_tables.readme_table(README, table.marker)
+    csvs: dict[tuple[str, str, str], dict[str, dict]] = {}
+    for row in table.rows:
+        cells = readme_tables.readme_row(table, rows, row)
+        for col in table.columns:
+            for part, (value, _) in zip(col.parts, readme_tables.figures(cells[header.index(col.readme)],
+                                                                            len(col.parts))):
+                step, name, key, wanted = readme_tables.part_location(table, row, part)
+                record = csvs.setdefault((step, name, key), {}).setdefault(wanted, dict(zip(key.split(","),
+                                                                                            wanted.split(","))))
+                record[part.result] = "" if value is None else value / part.scale
+    for (step, name, _), records in csvs.items():
+        (folder / step).mkdir(parents=True, exist_ok=True)
+        fields = list(dict.fromkeys(f for r in records.values() for f in r))
+        with open(folder / step / name, "w", newline="") as f:
+            writer = csv.DictWriter(f, fields)
             writer.writeheader()
-            for prefix, key in recipe.table.rows:
-                row = next(r for r in rows if r[0].replace("*", "").startswith(prefix))
-                writer.writerow({recipe.table.key: key, **{
-                    c.result: readme_tables.figure(row[header.index(c.readme)])[0] / c.scale
-                    for c in recipe.table.columns}})
-        compared = readme_tables.compare(recipe.table, README, fake)
-        assert len(compared) == len(recipe.table.rows)
-        for cells in compared.values():
-            for cell in cells.values():
-                assert cell.difference == pytest.approx(0.0, abs=1e-9)
-            assert cells[recipe.table.spread].within is not False
+            writer.writerows(records.values())
+    return {step: str(folder / step) for step, _, _ in csvs}
+
+
+@pytest.mark.parametrize("name", sorted(RECIPES))
+def test_every_recipe_matches_the_readme_it_reproduces(name, tmp_path):
+    """Each recipe's marker, rows and columns are in the README, its rows distinct, and results CSVs holding the
+    README's own figures compare as zero difference, within its ±."""
+    table = RECIPES[name].table
+    header, rows = readme_tables.readme_table(README, table.marker)
+    found = [readme_tables.readme_row(table, rows, row)[0] for row in table.rows]
+    assert len(set(found)) == len(found)
+    compared = readme_tables.compare(table, README, _readme_as_results(table, tmp_path))
+    assert list(compared) == found
+    figures = [cell for cells in compared.values() for cell in cells.values() if cell.readme is not None]
+    assert figures and all(cell.difference == pytest.approx(0.0, abs=1e-9) for cell in figures)
+    assert all(cell.within is not False for cell in figures)
+    if table.spread:
+        assert all(cells[table.spread].within for cells in compared.values())
+
+
+def test_a_cell_of_several_figures_maps_each_to_its_part():
+    assert readme_tables.figures("0.003 / 9.8 mm", 2) == [(0.003, None), (9.8, None)]
+    assert readme_tables.figures("**72 %** (91 % within 1 px)", 2) == [(72.0, None), (91.0, None)]
+    assert readme_tables.figures("92 mm", 2) == [(92.0, None), (None, None)]
+    assert readme_tables.figures("2.8 ± 1.1 cm", 1) == [(2.8, 1.1)]
+
+
+def test_every_recipe_step_has_one_command_and_every_table_step_is_made_by_its_recipe():
+    """A shared step (the decoder) is the same command in every recipe that names it."""
+    commands = {}
+    for recipe in RECIPES.values():
+        for step in recipe.steps:
+            assert commands.setdefault(step.name, step.command) == step.command
+        made = {step.name for step in recipe.steps}
+        assert {row.step or recipe.table.step for row in recipe.table.rows} <= made
 
 
 def test_every_recipe_command_parses_with_the_cli(tmp_path):
