@@ -75,11 +75,11 @@ def figures(cell: str, n: int) -> list[tuple[float | None, float | None]]:
 
 def readme_row(table: Table, rows: list[list[str]], row: Row) -> list[str]:
     """The README row whose first cell is `row.readme`, else the first that starts with it."""
-    labels = [r[0].replace("*", "") for r in rows]
-    found = labels.index(row.readme) if row.readme in labels else next(
-        (i for i, label in enumerate(labels) if label.startswith(row.readme)), None)
+    firsts = [r[0].replace("*", "") for r in rows]
+    found = firsts.index(row.readme) if row.readme in firsts else next(
+        (i for i, first in enumerate(firsts) if first.startswith(row.readme)), None)
     if found is None:
-        raise ValueError(must_be(f"the README table {table.marker!r}", f"a row starting {row.readme!r}", labels,
+        raise ValueError(must_be(f"the README table {table.marker!r}", f"a row starting {row.readme!r}", firsts,
                                  "Fix the recipe's rows (bodyschema/reproduce/recipes.py)."))
     return rows[found]
 
@@ -101,21 +101,29 @@ def compare(table: Table, readme: Path, products: Mapping[str, str]) -> dict[str
     missing = [c.readme for c in table.columns if c.readme not in header]
     if missing:
         raise ValueError(must_be(f"the README table {table.marker!r}", f"columns {missing}", header))
-    loaded: dict[tuple[str, str, str], dict[str, dict]] = {}
+    read = _reader(products)
     compared = {}
     for row in table.rows:
-        cells_of_row = readme_row(table, rows, row)
-        values = []
-        for column in table.columns:
-            for part, (value, spread) in zip(column.parts, figures(cells_of_row[header.index(column.readme)],
-                                                                   len(column.parts))):
-                step, name, key, wanted = part_location(table, row, part)
-                if (step, name, key) not in loaded:
-                    loaded[step, name, key] = _results(Path(products[step]) / name, key)
-                got = loaded[step, name, key].get(wanted, {}).get(part.result)
-                values.append(Cell(value, spread, float(got) * part.scale if got not in (None, "") else None))
-        compared[cells_of_row[0]] = dict(zip(labels(table), values))
+        cells = readme_row(table, rows, row)
+        values = [Cell(value, spread, read(part, *part_location(table, row, part)))
+                  for column in table.columns
+                  for part, (value, spread) in zip(column.parts, figures(cells[header.index(column.readme)],
+                                                                         len(column.parts)))]
+        compared[cells[0]] = dict(zip(labels(table), values))
     return compared
+
+
+def _reader(products: Mapping[str, str]):
+    """read(part, step, csv, key column(s), key): the part's value in the README's unit, None where the results
+    have none; each CSV is read once."""
+    loaded: dict[tuple[str, str, str], dict[str, dict]] = {}
+
+    def read(part: Part, step: str, name: str, key: str, wanted: str) -> float | None:
+        if (step, name, key) not in loaded:
+            loaded[step, name, key] = _results(Path(products[step]) / name, key)
+        got = loaded[step, name, key].get(wanted, {}).get(part.result)
+        return float(got) * part.scale if got not in (None, "") else None
+    return read
 
 
 def _results(path: Path, key: str) -> dict[str, dict]:

@@ -194,3 +194,13 @@ def test_a_missing_marker_and_an_unknown_run_are_the_house_error(tmp_path):
         readme_tables.readme_table(readme, "levels")
     with pytest.raises(FileNotFoundError, match="--run-id must be a reproduce run folder"):
         state.load(tmp_path / "no-such-run")
+
+
+@pytest.mark.parametrize("change, words", [
+    (dict(rows=(Row("9 (", "9"),)), "must be a row starting '9 ('"),
+    (dict(columns=(column("max", "joint_err_deg"),)), r"must be columns \['max'\]"),
+])
+def test_a_recipe_naming_what_the_readme_lacks_is_the_house_error(tiny, change, words):
+    table = dataclasses.replace(TINY.table, **change)
+    with pytest.raises(ValueError, match=words):
+        readme_tables.compare(table, tiny.readme, {})
