@@ -129,9 +129,12 @@ def _tracked(rate: str, condition: str, mine: list[dict[str, str]]) -> str:
     if tracker is None:
         raise NoFigure(f"summary.csv lacks the tracker row at {rate} Hz, {condition}")
     others = ", ".join(f"{cell(r, 'method')} {fmt(number(r, 'joint_err_deg'), '°')}" for r in mine if r is not tracker)
+    # CPU ms beside the wall ms where the run has them: a shared machine's load inflates only the wall
+    cpu = (f", {fmt(1e3 * number(tracker, 'wall_s_frame_cpu_median'), 'ms')} of CPU"
+           if tracker.get("wall_s_frame_cpu_median") else "")
     return (f"{rate} Hz, {condition}: tracker {fmt(number(tracker, 'joint_err_deg'), '°')} mean joint error"
             f"{f' ({others})' if others else ''}, {fmt(1e3 * number(tracker, 'wall_s_frame_median'), 'ms')} per frame "
-            f"(median), {int(number(tracker, 'lost_events'))} lost-track events")
+            f"(median{cpu}), {int(number(tracker, 'lost_events'))} lost-track events")
 
 
 def reaching(section: Section) -> str:

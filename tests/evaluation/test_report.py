@@ -306,6 +306,11 @@ def test_the_tracking_line_gives_the_trackers_error_time_and_lost_track_beside_t
     assert line == ("30 Hz, image: tracker 2.5° mean joint error (encoder 9.5°, flow 4.25°), 12.5 ms per frame "
                     "(median), 1 lost-track events · 60 Hz, image: tracker 1.75° mean joint error, 10 ms per frame "
                     "(median), 0 lost-track events")
+    cpu = "rate_hz,condition,method,joint_err_deg,lost_events,wall_s_frame_median,wall_s_frame_cpu_median\n"
+    (results / "tracking" / "summary.csv").write_text(cpu + "30,image,tracker,2.5,1,0.04,0.0105\n")
+    line = summary_lines(write_report(ReportConfig(results=results))["markdown"].read_text())["tracking"]
+    assert line == ("30 Hz, image: tracker 2.5° mean joint error, 40 ms per frame (median, 10.5 ms of CPU), "
+                    "1 lost-track events")
     (results / "tracking" / "summary.csv").write_text(header + "30,image,flow,4.25,3,0.004\n")
     line = summary_lines(write_report(ReportConfig(results=results))["markdown"].read_text())["tracking"]
     assert line == "key figure unavailable (summary.csv lacks the tracker row at 30 Hz, image)"
