@@ -197,7 +197,7 @@ def test_a_missing_marker_and_an_unknown_run_are_the_house_error(tmp_path):
 
 
 @pytest.mark.parametrize("change, words", [
-    (dict(rows=(Row("9 (", "9"),)), "must be a row starting '9 ('"),
+    (dict(rows=(Row("9 (", "9"),)), r"must be a row starting '9 \('"),
     (dict(columns=(column("max", "joint_err_deg"),)), r"must be columns \['max'\]"),
 ])
 def test_a_recipe_naming_what_the_readme_lacks_is_the_house_error(tiny, change, words):
