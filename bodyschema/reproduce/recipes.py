@@ -168,12 +168,15 @@ IMITATOR_DELAYS = (("imitator d = 0", "0.00"), ("0.05 s", "0.05"), ("0.1 s", "0.
 SELF_RECOGNITION = Recipe(
     name="self-recognition",
     about="is this me? nao_arm, 100 episodes per condition, 20 frames of 0.05 s, seed 0: the exact ee_pixel model "
-          "and the levels' pixel decoder (README: Self-recognition)",
+          "and the levels' pixel decoder, with its former per-frame start (README: Self-recognition)",
     steps=(NAO_DATA, DECODER,
            _benchmark("self_exact", "evaluate self-recognition --model analytic:nao_arm:ee_pixel --no-plots"),
-           _benchmark("self_decoder", "evaluate self-recognition --model {decoder} --no-plots")),
+           _benchmark("self_decoder", "evaluate self-recognition --model {decoder} --no-plots"),
+           _benchmark("self_decoder_before", "evaluate self-recognition --model {decoder} --start previous "
+                                             "--update flow --no-plots")),
     table=Table(marker="self-recognition", step="self_exact", csv="summary.csv", key="comparison",
-                rows=(Row("exact (", step="self_exact"), Row("pixel decoder (`dec_hand`", step="self_decoder")),
+                rows=(Row("exact (", step="self_exact"), Row("pixel decoder (`dec_hand`", step="self_decoder"),
+                      Row("pixel decoder, before", step="self_decoder_before")),
                 columns=(column("AUC pooled", "auc", row="pooled"),
                          *(column(header, "auc", row=f"imitator_{d}s") for header, d in IMITATOR_DELAYS),
                          column("second arm", "auc", row="second_arm"),
