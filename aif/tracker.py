@@ -61,11 +61,11 @@ class TrackerConfig:
     # against 2.1° on nao_arm at 30 Hz). 3 steps each: a restart costs ≤ 12 evaluations instead of ≤ 24 with 10, and
     # its frame stays near the others' time (measured: 0.86° with 3, 0.84° with 10)
     restart_starts: int = 8         # multistart: starts per lost stream (tracked, predicted, uniform draws)
-    settle_quantile: float | None = 0.75  # skip the updates where F at the start < this quantile of F at the truths
+    settle_quantile: float | None = 0.5   # skip the updates where F at the start < this quantile of F at the truths
     # of the calibration frames (F at the start is known from the proposal: with an encoder and an image model). A
-    # start as good as a typical truth is not improved by steps that jitter at the noise floor (measured, 30 s at
-    # 30 Hz: 0.74° mean joint error with 0.5, 0.75 and 0.9; 4.56, 4.30, 4.15 evaluations per frame); None: every frame
-    # is updated (0.60° against 0.62° with 0.5 on 20 s, 12 % more evaluations)
+    # start as good as a typical truth is not improved by steps that jitter at the noise floor. Measured on nao_arm at
+    # 30 Hz: None 0.60°, 0.5 0.62° (20 s; 12 % fewer evaluations); 0.75 saves 6 % more but lost 0.04° and the 3-frame
+    # recovery on bench/tracking.py's 60 s (0.98° vs 0.94°, longest lost track 12 vs 3 frames)
     proposals: bool = True          # with an encoder and an image model its guess competes with the predicted belief
     # every frame, the lower F starting the updates (2 F evaluations of the budget): a babbling arm moves up to ~20°
     # between frames at 30 Hz, farther than an image F's basin around the predicted pose
