@@ -112,7 +112,8 @@ def _run_step(step: Step, values: dict, products: dict, folder: Path, record: di
 
 def _finish(folder: Path, record: dict, recipes: list[Recipe], readme: Path) -> Path:
     sections = [f"# Reproduction {folder.name}\n", f"Compared with {readme}. A cell reads README → reproduced "
-                "(difference); ✓/✗ where the README states a ± (the standard deviation over its runs).\n"]
+                "(difference); ✓/✗ where the README states a ± (its spread: over runs for the levels, over "
+                "episodes for the rubber hand).\n"]
     for recipe in recipes:
         products = {name: done["product"] for name, done in record["steps"].items()}
         compared = readme_tables.compare(recipe.table, readme, products)
