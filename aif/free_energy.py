@@ -14,6 +14,7 @@ too, so no VJP is spent on top of it.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
@@ -111,7 +112,9 @@ def sensory_terms(models: Sequence[SensoryModel], observations: Mapping[str, tor
         n_out = x[0].numel()
         small = n_out <= jacobian_max_outputs
         jac = m.jacobian(z).to(mu.dtype) if small and need_grad else None  # (B, O, Dz)
-        eps = (x - m.predict(z).to(mu.dtype)).reshape(b, n_out)            # (B, O) ε = x − g(μ)
+        fused = not small and need_grad and not need_hessian and hasattr(m, "predict_and_vjp")
+        pred, vjp = m.predict_and_vjp(z) if fused else (m.predict(z), functools.partial(m.vjp, z))   # fused: 1 forward
+        eps = (x - pred.to(mu.dtype)).reshape(b, n_out)                    # (B, O) ε = x − g(μ)
         pi = pi.reshape(b, n_out)
         pe = pi * eps                                                      # (B, O) Π ε
         jt_pe = None                                                       # (B, Dz) Jᵀ Π ε
@@ -121,7 +124,7 @@ def sensory_terms(models: Sequence[SensoryModel], observations: Mapping[str, tor
         if need_grad:
             if jt_pe is None:
                 jt_pe = torch.einsum("bod,bo->bd", jac, pe) if small else \
-                    m.vjp(z, pe.reshape(x.shape).to(z.dtype)).to(mu.dtype)
+                    vjp(pe.reshape(x.shape).to(z.dtype)).to(mu.dtype)
             grad -= jt_pe                                                  # −Jᵀ Π ε
             if varies:                                                     # + (∂Π/∂μ)ᵀ (½ε² − ½Π⁻¹)
                 w = 0.5 * eps.pow(2) - 0.5 * torch.where(pi > 0, 1.0 / pi.clamp_min(1e-300), torch.zeros_like(pi))
