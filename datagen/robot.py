@@ -88,6 +88,18 @@ class Robot:
         self._chain = HingeChain(model, self._site)
         self._camera_pose()
 
+    # ---- pickling (a worker process gets its own copy) ----------------------------------------------------
+    def __getstate__(self) -> dict:
+        # _qpos and _ee are views into _kin: pickled they would become copies, and fk would write a pose no
+        # kinematics reads (it returned the zero pose); the renderer holds a GL context
+        return {k: v for k, v in vars(self).items() if k not in ("_qpos", "_ee", "_renderer")}
+
+    def __setstate__(self, state: dict) -> None:
+        vars(self).update(state)
+        self._qpos = self._kin.qpos
+        self._ee = self._kin.site_xpos[self._site]
+        self._renderer = None
+
     # ---- construction --------------------------------------------------------------------------------
     @classmethod
     def load(cls, robot: str | Path | RobotRecord, image_size: tuple[int, int] | None = None, rgb: bool = False,

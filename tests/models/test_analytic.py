@@ -117,3 +117,17 @@ def test_bad_config_raises():
         AnalyticModel("atlas", "ee_xyz")
     with pytest.raises(ValueError, match=r"precision must be a finite number > 0"):
         AnalyticModel(ROBOT, "ee_xyz", precision=-1.0)
+
+
+@pytest.mark.parametrize("robot, modality", [("planar2", "ee_xyz"), ("nao_arm", "ee_pixel")])
+def test_a_pickled_analytic_model_predicts_as_the_original(robot, modality):
+    """A worker process gets the model pickled: the robot's cached views into its MjData must follow it (they were
+    copies after pickling, and fk returned the zero pose)."""
+    import pickle
+
+    model = AnalyticModel(robot, modality)
+    copy = pickle.loads(pickle.dumps(model))
+    low, high = model.robot.sampling_ranges.T
+    z = torch.as_tensor(np.random.default_rng(0).uniform(low, high, (5, len(low))))
+    assert torch.equal(copy.predict(z), model.predict(z))
+    assert torch.equal(copy.jacobian(z), model.jacobian(z))
