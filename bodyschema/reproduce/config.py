@@ -18,7 +18,7 @@ class ReproduceConfig:
     written beside the README's figures with the difference. A killed run continues where it stopped: run the same
     command again."""
 
-    only: tuple[str, ...] = ()          # recipes to run (levels); empty: every recipe
+    only: tuple[str, ...] = ()          # recipes to run, by name (levels reaching, or levels,reaching); empty: all
     out: Path = Path("results/reproduce")   # a run writes <out>/<run-id>/ (data, runs, results, tables.md)
     run_id: str | None = None           # continue this run; None: the newest unfinished run of the same recipes
     fresh: bool = False                 # start a new run even when an unfinished one exists
@@ -31,6 +31,8 @@ class ReproduceConfig:
     progress: bool = False              # progress bars of every step (on from the CLI)
 
     def __post_init__(self):
+        names = tuple(name for given in self.only for name in given.split(",") if name)   # "levels,reaching" too
+        object.__setattr__(self, "only", names)
         unknown = [name for name in self.only if name not in RECIPES]
         if unknown:
             raise ValueError(must_be("--only", f"names among {sorted(RECIPES)}", list(self.only),

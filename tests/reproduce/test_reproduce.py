@@ -204,3 +204,8 @@ def test_a_recipe_naming_what_the_readme_lacks_is_the_house_error(tiny, change, 
     table = dataclasses.replace(TINY.table, **change)
     with pytest.raises(ValueError, match=words):
         readme_tables.compare(table, tiny.readme, {})
+
+
+def test_only_takes_names_apart_or_comma_separated():
+    assert ReproduceConfig(only=("levels,reaching",)).only == ("levels", "reaching")
+    assert ReproduceConfig(only=("levels", "reaching")).only == ("levels", "reaching")
