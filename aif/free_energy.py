@@ -111,9 +111,8 @@ def sensory_terms(models: Sequence[SensoryModel], observations: Mapping[str, tor
         pi = m.precision(z).to(mu.dtype) if pi is None else pi.to(mu.dtype)  # (B, *out)
         n_out = x[0].numel()
         small = n_out <= jacobian_max_outputs
-        jac = m.jacobian(z).to(mu.dtype) if small and need_grad else None  # (B, O, Dz)
-        fused = not small and need_grad and not need_hessian and hasattr(m, "predict_and_vjp")
-        pred, vjp = m.predict_and_vjp(z) if fused else (m.predict(z), functools.partial(m.vjp, z))   # fused: 1 forward
+        pred, jac, vjp = _evaluated(m, z, small, need_grad, need_hessian, b * n_out * dz)
+        jac = jac.to(mu.dtype) if jac is not None else None                # (B, O, Dz)
         eps = (x - pred.to(mu.dtype)).reshape(b, n_out)                    # (B, O) ε = x − g(μ)
         pi = pi.reshape(b, n_out)
         pe = pi * eps                                                      # (B, O) Π ε
@@ -134,6 +133,21 @@ def sensory_terms(models: Sequence[SensoryModel], observations: Mapping[str, tor
         free += term - 0.5 * logdet
         weighted[m.modality] = term
     return SensoryTerms(free, grad, hess, weighted)
+
+
+def _evaluated(m: SensoryModel, z: torch.Tensor, small: bool, need_grad: bool, need_hessian: bool, elements: int):
+    """g(z), its Jacobian when it is wanted whole (None: not needed, or built in chunks by _gauss_newton) and a VJP.
+    A large output (an image) takes g with what the step needs from one forward where the model offers it:
+    g and Jᵀv for a gradient step, g and J for a Gauss–Newton one (when J fits in CHUNK_ELEMENTS)."""
+    vjp = functools.partial(m.vjp, z)
+    if small:
+        return m.predict(z), (m.jacobian(z) if need_grad else None), vjp
+    if need_hessian and elements <= CHUNK_ELEMENTS and hasattr(m, "predict_and_jacobian"):
+        return (*m.predict_and_jacobian(z), vjp)
+    if need_grad and not need_hessian and hasattr(m, "predict_and_vjp"):
+        pred, fused_vjp = m.predict_and_vjp(z)
+        return pred, None, fused_vjp
+    return m.predict(z), None, vjp
 
 
 def _gauss_newton(model: SensoryModel, mu: torch.Tensor, pi: torch.Tensor, pe: torch.Tensor,
