@@ -15,10 +15,9 @@ relative difference of each Jacobian to it.
 from __future__ import annotations
 
 import argparse
-import statistics
-import time
 
 import torch
+from jacobian import interleaved_medians  # bench/jacobian.py: this folder is on sys.path when run as a script
 
 from bodyschema.models._nn_fit import NetModel, build
 from bodyschema.models.contract import load_model
@@ -50,18 +49,6 @@ def methods(model, z: torch.Tensor) -> dict:
             "forward differences": lambda: forward_differences(model, z)}
 
 
-def medians(fns: dict, repeats: int) -> dict[str, float]:
-    for fn in fns.values():
-        fn()
-    times = {name: [] for name in fns}
-    for _ in range(repeats):
-        for name, fn in fns.items():
-            start = time.perf_counter()
-            fn()
-            times[name].append(time.perf_counter() - start)
-    return {name: statistics.median(t) for name, t in times.items()}
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--decoder", default=None, help="a saved pixel decoder directory (default: an untrained one)")
@@ -76,7 +63,7 @@ def main() -> None:
     for b in args.batches:
         z = model.body.from_unit(torch.rand(b, model.latent_dim, generator=gen) * 2 - 1)   # (B, Dz) rad, float32
         fns = methods(model, z)
-        ms = {k: 1e3 * v for k, v in medians(fns, args.repeats).items()}
+        ms = {k: 1e3 * v for k, v in interleaved_medians(fns, args.repeats)[0].items()}
         reference = NetModel._jacobian(model, z)
         scale = float(reference.abs().max())
         for name, t in ms.items():
