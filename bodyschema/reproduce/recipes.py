@@ -86,7 +86,7 @@ LEVELS = Recipe(
     about="the levels benchmark, 5 runs × 500 trials, lean pixel decoder + encoder (README: Estimation levels)",
     steps=(NAO_DATA, DECODER, ENCODER,
            _benchmark("levels", "evaluate levels --model {decoder} --encoder {encoder} --multistart 0 --runs 5 "
-                                "--trials 500 --seed 0 --device {device}")),
+                                "--trials 500 --seed 0 --device {device} --workers {workers}")),
     table=Table(marker="levels", step="levels", csv="summary.csv", key="level",
                 rows=(Row("1 (", "1"), Row("1 +", "1+enc"), Row("2 (", "2"), Row("2 +", "2+enc"), Row("3 (", "3"),
                       Row("3 from", "3+enc")),
