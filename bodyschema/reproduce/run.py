@@ -72,7 +72,7 @@ def _open_run(config: ReproduceConfig, names: list[str]) -> tuple[Path, dict]:
     if folder is not None:
         print(f"continuing {folder} (--fresh starts a new run)")
         return folder, state.load(folder)
-    return state.new_run(config.out, names)
+    return state.new_run(config, names)
 
 
 def _steps(recipes: list[Recipe]) -> list[Step]:

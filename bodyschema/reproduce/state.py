@@ -11,18 +11,15 @@ import time
 from pathlib import Path
 
 from bodyschema.errors import must_be
+from bodyschema.evaluation.core import runs
 
 STATE = "state.json"
 
 
-def new_run(out: Path, recipes: list[str]) -> tuple[Path, dict]:
-    stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime())
-    folder = Path(out) / stamp
-    for k in range(1, 1000):
-        if not folder.exists():
-            break
-        folder = Path(out) / f"{stamp}-{k}"
-    folder.mkdir(parents=True)
+def new_run(config, recipes: list[str]) -> tuple[Path, dict]:
+    """A fresh `<config.out>/<run-id>/` (the benchmarks' run folders: UTC start and config hash, run.json) with its
+    state."""
+    folder = runs.new_run(config)
     state = {"recipes": recipes, "started": time.time(), "steps": {}, "finished": None}
     save(folder, state)
     return folder, state
