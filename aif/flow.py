@@ -127,6 +127,17 @@ class FlowRun:
             record_step(self.trajectory, len(self.u), self.active, ua, f_a, errors)
         self._commit(t, f_a, new, moved, bad)
 
+    def finish(self, t: int, ua: torch.Tensor, terms: Terms) -> None:
+        """Book the last step t of a descent-controlled run, whose candidates were judged (`accept`) and which takes
+        no step further: F at the accepted beliefs ua (b_a, K, Dz), the steps taken. A trial still active here has not
+        converged: its next step, never taken, was not computed."""
+        f_a, _, _, errors = terms
+        if self.trajectory is not None:
+            record_step(self.trajectory, len(self.u), self.active, ua, f_a, errors)
+        self.free[self.active] = f_a
+        self.steps[self.active] = t + 1
+        self.active = self.active[:0]
+
     def trajectory_tensors(self) -> dict[str, torch.Tensor] | None:
         """The recorded rows stacked: "mu" (T, B, K, Dz), "F" and "error:<m>" (T, B); None when not recording."""
         if self.trajectory is None:

@@ -136,12 +136,17 @@ class Perception:
             if run.active.numel() == 0:
                 break
             ua = run.cand[run.active]                                      # (b_a, K, Dz)
-            terms = self._terms(sensors, ua, run.active, run.need_h)
+            # under descent control the last evaluation only judges its candidate: F alone, no derivatives
+            last = run.descent and t > 0 and t == self.config.max_steps - 1
+            terms = self._terms(sensors, ua, run.active, run.need_h and not last, need_grad=not last)
             run.evaluations += run.active.numel()
             if run.descent and t > 0:
                 ua, terms = run.accept(ua, terms)
                 if run.active.numel() == 0:
                     break
+            if last:
+                run.finish(t, ua, terms)
+                break
             run.step(t, ua, terms)
         keep = torch.nonzero(~run.diverged).squeeze(-1)
         if keep.numel() and not run.descent:                               # descent: F at u is already known

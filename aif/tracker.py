@@ -56,10 +56,11 @@ class TrackerConfig:
     lost_quantile: float = 0.99     # calibrate: the quantile of F at the true poses …
     lost_slack: float = 1.0         # … plus this many times its distance to the median (F's spread)
     restart: str = "auto"           # "encoder" (its guess), "multistart", "auto": the encoder when one is given
-    restart_perception: PerceptionConfig = PerceptionConfig(max_steps=3)   # a restart's update ("auto": see below)
+    restart_perception: PerceptionConfig = PerceptionConfig(max_steps=2)   # a restart's update ("auto": see below)
     # as in the levels: Adam then LM with an image model, monotone in F, where undamped Gauss–Newton steps bounce (1.7°
-    # against 2.1° on nao_arm at 30 Hz). 3 steps each: a restart costs ≤ 12 evaluations instead of ≤ 24 with 10, and
-    # its frame stays near the others' time (measured: 0.86° with 3, 0.84° with 10)
+    # against 2.1° on nao_arm at 30 Hz). 2 steps each: a restart costs ≤ 8 evaluations, and its frame stays within a
+    # p95 of 20 ms (measured, nao_arm 30 Hz, 30 s: 3 steps 0.81° mean error, restarted frames 24 ms; 2 steps 0.85°,
+    # 19 ms; Adam alone, 3 steps: 0.94°, 13 ms)
     restart_starts: int = 8         # multistart: starts per lost stream (tracked, predicted, uniform draws)
     settle_quantile: float | None = 0.5   # skip the updates where F at the start < this quantile of F at the truths
     # of the calibration frames (F at the start is known from the proposal: with an encoder and an image model). A

@@ -34,6 +34,10 @@ from bodyschema.models.scaling import BodySpec
 FLOAT_DTYPES = (torch.float32, torch.float64)
 FORMAT_VERSION = 1
 STATE_SHA256 = "state_sha256"   # meta.json key; models saved before it have none and load unchecked
+# optional calls a model may add to the contract, prediction and derivative from one forward pass (networks):
+# predict_and_jacobian(z) → (g, J) and predict_and_vjp(z) → (g, v ↦ Jᵀv); free energy uses them where present,
+# so a wrapper of a model (sensor noise, timing) must pass them on
+FUSED_CALLS = ("predict_and_jacobian", "predict_and_vjp")
 
 
 @runtime_checkable

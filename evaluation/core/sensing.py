@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from bodyschema.models.contract import FUSED_CALLS
 from bodyschema.models.scaling import IMAGE_SCALE
 
 
@@ -114,6 +115,13 @@ class NoisySensor:
         self.output_shape, self.kind = model.output_shape, getattr(model, "kind", type(model).__name__)
         if hasattr(model, "compute_dtype"):                         # a network keeps its fast float32 path
             self.compute_dtype = model.compute_dtype
+
+    def __getattr__(self, name):
+        """The model's optional fused calls (`FUSED_CALLS`), where it has them: the noise changes only the precision,
+        and free energy asks for them with hasattr (a network's Gauss–Newton step then runs one forward, not two)."""
+        if name in FUSED_CALLS and "model" in self.__dict__:
+            return getattr(self.__dict__["model"], name)
+        raise AttributeError(name)
 
     def predict(self, z):
         return self.model.predict(z)

@@ -25,6 +25,7 @@ from bodyschema.aif.free_energy import sensory_terms
 from bodyschema.aif.perception import Perception
 from bodyschema.aif.perception_config import FlowSettings, PerceptionConfig
 from bodyschema.aif.tracker import Tracker, TrackerConfig
+from bodyschema.models.contract import FUSED_CALLS
 
 METHODS = ("encoder", "flow", "tracker", "tracker+command")
 CURVATURE_FRAMES = 32             # calibration frames whose curvature sets the flow's Δt (Jacobians of images cost)
@@ -48,14 +49,27 @@ class Timed:
         self._model, self._clock = model, clock
 
     def __getattr__(self, name):
-        return getattr(self._model, name)
+        attr = getattr(self._model, name)
+        return self._timed_fused(attr) if name in FUSED_CALLS else attr
+
+    def _timed_fused(self, call):
+        """A fused call, timed with the derivative function it returns (predict_and_vjp's runs the backward)."""
+        def timed(z):
+            out, derivative = self._timed_call(call)(z)
+            return out, (self._timed_call(derivative) if callable(derivative) else derivative)
+        return timed
+
+    def _timed_call(self, function):
+        def timed(*args):
+            start = time.perf_counter()
+            try:
+                return function(*args)
+            finally:
+                self._clock.ms += 1e3 * (time.perf_counter() - start)
+        return timed
 
     def _call(self, name, *args):
-        start = time.perf_counter()
-        try:
-            return getattr(self._model, name)(*args)
-        finally:
-            self._clock.ms += 1e3 * (time.perf_counter() - start)
+        return self._timed_call(getattr(self._model, name))(*args)
 
     def predict(self, z):
         return self._call("predict", z)
