@@ -100,6 +100,30 @@ def test_a_learned_model_is_seen_through_its_noise_unless_its_precision_is_fixed
     torch.testing.assert_close(noisy[0].precision(z), torch.full((1, 3), 1 / (1e-4 + 1e-4), dtype=torch.float64))
 
 
+def test_the_noise_and_clock_wrappers_pass_a_networks_fused_calls_on_and_clock_them():
+    """Free energy asks for predict_and_jacobian with hasattr: a wrapper that hid it made every Gauss–Newton step of
+    the benchmark run two forwards. Through both wrappers the fused call gives the model's own values, clocked; a
+    model without it stays without it."""
+    from tests.models.test_pixel import blob_images, joint_angles, tiny_decoder
+    from tests.toy_models import ToyPlanarArm
+    q = joint_angles(16, seed=0)
+    decoder = tiny_decoder(epochs=1).fit(q, blob_images(q), progress=False)
+    clock = Clock()
+    (seen,), _ = sensed([decoder], {"image": 0.02}, clock)
+    prediction, jacobian = seen.predict_and_jacobian(q[:3])
+    expected = decoder.predict_and_jacobian(q[:3])
+    torch.testing.assert_close(prediction, expected[0], rtol=0, atol=0)
+    torch.testing.assert_close(jacobian, expected[1], rtol=0, atol=0)
+    assert clock.lap() > 0
+    _, vjp = seen.predict_and_vjp(q[:3])
+    assert clock.lap() > 0
+    v = torch.ones(3, *decoder.output_shape)
+    torch.testing.assert_close(vjp(v), decoder.vjp(q[:3], v))
+    assert clock.lap() > 0, "the VJP function a fused call returns runs the backward: its time is the model's"
+    (arm,), _ = sensed([ToyPlanarArm()], {"ee_xyz": 0.01}, clock)                 # a NoisySensor in a Timed
+    assert not hasattr(arm, "predict_and_jacobian") and not hasattr(arm, "predict_and_vjp")
+
+
 @pytest.mark.parametrize("change, message", [
     (dict(rates=()), "rates must be"), (dict(methods=("tracker", "kalman")), "methods must be"),
     (dict(noise=(("touch", 0.1),)), "noise must be"), (dict(fuse_joints=(True, True)), "fuse_joints must be"),
