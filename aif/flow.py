@@ -10,7 +10,8 @@ Euler step (same limits, a solve instead of an exponential); "euler" is the plai
 protocol. With step_control "descent" (order 0: F is then a Lyapunov function of the flow) a step that raises F
 is undone and that trial's Δt shrinks ×0.1 (it regrows ×2 on accepted steps, up to dt): the Gauss–Newton
 step becomes Levenberg–Marquardt-like, monotone, and a trial stops once even a step below `tol` does not
-descend, instead of jittering at the float32 noise floor of a learned model. A step of the joints is capped
+descend, instead of jittering at the float32 noise floor of a learned model; the run's last evaluation only
+judges the last step, so it computes F alone (`finish`). A step of the joints is capped
 at `max_step` rad (trust region), the belief is clamped to the joint limits, and every trial stops on its own:
 trials that converged (moved < tol) or diverged (F or the step not finite, an Euler step > divergence_step rad, or
 the precision-weighted prediction error E = F + ½ln|Π| grown above divergence_ratio · max(E at the start, 1) — an
