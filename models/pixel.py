@@ -18,6 +18,7 @@ give one model.
 from __future__ import annotations
 
 import math
+from contextlib import contextmanager
 
 import torch
 import torch.nn.functional as F
@@ -28,6 +29,9 @@ from bodyschema.models._nn_fit import NetModel, TrainSettings, build, check_fit_
 from bodyschema.models.contract import BaseSensoryModel, register_kind
 from bodyschema.models.scaling import BodySpec
 
+ONEDNN_MIN_BATCH = 4   # latents per inference call from which oneDNN's convolutions pay: below, its per-call setup
+# outweighs these small layers (one camera's frame; bench/conv_backend.py, 1 thread: at B = 1 predict 0.70×, the
+# Jacobian 0.83×, forward + VJP 0.85× the time with it; from B = 4 the VJP, from B = 32 every call, is slower without)
 SIZES = {   # name → capacity; an explicit fc_hidden / channels / refine overrides the preset's value
     "lean": {"fc_hidden": 64, "channels": (32, 16, 8), "refine": False},      # 56×80: 7×10×32 → … → 56×80
     "pixel_aif": {"fc_hidden": 512, "channels": (16, 64, 16), "refine": True},  # 56×80: 7×10×16 = 1120 → …
@@ -115,6 +119,18 @@ def _with_tangents(layers: nn.Sequential, x: torch.Tensor, b: int) -> torch.Tens
     return x
 
 
+@contextmanager
+def convolutions_for(batch: int):
+    """PyTorch's own convolutions for a batch below ONEDNN_MIN_BATCH latents, oneDNN (where the user left it on)
+    from there: inference only, training's batches keep oneDNN and their float rounding."""
+    before = torch.backends.mkldnn.enabled
+    torch.backends.mkldnn.enabled = before and batch >= ONEDNN_MIN_BATCH
+    try:
+        yield
+    finally:
+        torch.backends.mkldnn.enabled = before
+
+
 def fast_layout(net: nn.Module) -> nn.Module:
     """channels_last weights: oneDNN then runs the transposed convolutions in NHWC (≈2× faster on CPU)."""
     return net.to(memory_format=torch.channels_last)
@@ -178,6 +194,10 @@ class PixelDecoder(NetModel, BaseSensoryModel):
     def _outputs(self, net, u):
         return net(u)
 
+    def _g(self, z, net=None):
+        with convolutions_for(len(z)):          # a call's backend, outside `_outputs`: the ONNX graph stays generic
+            return super()._g(z, net)
+
     def _jacobian(self, z):
         return self._predict_and_jacobian(z)[1]
 
@@ -187,7 +207,7 @@ class PixelDecoder(NetModel, BaseSensoryModel):
 
     def _predict_and_jacobian(self, z):
         net, z_dev = self._net(z.dtype), z.to(self.device)
-        with torch.no_grad():
+        with torch.no_grad(), convolutions_for(len(z_dev)):
             y, jac = net.forward_and_jacobian(self.body.to_unit(z_dev))
         return y.to(z.device), (jac * self.body.unit_per_rad(z_dev)).to(z.device)   # chain rule through to_unit
 

@@ -175,3 +175,31 @@ def test_predict_and_vjp_reuses_one_forward_and_matches_the_separate_calls():
     torch.testing.assert_close(vjp(2 * v), 2 * model.vjp(z, v))   # callable more than once
     with pytest.raises(ValueError, match="v must be"):
         vjp(v[:2])
+
+
+def test_one_cameras_batch_runs_without_onednn_to_the_same_values_and_leaves_the_users_flag():
+    """Below ONEDNN_MIN_BATCH latents the decoder runs PyTorch's own convolutions (faster there): the same g and J
+    as the oneDNN path of a larger batch within float32 rounding (another summation order: ~1e-7 relative, checked
+    at 1e-5), and the user's oneDNN setting is back after the call, after an error, and never turned on."""
+    from bodyschema.models.pixel import ONEDNN_MIN_BATCH, convolutions_for
+    q = joint_angles(64, seed=0)
+    with one_thread():
+        model = tiny_decoder(epochs=2).fit(q, blob_images(q), progress=False)
+        z = joint_angles(ONEDNN_MIN_BATCH, seed=3)
+        g, jac = model.predict_and_jacobian(z)
+        for i in range(len(z)):
+            g_i, jac_i = model.predict_and_jacobian(z[i:i + 1])
+            torch.testing.assert_close(g_i, g[i:i + 1], rtol=1e-5, atol=1e-6)
+            torch.testing.assert_close(jac_i, jac[i:i + 1], rtol=1e-5, atol=1e-5)
+            torch.testing.assert_close(model.predict(z[i:i + 1]), g[i:i + 1], rtol=1e-5, atol=1e-6)
+    user = torch.backends.mkldnn.enabled
+    try:
+        with pytest.raises(RuntimeError), convolutions_for(1):
+            assert not torch.backends.mkldnn.enabled
+            raise RuntimeError("inside")
+        assert torch.backends.mkldnn.enabled == user
+        torch.backends.mkldnn.enabled = False
+        with convolutions_for(ONEDNN_MIN_BATCH):
+            assert not torch.backends.mkldnn.enabled, "a user's oneDNN off stays off"
+    finally:
+        torch.backends.mkldnn.enabled = user
