@@ -121,11 +121,18 @@ class Perception:
     def free_energy(self, observations: Mapping[str, torch.Tensor], mu: torch.Tensor) -> torch.Tensor:
         """F (B,) at beliefs mu (B, Dz) or (B, K, Dz) rad, nothing updated: the F every update descends, with this
         perception's precisions and prior (e.g. at the true poses, to calibrate a tracker's lost-track threshold)."""
+        return self.energies(observations, mu)[0]
+
+    def energies(self, observations: Mapping[str, torch.Tensor], mu: torch.Tensor
+                 ) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        """F (B,) and each term's precision-weighted prediction error ½ εᵀΠε (modality or "prior" → (B,)) at beliefs
+        mu (B, Dz) or (B, K, Dz) rad, nothing updated (a tracker's per-sensor consistency test)."""
         observations, mu = as_inputs(observations), as_input(mu)
         u = self._initial_belief(mu)                                       # (B, K, Dz)
         sensors = self._resolve(observations, u[:, 0], None)
         with torch.no_grad():
-            return self._terms(sensors, u, torch.arange(len(u)), False, need_grad=False)[0]
+            free, _, _, weighted = self._terms(sensors, u, torch.arange(len(u)), False, need_grad=False)
+        return free, weighted
 
     # ---- internals --------------------------------------------------------------------------------------
     def _flow(self, sensors: _Sensors, u: torch.Tensor) -> PerceptionResult:

@@ -129,6 +129,44 @@ def test_the_encoders_proposal_catches_a_jump_on_its_frame_without_a_restart():
     assert ((mu[6:] - q[6:]).abs().amax(-1) < 5 * DEG).all()
 
 
+def other_branch(q: torch.Tensor) -> torch.Tensor:
+    """The other inverse-kinematics branch of poses q (..., 2): the same hand, so the same blob image."""
+    from tests.toy_models import LINKS_M
+    l1, l2 = LINKS_M
+    turn = 2 * torch.atan2(l2 * q[..., 1].sin(), l1 + l2 * q[..., 1].cos())
+    return torch.stack([q[..., 0] + turn, -q[..., 1]], -1)
+
+
+PRECISION = 8.0
+
+
+@pytest.mark.parametrize("consistency", [True, False])
+def test_a_belief_the_joint_encoders_contradict_is_lost_even_where_F_is_not(consistency):
+    """On the other elbow branch the blob image is the same and F rises only by the joints' weak term (~21), within
+    F's spread (its threshold ~53 above the median): F alone never notices; the joint encoders' own ½ εᵀΠε (~22),
+    above their calibrated threshold (~13), does, and the restart's candidate they accept wins."""
+    image, joints = ToyBlobImage(precision=NOISE ** -2), ToyJoints(precision=PRECISION)   # σ ≈ 20° joint encoders
+    sigma_joints = PRECISION ** -0.5
+    q = trajectory(10, 1, seed=10)                                           # elbow 0.9 rad: branches 47°, 103° apart
+    assert torch.allclose(image.predict(other_branch(q[0])), image.predict(q[0]), atol=1e-9)
+    calibration = trajectory(50, 4, seed=3).reshape(-1, 2)
+    config = TrackerConfig(budget=4, consistency=consistency, proposals=False)   # the encoder's proposal would too
+    tracker = Tracker([image, joints], config, GridEncoder(image))
+    tracker.calibrate({"image": seen(image, calibration, NOISE, seed=9),
+                       "joints": seen(joints, calibration, sigma_joints, seed=10)}, calibration)
+    images, readings = seen(image, q, NOISE, seed=11), seen(joints, q, sigma_joints, seed=12)
+    tracker.reset(other_branch(q[0]))
+    restarted = []
+    for k in range(len(q)):
+        mu, _ = tracker.step({"image": images[k], "joints": readings[k]}, dt=DT)
+        restarted.append(bool(tracker.last.restarted))
+    err = float((mu - q[-1]).abs().max()) / DEG
+    if consistency:
+        assert restarted[0] and err < 5 and set(tracker.sensor_thresholds) == {"joints"}, (restarted, err)
+    else:
+        assert not any(restarted) and err > 30, "F alone stays on the wrong branch"
+
+
 class CountingEncoder(GridEncoder):
     calls = 0
 
