@@ -107,8 +107,10 @@ def _bound(step: torch.Tensor, max_step: float | None) -> torch.Tensor:
 
 
 def levenberg_marquardt(objective: Objective, mu0: torch.Tensor, low, high, *, max_steps: int, tol: float,
-                        damping: float, max_step: float | None, record: bool) -> DescentResult:
-    """Batched Levenberg–Marquardt on F from mu0 (B, Dz) rad; λ₀ = `damping` (relative to diag H)."""
+                        damping: float, max_step: float | None, record: bool,
+                        trial_derivatives: bool = False) -> DescentResult:
+    """Batched Levenberg–Marquardt on F from mu0 (B, Dz) rad; λ₀ = `damping` (relative to diag H). A trial step is
+    judged on F alone and its derivatives asked where it is accepted, or (trial_derivatives) asked with F."""
     b, dz = mu0.shape
     mu, t, steps, converged, diverged, rec, active = _start(objective, mu0, low, high, True, record)
     free, grad, hess, errors = t.free.clone(), t.grad.clone(), t.hess.clone(), dict(t.errors)
@@ -128,14 +130,14 @@ def levenberg_marquardt(objective: Objective, mu0: torch.Tensor, low, high, *, m
         new = _clamp(m + step, low, high)
         step = new - m
         gain = -(g * step).sum(-1) - 0.5 * torch.einsum("bi,bij,bj->b", step, h, step)     # predicted decrease
-        trial = objective(active, new, False, False)                              # F only: most steps are judged
+        trial = objective(active, new, trial_derivatives, trial_derivatives)     # F only: most steps are judged
         evaluations += active.numel()
         rho = (free[active] - trial.free) / gain.clamp_min(1e-300)
         ok = torch.isfinite(trial.free) & (trial.free < free[active]) & (gain > 0)
         steps[active] += 1
         if ok.any():                                                              # gradient and H where accepted
             acc = active[ok]
-            full = objective(acc, new[ok], True, True)
+            full = _rows(trial, ok) if trial_derivatives else objective(acc, new[ok], True, True)
             mu[acc], free[acc], grad[acc], hess[acc] = new[ok], full.free, full.grad, full.hess
             for k, v in full.errors.items():
                 errors[k][acc] = v
@@ -207,13 +209,19 @@ def adam(objective: Objective, mu0: torch.Tensor, low, high, *, max_steps: int, 
     return DescentResult(best_mu, best_free, steps, converged, diverged, evaluations, rec.rows)
 
 
+def _rows(terms: Terms, ok: torch.Tensor) -> Terms:
+    """The rows ok of a trial's terms (F, gradient, H, prediction errors)."""
+    return Terms(terms.free[ok], terms.grad[ok], terms.hess[ok], {k: v[ok] for k, v in terms.errors.items()})
+
+
 def adam_then_lm(objective: Objective, mu0: torch.Tensor, low, high, *, max_steps: int, tol: float, lr: float,
-                 patience: int, handover: float, max_step: float | None, record: bool) -> DescentResult:
+                 patience: int, handover: float, max_step: float | None, record: bool,
+                 trial_derivatives: bool = False) -> DescentResult:
     """Adam until its step is below `handover` rad, then Levenberg–Marquardt (λ₀ = 0.1) from its best belief."""
     first = adam(objective, mu0, low, high, max_steps=max_steps, tol=handover, lr=lr, patience=patience,
                  max_step=max_step, record=record)
     second = levenberg_marquardt(objective, first.mu, low, high, max_steps=max_steps, tol=tol, damping=0.1,
-                                 max_step=max_step, record=record)
+                                 max_step=max_step, record=record, trial_derivatives=trial_derivatives)
     trajectory = None
     if record:                                                             # one time axis: Adam's rows, then LM's
         trajectory = {name: first.trajectory.get(name, []) + second.trajectory.get(name, [])

@@ -170,10 +170,12 @@ class Perception:
             free, grad, hess, errors = self._terms(sensors, mu[:, None], rows, need_hess, need_grad=need_grad)
             return descent.Terms(free, grad[:, 0] if need_grad else None, hess, errors)
 
-        common = dict(max_steps=cfg.max_steps, tol=cfg.tol, max_step=cfg.max_step, record=cfg.record)
+        common = dict(max_steps=cfg.max_steps, tol=cfg.tol, max_step=cfg.max_step, record=cfg.record,
+                      trial_derivatives=cfg.lm.trial_derivatives)
         if cfg.method == "lm":
             r = descent.levenberg_marquardt(objective, mu0, self.low, self.high, damping=cfg.lm.damping, **common)
         elif cfg.method == "adam":
+            common.pop("trial_derivatives")
             r = descent.adam(objective, mu0, self.low, self.high, lr=cfg.adam.lr, patience=cfg.adam.patience,
                              **common)
         else:

@@ -64,6 +64,9 @@ class LMSettings:
     """method "lm" (and the second half of "adam+lm"): Levenberg–Marquardt (descent.py)."""
 
     damping: float = 1.0           # lm: initial λ relative to diag H; large = short gradient-like first steps
+    trial_derivatives: bool = False   # the derivatives with every trial step, one model call instead of F and then
+    # the derivatives where the step is accepted: for a few trials whose steps are mostly accepted (a tracker's
+    # restart); a batch's rejected rows would waste theirs
 
     def __post_init__(self):
         _positive(self, "damping")

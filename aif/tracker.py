@@ -32,7 +32,7 @@ import torch
 from bodyschema.aif.free_energy import JACOBIAN_MAX_OUTPUTS
 from bodyschema.aif.multistart import infer_multistart
 from bodyschema.aif.perception import Perception, as_inputs
-from bodyschema.aif.perception_config import FlowSettings, PerceptionConfig
+from bodyschema.aif.perception_config import FlowSettings, LMSettings, PerceptionConfig
 from bodyschema.errors import must_be
 from bodyschema.models.contract import as_input
 
@@ -59,7 +59,8 @@ class TrackerConfig:
     lost_quantile: float = 0.99     # calibrate: the quantile of F at the true poses …
     lost_slack: float = 1.0         # … plus this many times its distance to the median (F's spread)
     restart: str = "auto"           # "encoder" (its guess), "multistart", "auto": the encoder when one is given
-    restart_perception: PerceptionConfig = PerceptionConfig(max_steps=2)   # a restart's update ("auto": see below)
+    restart_perception: PerceptionConfig = PerceptionConfig(max_steps=2, lm=LMSettings(trial_derivatives=True))
+    # a restart's update ("auto": see below; one stream's LM steps are mostly accepted: derivatives with each trial)
     # as in the levels: Adam then LM with an image model, monotone in F, where undamped Gauss–Newton steps bounce (1.7°
     # against 2.1° on nao_arm at 30 Hz). 2 steps each: a restart costs ≤ 8 evaluations, and its frame stays within a
     # p95 of 20 ms (measured, nao_arm 30 Hz, 30 s: 3 steps 0.81° mean error, restarted frames 24 ms; 2 steps 0.85°,

@@ -153,3 +153,31 @@ def test_free_energy_gradient_includes_the_precision_term(make):
     assert rel < 1e-3, f"∂F/∂μ off by {rel:.2e} relative to finite differences of F"
     frozen = grad - model.precision_vjp(mu, 0.5 * (x - model.predict(mu)).pow(2) - 0.5 / model.precision(mu))
     assert (frozen - fd).norm() / fd.norm() > 10 * rel, "the Π(μ) term should matter for this model"
+
+
+@pytest.mark.parametrize("method", ["lm", "adam+lm"])
+def test_lm_with_trial_derivatives_takes_the_same_steps_in_fewer_model_calls(method):
+    """Derivatives asked with every trial step: the same F, gradient and H at every accepted belief, so the same
+    steps bit for bit (a float64 model), and one model call per LM step instead of F and then the derivatives."""
+    from bodyschema.aif.perception_config import LMSettings
+    image = ToyBlobImage()
+    q = planar_poses(1, seed=26)
+    obs, mu0 = {"image": image.predict(q)}, perturb(q, seed=27, max_rad=0.2)
+    predict, results, calls = image.predict, [], []
+
+    def counted(z):
+        image.calls["predict"] += 1
+        return predict(z)
+
+    image.predict = counted
+    for trial_derivatives in (False, True):
+        image.calls = {"vjp": 0, "jacobian": 0, "predict": 0}
+        config = PerceptionConfig(method=method, max_steps=6, lm=LMSettings(trial_derivatives=trial_derivatives))
+        results.append(Perception([image], config).infer(obs, mu0))
+        calls.append(dict(image.calls))
+    torch.testing.assert_close(results[1].mu, results[0].mu, rtol=0, atol=0)
+    torch.testing.assert_close(results[1].F, results[0].F, rtol=0, atol=0)
+    assert (results[1].steps == results[0].steps).all()
+    assert (results[0].mu - q).abs().max() < (mu0 - q).abs().max()
+    assert calls[1]["predict"] < calls[0]["predict"], calls            # no second forward at an accepted step
+    assert calls[1]["jacobian"] >= calls[0]["jacobian"], "every trial builds its Jacobian (most are accepted)"
