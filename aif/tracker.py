@@ -78,8 +78,8 @@ class TrackerConfig:
     # truth); a restart's candidate the sensors accept then beats one they reject
     consistency_slack: float = 3.0  # a sensor's threshold: its lost_quantile plus this many times its distance to the
     # median. Measured (nao_arm fused with joints, bench/tracking.py, 60 s at 30 Hz): 3.0 restarts 11 % of frames,
-    # 0.77° mean error, p95 20.5 ms, lost track ≤ 2 frames; 1.0: 16 %, 0.74°, 21.4 ms, ≤ 2 frames; without the test:
-    # 7 %, 0.88°, 19.2 ms, 13 frames lost (that ambiguity's ½ εᵀΠε ≈ 117 is far above either threshold)
+    # 0.77° mean error, lost track ≤ 2 frames; 1.0: 16 %, 0.74°, ≤ 2 frames (the restarted frames set the p95: 1 ms
+    # more); without the test: 7 %, 0.88°, 13 frames lost (that ambiguity's ½ εᵀΠε ≈ 117 is far above either)
     proposals: bool = True          # with an encoder and an image model its guess competes with the predicted belief
     # every frame, the lower F starting the updates (2 F evaluations of the budget): a babbling arm moves up to ~20°
     # between frames at 30 Hz, farther than an image F's basin around the predicted pose
