@@ -29,7 +29,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import torch
 
-from bodyschema.aif.free_energy import JACOBIAN_MAX_OUTPUTS
+from bodyschema.aif.consistency import SensorChecks, above_spread
 from bodyschema.aif.multistart import infer_multistart
 from bodyschema.aif.perception import Perception, as_inputs
 from bodyschema.aif.perception_config import FlowSettings, LMSettings, PerceptionConfig
@@ -161,8 +161,7 @@ class Tracker:
             raise ValueError(must_be("restart", "'multistart' without an encoder and an image model", "encoder"))
         self.threshold = config.lost_threshold
         self.settled: float | None = None       # F of a start good enough to skip a frame's updates (`calibrate`)
-        self.sensors = self._sensor_checks(precisions, limits)   # Perception over the checked sensors, or None
-        self.sensor_thresholds: dict[str, float] = {}            # modality → ½ εᵀΠε above which it contradicts
+        self.sensors = SensorChecks.of(self.perception, precisions, limits) if config.consistency else None
         self._runs: dict[int, Perception] = {}
         self._restarts = self.perception.with_config(replace(config.restart_perception, record=False))
         self.reset()
@@ -203,25 +202,12 @@ class Tracker:
         if not np.isfinite(free).all():
             raise ValueError(must_be("F at the calibration poses", "finite", "non-finite values",
                                      "Calibrate on frames the models explain (training frames)."))
-        self.threshold = self._above_spread(free)
+        self.threshold = above_spread(free, self.config.lost_quantile, self.config.lost_slack)
         if self.config.settle_quantile is not None:
             self.settled = float(np.quantile(free, self.config.settle_quantile))
         if self.sensors is not None:
-            from scipy.stats import chi2
-            _, errors = self.sensors.energies(self._sensed(as_inputs(observations)), q_true)
-            outputs = {m.modality: math.prod(m.output_shape) for m in self.sensors.models}
-            # never below what the sensor's own precision expects at the truth: ½ εᵀΠε ~ ½ χ²(outputs) (frames with
-            # less noise than their precision says would otherwise leave no room at all)
-            self.sensor_thresholds = {name: max(self._above_spread(e.numpy(), self.config.consistency_slack),
-                                                0.5 * float(chi2.ppf(self.config.lost_quantile, outputs[name])))
-                                      for name, e in errors.items() if name in outputs}
+            self.sensors.calibrate(observations, q_true, self.config.lost_quantile, self.config.consistency_slack)
         return self.threshold
-
-    def _above_spread(self, values: np.ndarray, slack: float | None = None) -> float:
-        """The lost-track rule on values at true poses: their lost_quantile plus `slack` (default lost_slack) times its
-        distance to the median."""
-        top = float(np.quantile(values, self.config.lost_quantile))
-        return top + (self.config.lost_slack if slack is None else slack) * (top - float(np.median(values)))
 
     def step(self, observations, command=None, dt: float | None = None):
         """One frame of every stream: observations modality → (B, *out); command (B, Dz) rad/s or None; dt s since
@@ -385,35 +371,11 @@ class Tracker:
             draws[:, 0], draws[:, 1] = mu[rows], predicted[rows]
         return draws
 
-    def _sensor_checks(self, precisions, limits) -> Perception | None:
-        """A Perception over the low-dimensional sensors whose consistency is checked: with `consistency` and several
-        modalities, every model of at most JACOBIAN_MAX_OUTPUTS outputs (cheap: no image is evaluated again)."""
-        models = self.perception.models
-        small = [m for m in models if math.prod(m.output_shape) <= JACOBIAN_MAX_OUTPUTS]
-        if not self.config.consistency or len(models) < 2 or not small:
-            return None
-        names = {m.modality for m in small}
-        config = replace(self.perception.config, precisions=tuple((k, v) for k, v in self.perception.config.precisions
-                                                                  if k in names))
-        return Perception(small, config, {k: v for k, v in (precisions or {}).items() if k in names}, limits)
-
-    def _sensed(self, obs: Mapping) -> dict:
-        """The observations of the checked sensors."""
-        names = {m.modality for m in self.sensors.models}
-        return {name: x for name, x in obs.items() if name in names}
-
     def _contradicted(self, obs, mu) -> torch.Tensor:
-        """(B,) bool: a checked sensor's ½ εᵀΠε at beliefs mu (B, Dz) above its calibrated threshold; all False
-        before `calibrate` or without checked sensors (and for no belief yet: the first frame restarts anyway)."""
-        b = next(iter(obs.values())).shape[0]
-        if not self.sensor_thresholds or mu is None:
-            return torch.zeros(b, dtype=torch.bool)
-        _, errors = self.sensors.energies(self._sensed(obs), mu)
-        out = torch.zeros(b, dtype=torch.bool)
-        for name, limit in self.sensor_thresholds.items():
-            if name in errors:                                   # a broken sensor (Π = 0) has no term
-                out |= ~(errors[name] <= limit)
-        return out
+        """(B,) bool: a checked sensor contradicts the belief mu (aif/consistency.py); all False without checks."""
+        if self.sensors is None:
+            return torch.zeros(next(iter(obs.values())).shape[0], dtype=torch.bool)
+        return self.sensors.contradicted(obs, mu)
 
     def _commit(self, mu, free, restarted, command, dt) -> None:
         """The new state: μ, and its motion from the frame-to-frame change (a restarted stream's motion unknown: 0,
@@ -436,4 +398,3 @@ class Tracker:
 
     def _clamp(self, mu: torch.Tensor) -> torch.Tensor:
         return torch.minimum(torch.maximum(mu, self.perception.low), self.perception.high)
-

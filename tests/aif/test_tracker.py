@@ -162,7 +162,7 @@ def test_a_belief_the_joint_encoders_contradict_is_lost_even_where_F_is_not(cons
         restarted.append(bool(tracker.last.restarted))
     err = float((mu - q[-1]).abs().max()) / DEG
     if consistency:
-        assert restarted[0] and err < 5 and set(tracker.sensor_thresholds) == {"joints"}, (restarted, err)
+        assert restarted[0] and err < 5 and set(tracker.sensors.bounds) == {"joints"}, (restarted, err)
     else:
         assert not any(restarted) and err > 30, "F alone stays on the wrong branch"
 
