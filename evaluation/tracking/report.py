@@ -86,6 +86,8 @@ def display(rows: Sequence[Mapping]) -> list[dict]:
 def notes(config, robot, models, wall: float) -> list[str]:
     specs = ", ".join(getattr(m, "provenance", {}).get("spec", type(m).__name__) for m in models)
     t = config.tracker
+    sensors = f"; with several sensors, also each joints or ee term alone (slack {t.consistency_slack:g})" \
+        if t.consistency else ""
     return [f"Robot {robot.name}; models {specs}; encoder {config.encoder or 'none'}. {config.trials} babbling "
             f"streams of {config.duration:g} s per rate (targets held {config.hold_s[0]:g}–{config.hold_s[1]:g} s), "
             f"every method from the true first pose; noise σ {dict(config.noise)}.",
@@ -93,7 +95,7 @@ def notes(config, robot, models, wall: float) -> list[str]:
             f"{f' and {t.budget_ms:g} ms' if t.budget_ms else ''}, motion order {t.order}, lost-track threshold "
             f"{'calibrated' if t.lost_threshold is None else t.lost_threshold} (F at the truth of "
             f"{config.calibration_frames} frames: quantile {t.lost_quantile} + {t.lost_slack} × its distance to the "
-            f"median){f'; with several sensors, also each joints or ee term alone (slack {t.consistency_slack:g})' if t.consistency else ''}"
+            f"median){sensors}"
             f", restarts: {t.restart}. flow: Euler steps, same budget, Δt = 1/λ_max(H) (column euler_dt). "
             "tracker+command: moved by the joint velocity of the previous frame.",
             f"Off track: the hand > {config.lost_mm:g} mm from the truth; recovered_share: lost events back within "
