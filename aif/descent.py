@@ -130,7 +130,7 @@ def levenberg_marquardt(objective: Objective, mu0: torch.Tensor, low, high, *, m
         new = _clamp(m + step, low, high)
         step = new - m
         gain = -(g * step).sum(-1) - 0.5 * torch.einsum("bi,bij,bj->b", step, h, step)     # predicted decrease
-        trial = objective(active, new, trial_derivatives, trial_derivatives)     # F only: most steps are judged
+        trial = objective(active, new, trial_derivatives, trial_derivatives)     # F alone, or with derivatives
         evaluations += active.numel()
         rho = (free[active] - trial.free) / gain.clamp_min(1e-300)
         ok = torch.isfinite(trial.free) & (trial.free < free[active]) & (gain > 0)
