@@ -61,11 +61,10 @@ class TrackerConfig:
     lost_slack: float = 1.0         # … plus this many times its distance to the median (F's spread)
     restart: str = "auto"           # "encoder" (its guess), "multistart", "auto": the encoder when one is given
     restart_perception: PerceptionConfig = RESTART   # a restart's update ("auto": Adam then LM with an image model)
-    # One stream's LM steps are mostly accepted, so each trial brings its derivatives. Adam then LM as in the
-    # levels, monotone in F, where undamped Gauss–Newton steps bounce
-    # (1.7° against 2.1° on nao_arm at 30 Hz). 2 steps each: a restart costs ≤ 8 evaluations, and its frame stays
-    # within a p95 of 20 ms (measured, nao_arm 30 Hz, 30 s: 3 steps 0.81° mean error, restarted frames 24 ms; 2 steps
-    # 0.85°, 19 ms; Adam alone, 3 steps: 0.94°, 13 ms)
+    # One stream's LM steps are mostly accepted, so each trial brings its derivatives. Adam then LM as in the levels,
+    # monotone in F, where undamped Gauss–Newton steps bounce (1.7° against 2.1° on nao_arm at 30 Hz). 2 steps each:
+    # a restart costs ≤ 8 evaluations, and its frame stays within a p95 of 20 ms (measured, nao_arm 30 Hz, 30 s:
+    # 3 steps 0.81° mean error, restarted frames 24 ms; 2 steps 0.85°, 19 ms; Adam alone, 3 steps: 0.94°, 13 ms)
     restart_starts: int = 8         # multistart: starts per lost stream (tracked, predicted, uniform draws)
     settle_quantile: float | None = 0.5   # skip the updates where F at the start < this quantile of F at the truths
     # of the calibration frames (F at the start is known from the proposal: with an encoder and an image model). A
