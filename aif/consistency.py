@@ -27,11 +27,15 @@ def above_spread(values: np.ndarray, quantile: float, slack: float) -> float:
     return top + slack * (top - float(np.median(values)))
 
 
+def _outputs(model) -> int:
+    return math.prod(model.output_shape)
+
+
 class SensorChecks:
     """The checked sensors of a perception and their bounds (empty until `calibrate`)."""
 
     def __init__(self, perception: Perception, precisions: Mapping | None, limits):
-        small = [m for m in perception.models if math.prod(m.output_shape) <= JACOBIAN_MAX_OUTPUTS]
+        small = [m for m in perception.models if _outputs(m) <= JACOBIAN_MAX_OUTPUTS]
         self.names = {m.modality for m in small}
         config = replace(perception.config, precisions=tuple((k, v) for k, v in perception.config.precisions
                                                              if k in self.names))
@@ -43,7 +47,7 @@ class SensorChecks:
     def of(cls, perception: Perception, precisions, limits) -> SensorChecks | None:
         """Checks for a perception of several modalities with at least one low-dimensional; else None."""
         models = perception.models
-        if len(models) < 2 or all(math.prod(m.output_shape) > JACOBIAN_MAX_OUTPUTS for m in models):
+        if len(models) < 2 or all(_outputs(m) > JACOBIAN_MAX_OUTPUTS for m in models):
             return None
         return cls(perception, precisions, limits)
 
@@ -51,7 +55,7 @@ class SensorChecks:
         """Each sensor's bound from its ½ εᵀΠε at the true poses q_true (N, Dz) of frames `observations`. → bounds"""
         from scipy.stats import chi2
         _, errors = self.perception.energies(self._sensed(as_inputs(observations)), q_true)
-        outputs = {m.modality: math.prod(m.output_shape) for m in self.perception.models}
+        outputs = {m.modality: _outputs(m) for m in self.perception.models}
         # never below what the sensor's own precision expects at the truth, ½ εᵀΠε ~ ½ χ²(outputs): frames with less
         # noise than their precision says would otherwise leave no room at all
         self.bounds = {name: max(above_spread(e.numpy(), quantile, slack),

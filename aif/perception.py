@@ -170,17 +170,17 @@ class Perception:
             free, grad, hess, errors = self._terms(sensors, mu[:, None], rows, need_hess, need_grad=need_grad)
             return descent.Terms(free, grad[:, 0] if need_grad else None, hess, errors)
 
-        common = dict(max_steps=cfg.max_steps, tol=cfg.tol, max_step=cfg.max_step, record=cfg.record,
-                      trial_derivatives=cfg.lm.trial_derivatives)
+        common = dict(max_steps=cfg.max_steps, tol=cfg.tol, max_step=cfg.max_step, record=cfg.record)
         if cfg.method == "lm":
-            r = descent.levenberg_marquardt(objective, mu0, self.low, self.high, damping=cfg.lm.damping, **common)
+            r = descent.levenberg_marquardt(objective, mu0, self.low, self.high, damping=cfg.lm.damping,
+                                            trial_derivatives=cfg.lm.trial_derivatives, **common)
         elif cfg.method == "adam":
-            common.pop("trial_derivatives")
             r = descent.adam(objective, mu0, self.low, self.high, lr=cfg.adam.lr, patience=cfg.adam.patience,
                              **common)
         else:
             r = descent.adam_then_lm(objective, mu0, self.low, self.high, lr=cfg.adam.lr,
-                                     patience=cfg.adam.patience, handover=cfg.adam.handover, **common)
+                                     patience=cfg.adam.patience, handover=cfg.adam.handover,
+                                     trial_derivatives=cfg.lm.trial_derivatives, **common)
         traj = None if r.trajectory is None else \
             {name: torch.stack(rows) if rows else torch.empty(0, len(mu0)) for name, rows in r.trajectory.items()}
         diverged_step = torch.where(r.diverged, 0, -1)

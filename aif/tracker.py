@@ -230,13 +230,13 @@ class Tracker:
             evaluations += spent
             self._learn_cost(timings["perceive"], evaluations / b)
         contradicted = self._contradicted(obs, mu)
-        restart = contradicted | (~torch.isfinite(free) if self.threshold is None else ~(free <= self.threshold))
+        restart = self._lost(free, contradicted)
         if restart.any():
             tick = time.perf_counter()
             mu, free, contradicted, extra = self._restarted(obs, mu, free, contradicted, predicted, restart, guess)
             timings["restart"] = 1e3 * (time.perf_counter() - tick)
             evaluations += extra
-        lost = contradicted | (~torch.isfinite(free) if self.threshold is None else ~(free <= self.threshold))
+        lost = self._lost(free, contradicted)
         self._commit(mu, free, restart, command, dt)
         self.last = FrameInfo(lost, restart, steps, evaluations / b, 1e3 * (time.perf_counter() - start), timings)
         return mu.clone(), free.clone()
@@ -370,6 +370,10 @@ class Tracker:
         if mu is not None:
             draws[:, 0], draws[:, 1] = mu[rows], predicted[rows]
         return draws
+
+    def _lost(self, free, contradicted) -> torch.Tensor:
+        """(B,) bool: F above the lost-track threshold (not finite, without one), or a sensor contradicts."""
+        return contradicted | (~torch.isfinite(free) if self.threshold is None else ~(free <= self.threshold))
 
     def _contradicted(self, obs, mu) -> torch.Tensor:
         """(B,) bool: a checked sensor contradicts the belief mu (aif/consistency.py); all False without checks."""
