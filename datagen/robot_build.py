@@ -16,13 +16,13 @@ From the model file (MJCF, or URDF through `urdf.load_urdf`) the spec is edited 
 from __future__ import annotations
 
 import hashlib
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import mujoco
 import numpy as np
 
+from bodyschema.datagen.model_files import Budget, check_spec, decode, mjcf_files, one_line, parse_xml
 from bodyschema.datagen.robot_record import AUTO_CAMERA, EE_SITE, RobotRecord
 from bodyschema.datagen.urdf import load_urdf
 from bodyschema.errors import must_be
@@ -50,37 +50,34 @@ class Built:
 
 
 def read_source(record: RobotRecord, text: str | None = None) -> tuple[mujoco.MjSpec, Source]:
-    """The spec of the record's model file (or of `text`, the same file's content kept elsewhere) and its Source."""
+    """The spec of the record's model file (or of `text`, the same file's content kept elsewhere) and its Source,
+    every file read under the policy of `model_files` and the spec's sizes checked before anything is compiled."""
     path = record.model_path
+    budget = Budget()
     if text is None:
         if not path.is_file():
             raise FileNotFoundError(must_be(f"the model file of robot {record.name!r}", "an existing file", str(path),
                                             "Fix `model` in its record (relative to the record's folder)."))
-        raw = path.read_bytes()
-        text = raw.decode()
+        raw = budget.read(path, f"the model file of robot {record.name!r}")
+        text = decode(raw, path)
     else:
         raw = text.encode()
+    roots = [path.parent] + ([record.mesh_path] if record.mesh_path else [])
     if path.suffix.lower() == ".urdf":
-        spec, meshes = load_urdf(path, text, record.mesh_path, record.visual)
+        spec, meshes = load_urdf(path, text, record.mesh_path, record.visual, budget)
     else:
-        spec, meshes = _mjcf_spec(path, text)
+        spec, meshes = _mjcf_spec(path, text, roots, budget)
+    check_spec(spec, path)
     return spec, Source(str(path), text, hashlib.sha256(raw).hexdigest(), meshes)
 
 
-def _mjcf_spec(path: Path, text: str) -> tuple[mujoco.MjSpec, dict[str, str]]:
-    folder = path.parent
-    includes = {f: (folder / f).read_bytes() for f in re.findall(r'<include\s+file="([^"]+)"', text)}
+def _mjcf_spec(path: Path, text: str, roots: list[Path], budget: Budget) -> tuple[mujoco.MjSpec, dict[str, str]]:
+    includes, meshes = mjcf_files(parse_xml(text, path, "MJCF"), path, roots, budget)
     try:
         spec = mujoco.MjSpec.from_string(text, include=includes or None)
-    except ValueError as e:
-        raise ValueError(must_be(f"the MJCF {path}", "a model MuJoCo parses", str(e).strip())) from e
-    spec.modelfiledir = str(folder)            # meshes and textures resolve as if read from the file
-    meshes = {}
-    for asset in [*spec.meshes, *spec.textures]:
-        if asset.file:
-            file = folder / (spec.texturedir if asset in spec.textures else spec.meshdir) / asset.file
-            if file.is_file():
-                meshes[asset.file] = hashlib.sha256(file.read_bytes()).hexdigest()
+    except (ValueError, RuntimeError) as e:
+        raise ValueError(must_be(f"the MJCF {path}", "a model MuJoCo parses", one_line(e))) from e
+    spec.modelfiledir = str(path.parent)       # meshes and textures resolve as if read from the file
     return spec, meshes
 
 
@@ -89,7 +86,7 @@ def build_model(record: RobotRecord, actuators: str = "position", text: str | No
     if actuators not in ACTUATOR_KINDS:
         raise ValueError(must_be("actuators", f"one of {ACTUATOR_KINDS}", actuators))
     spec, source = read_source(record, text)
-    reference = _compile(spec, source.path, fusestatic=False)      # frames of every body, before any edit
+    reference = compile_spec(spec, source.path, fusestatic=False)      # frames of every body, before any edit
     joints = chosen_joints(record, reference)
     _weld_others(spec, reference, joints, record.hold)
     _limit_continuous(spec, joints)
@@ -104,17 +101,17 @@ def build_model(record: RobotRecord, actuators: str = "position", text: str | No
             force = np.array(act.forcerange, dtype=float)
             act.set_to_motor()
             act.forcelimited, act.ctrlrange = mujoco.mjtLimited.mjLIMITED_FALSE, force
-    return Built(_compile(spec, source.path), source, site, camera)
+    return Built(compile_spec(spec, source.path), source, site, camera)
 
 
-def _compile(spec: mujoco.MjSpec, path: str, fusestatic: bool | None = None) -> mujoco.MjModel:
+def compile_spec(spec: mujoco.MjSpec, path: str, fusestatic: bool | None = None) -> mujoco.MjModel:
     saved = spec.compiler.fusestatic
     if fusestatic is not None:
         spec.compiler.fusestatic = fusestatic
     try:
         return spec.compile()
-    except ValueError as e:
-        raise ValueError(must_be(f"the model {path}", "one MuJoCo compiles", str(e).strip())) from e
+    except (ValueError, RuntimeError) as e:       # RuntimeError: "Caught an unknown exception!" (e.g. out of memory)
+        raise ValueError(must_be(f"the model {path}", "one MuJoCo compiles", one_line(e))) from e
     finally:
         spec.compiler.fusestatic = saved
 

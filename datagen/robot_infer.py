@@ -20,7 +20,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from bodyschema.datagen.robot_build import build_model, read_source
+from bodyschema.datagen.robot_build import build_model, compile_spec, read_source
 from bodyschema.datagen.robot_record import AUTO_CAMERA, RobotRecord
 from bodyschema.errors import must_be
 
@@ -46,7 +46,7 @@ def infer_record(path: Path, mesh_dir: Path | None = None, visual: str = "mesh",
                         workspaces={"full": box, "camera": box}, camera=_PLACEHOLDER_CAMERA, mesh_dir=mesh,
                         visual=visual, collisions="none")
     spec, _ = read_source(draft)
-    model = spec.compile()
+    model = compile_spec(spec, str(path))
     ee, body = _infer_ee(model)
     joints = _chain_hinges(model, body)
     if not joints:

@@ -1,10 +1,12 @@
 """`load_urdf`: a URDF as a MuJoCo spec, its meshes found and checked first.
 
 MuJoCo compiles URDF itself but neither resolves `package://` paths nor reads every mesh format. Each mesh path is
-resolved here: `package://PKG/REST` against the URDF's folder and its ancestors (a folder named PKG, or one holding
-PKG/REST) and against `mesh_dir`; a plain path against the URDF's folder, then `mesh_dir`. Meshes go to MuJoCo as
-named assets (no path guessing on its side). A format MuJoCo does not load (.dae, ...) is the house error naming
-the file, unless `visual="collision"` asks for the collision geometry to be rendered instead of the visual meshes.
+resolved here: `package://PKG/REST` in the folder named PKG nearest above the URDF (the ROS package holding it), then
+PKG/REST or REST beside the URDF or in `mesh_dir`; a plain path against the URDF's folder, then `mesh_dir`. Nothing
+resolves outside those folders (`model_files`: no absolute path elsewhere, no `..` out, no walk up to `/`). Each mesh
+file is read once and goes to MuJoCo as one named asset however many links show it (no path guessing on its side).
+A format MuJoCo does not load (.dae, ...) is the house error naming the file, unless `visual="collision"` asks for
+the collision geometry to be rendered instead of the visual meshes.
 """
 
 from __future__ import annotations
@@ -15,61 +17,80 @@ from pathlib import Path
 
 import mujoco
 
+from bodyschema.datagen.model_files import MAX_ASSETS, Budget, inside, one_line, parse_xml
 from bodyschema.errors import must_be
 
 MESH_SUFFIXES = (".stl", ".obj", ".msh")    # what MuJoCo loads
 
 
-def load_urdf(path: Path, text: str, mesh_dir: Path | None, visual: str) -> tuple[mujoco.MjSpec, dict[str, str]]:
+def load_urdf(path: Path, text: str, mesh_dir: Path | None, visual: str,
+              budget: Budget | None = None) -> tuple[mujoco.MjSpec, dict[str, str]]:
     """(spec, {mesh path as written in the URDF: sha256}) for the URDF `text` read from `path`."""
-    try:
-        root = ET.fromstring(text)
-    except ET.ParseError as e:
-        raise ValueError(must_be(f"the URDF {path}", "well-formed XML", str(e))) from e
+    budget = budget or Budget()
+    root = parse_xml(text, path, "URDF")
     if root.tag != "robot":
         raise ValueError(must_be(f"the URDF {path}", "a <robot> document", f"<{root.tag}>"))
     if visual == "collision":
         for link in root.iter("link"):
             for element in link.findall("visual"):
                 link.remove(element)
-    assets, digests = {}, {}
+    assets, digests, names, references = {}, {}, {}, 0
     for kind in ("visual", "collision"):
         for element in root.iter(kind):
             for mesh in element.iter("mesh"):
+                references += 1
+                if references > MAX_ASSETS:
+                    raise ValueError(must_be(f"the mesh references of the URDF {path}", f"at most {MAX_ASSETS}",
+                                             "more", "Merge or drop meshes."))
                 written = mesh.get("filename", "")
-                file = resolve_mesh(written, Path(path).parent, mesh_dir)
+                file = resolve_mesh(written, Path(path).parent, mesh_dir, path)
                 _check_format(file, written, kind)
-                data = file.read_bytes()
-                name = f"mesh{len(assets)}_{file.stem}{file.suffix.lower()}"
-                mesh.set("filename", name)
-                assets[name], digests[written] = data, hashlib.sha256(data).hexdigest()
+                if file not in names:             # one asset per file, however many links show it
+                    data = budget.read(file, f"{kind} mesh {written!r} of {path}")
+                    names[file] = (f"mesh{len(assets)}_{file.stem}{file.suffix.lower()}",
+                                   hashlib.sha256(data).hexdigest())
+                    assets[names[file][0]] = data
+                mesh.set("filename", names[file][0])
+                digests[written] = names[file][1]
     _keep_visuals(root)
-    return mujoco.MjSpec.from_string(ET.tostring(root, encoding="unicode"), assets=assets), digests
+    try:
+        spec = mujoco.MjSpec.from_string(ET.tostring(root, encoding="unicode"), assets=assets)
+    except (ValueError, RuntimeError) as e:
+        raise ValueError(must_be(f"the URDF {path}", "a robot MuJoCo parses", one_line(e),
+                                 "Check its links and joints (one parent each, no cycles).")) from e
+    return spec, digests
 
 
-def resolve_mesh(written: str, folder: Path, mesh_dir: Path | None) -> Path:
-    """The file a URDF mesh path names (house error listing where it was looked for)."""
+def resolve_mesh(written: str, folder: Path, mesh_dir: Path | None, urdf: Path | str = "the URDF") -> Path:
+    """The file a URDF mesh path names, inside the URDF's folder, `mesh_dir` or the package it names (house error
+    listing where it was looked for, or saying which folders a path may resolve in)."""
     if written.startswith("file://"):
         written = written[len("file://"):]
     places = [] if mesh_dir is None else [Path(mesh_dir)]
     if written.startswith("package://"):
         package, _, rest = written[len("package://"):].lstrip("/").partition("/")
+        # the folder named PKG nearest above the URDF (a ROS package holding it), else PKG/ or the file in a place
+        above = next((p for p in [folder.resolve(), *folder.resolve().parents] if p.name == package and package), None)
+        tops = [(top / package, top) for top in [*places, folder]] + [(top, top) for top in [*places, folder]]
+        if above is not None:
+            tops.insert(0, (above, above))
         tried = []
-        for top in [*places, folder, *folder.resolve().parents]:
-            candidates = [top / package / rest, top / rest] if top.name != package else [top / rest]
-            tried += candidates
-            found = next((c for c in candidates if c.is_file()), None)
-            if found:
-                return found
-        raise FileNotFoundError(must_be(f"mesh {written}", "found beside the URDF or in --mesh-dir",
+        for base, root in tops:
+            candidate = base / rest
+            tried.append(candidate)
+            if candidate.is_file():
+                return inside(rest, base, [root], "mesh", str(urdf))
+        raise FileNotFoundError(must_be(f"mesh {written} of {urdf}", "found in a folder named "
+                                        f"{package!r} above the URDF, beside it or in --mesh-dir",
                                         f"not in {[str(t) for t in tried[:4]]} ...",
                                         f"Pass --mesh-dir pointing at the folder that holds {package}/ or {rest}."))
-    candidates = [Path(written)] if Path(written).is_absolute() else [folder / written, *(p / written for p in places)]
-    found = next((c for c in candidates if c.is_file()), None)
+    candidates = [(folder, written), *((p, written) for p in places)]
+    found = next(((base, w) for base, w in candidates if (base / w).is_file()), None)
     if found is None:
-        raise FileNotFoundError(must_be(f"mesh {written}", "an existing file (relative to the URDF or --mesh-dir)",
-                                        [str(c) for c in candidates], "Pass --mesh-dir with the mesh folder."))
-    return found
+        raise FileNotFoundError(must_be(f"mesh {written} of {urdf}", "an existing file (relative to the URDF or "
+                                        "--mesh-dir)", [str(b / w) for b, w in candidates],
+                                        "Pass --mesh-dir with the mesh folder."))
+    return inside(found[1], found[0], [folder, *places], "mesh", str(urdf))
 
 
 def _check_format(file: Path, written: str, kind: str) -> None:
