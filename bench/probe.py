@@ -1,6 +1,6 @@
 """The bad-input probe's tally: every fuzz case of the test suite run as a user would, through the console script.
 
-    .venv/bin/python bench/probe.py [--timeout 120] [--only SUBSTRING]
+    .venv/bin/python bench/probe.py [--timeout 120] [--only SUBSTRING] [--no-library] [--no-races]
 
 Gathers the one-line bad-input cases of `tests/test_cli_fuzz.py` and of every `tests/reliability/test_*.py` (its
 module-level `CASES…` lists of (id, command) or (id, command, env)), builds each module's scratch folder (its
@@ -13,7 +13,9 @@ outcome into one of:
   half-written    refused, but a file of the folder was added, removed or changed
   silently accepted   exit 0
   unclear         refused without a traceback, but with no house line
-Prints the counts and the cases that are not clear errors. Not a test: the suite asserts each case in-process; this
+Prints the counts and the cases that are not clear errors, then the library calls' tally (bench/probe_library.py:
+`gymnasium.make` on bad robot records) and the concurrency tally (bench/probe_races.py: two writers, one target, as
+real processes at several offsets; a few minutes). Not a test: the suite asserts each case in-process; this
 is the figure of the reliability reports (bad inputs / clear errors / tracebacks / hangs / half-written / silently
 accepted), measured the way the probe measured it.
 """
@@ -31,6 +33,9 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+
+import probe_library  # noqa: E402 — beside this file
+import probe_races  # noqa: E402
 
 from tests.test_cli_fuzz import TYRO_PHRASES, VALIDATE_ANSWERS, build_world, snapshot  # noqa: E402 — after the repo root is on sys.path
 
@@ -82,6 +87,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--timeout", type=float, default=120.0, help="seconds before a case counts as a hang")
     parser.add_argument("--only", default="", help="run only the cases whose id contains this")
+    parser.add_argument("--library", action=argparse.BooleanOptionalAction, default=True,
+                        help="also the library calls (bench/probe_library.py)")
+    parser.add_argument("--races", action=argparse.BooleanOptionalAction, default=True,
+                        help="also the concurrency cases (bench/probe_races.py)")
     args = parser.parse_args()
     tally, odd, total = Counter(), [], 0
     for module in case_modules():
@@ -103,6 +112,11 @@ def main() -> None:
                     odd.append(f"- {case_id} ({outcome}): `{command}` {env or ''} → {tail}")
     print(f"bad inputs {total}: " + " / ".join(f"{name} {tally[name]}" for name in OUTCOMES))
     print("\n".join(odd))
+    only = ["--only", args.only] if args.only else []
+    if args.library:
+        probe_library.main(only)
+    if args.races:
+        probe_races.main(only)
 
 
 if __name__ == "__main__":
