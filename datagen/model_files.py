@@ -17,8 +17,8 @@ from __future__ import annotations
 import os
 import stat
 import xml.etree.ElementTree as ET
-from xml.parsers import expat
 from pathlib import Path
+from xml.parsers import expat
 
 from bodyschema.errors import must_be
 
@@ -47,8 +47,8 @@ class Budget:
         data = read_regular(path, what, MAX_FILE_BYTES)
         self.total += len(data)
         if self.total > MAX_TOTAL_BYTES:
-            raise ValueError(must_be(f"the files of {what}", f"at most {MAX_TOTAL_BYTES // 2**20} MiB together",
-                                     f"{self.total // 2**20} MiB after {path}",
+            raise ValueError(must_be(f"the files of {what}", f"at most {_size(MAX_TOTAL_BYTES)} together",
+                                     f"{_size(self.total)} after {path}",
                                      "Use decimated meshes (fewer triangles) or fewer of them."))
         self.files[path] = data
         return data
@@ -67,15 +67,19 @@ def read_regular(path: Path, what: str, limit: int) -> bytes:
             raise ValueError(must_be(what, "a regular file", f"{path} ({_kind(info.st_mode)})",
                                      "Point it at a file, not a device, FIFO or folder."))
         if info.st_size > limit:
-            raise ValueError(must_be(what, f"a file of at most {limit // 2**20} MiB", f"{info.st_size / 2**20:.1f} "
-                                     f"MiB ({path})", "Use a smaller (decimated) file."))
+            raise ValueError(must_be(what, f"a file of at most {_size(limit)}", f"{_size(info.st_size)} ({path})",
+                                     "Use a smaller (decimated) file."))
         with os.fdopen(fd, "rb", closefd=False) as f:
             data = f.read(limit + 1)
         if len(data) > limit:             # grew while read
-            raise ValueError(must_be(what, f"a file of at most {limit // 2**20} MiB", str(path)))
+            raise ValueError(must_be(what, f"a file of at most {_size(limit)}", str(path)))
         return data
     finally:
         os.close(fd)
+
+
+def _size(n: int) -> str:
+    return f"{n / 2**20:.1f} MiB" if n >= 2**20 else f"{n} bytes"
 
 
 def _kind(mode: int) -> str:
