@@ -54,7 +54,7 @@ from bodyschema.evaluation.report import ReportConfig, write_report
 from bodyschema.export_commands import RUNNERS as EXPORT_RUNNERS, ExportDatasetArgs, ExportOnnxArgs, ShowArgs
 from bodyschema.reproduce.config import ReproduceConfig
 from bodyschema.training.config import TrainConfig, train_commands
-from bodyschema.training.sweep_config import SweepConfig
+from bodyschema.training.sweep_config import SweepConfig, check_sweep_flags
 
 logger = logging.getLogger("bodyschema.cli")    # not __name__: run as `python -m bodyschema.cli` it is __main__
 
@@ -402,6 +402,7 @@ def parse_command(argv: list[str]):
     tyro's message box and exit 2, a config's own check the house error."""
     check_train_flags(argv)
     check_renamed_flags(argv)
+    check_sweep_flags(argv)
     with _config_errors_as_ours():
         return tyro.cli(commands(_command_words(argv)), prog="bodyschema", args=argv, description=DESCRIPTION)
 

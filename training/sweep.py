@@ -32,8 +32,8 @@ from bodyschema import log
 from bodyschema.datagen.backends import ray_session
 from bodyschema.errors import must_be
 from bodyschema.models import kinds
-from bodyschema.training import sweep_report
-from bodyschema.training.config import TrainConfig
+from bodyschema.training import guards, sweep_report
+from bodyschema.training.config import TrainConfig, build_model
 from bodyschema.training.data import load_dataset
 from bodyschema.training.registry import ensure_experiment, sqlite_path, tracking_uri, use_tracking
 from bodyschema.training.sweep_config import SweepConfig
@@ -83,7 +83,7 @@ def plan(config: SweepConfig) -> Plan:
     epochs = [d.high if not d.grid else max(d.grid) for d in space.dimensions if d.name == "epochs"]
     max_epochs = int(max(epochs)) if epochs else getattr(train.model, "epochs", None)
     cpus = os.cpu_count() or 1
-    concurrent = config.max_concurrent or min(space.trials, cpus)
+    concurrent = min(space.trials, cpus) if config.max_concurrent is None else config.max_concurrent
     if concurrent < 1 or (not os.environ.get("RAY_ADDRESS") and concurrent > cpus):
         raise ValueError(must_be("--max-concurrent", f"between 1 and this machine's {cpus} CPUs", concurrent,
                                  "Each trial takes one CPU; more would only queue."))
@@ -101,6 +101,7 @@ def _sweep(p: Plan) -> sweep_report.SweepResult:
     uri = _absolute(tracking_uri(p.config.tracking_uri))            # a trial's cwd is its trial folder
     data = load_dataset(p.train.data, p.train.modalities, val_fraction=p.train.val_fraction, seed=p.train.seed,
                         max_train=p.train.max_train)
+    check_memory(p, data)                                           # every trial's fit, as `train` checks one
     with ray_session(os.cpu_count() or 1) as ray:                   # RAY_ADDRESS unreachable: refused here
         cpus, gpus = ray.cluster_resources().get("CPU", 0), ray.cluster_resources().get("GPU", 0)
         if p.concurrent > cpus:
@@ -206,6 +207,27 @@ def _log_parent_params(p: Plan, cost, gpus: float) -> None:
         mlflow.log_params({k: str(v) for k, v in params.items()})
     except mlflow.exceptions.MlflowException:
         pass                                                        # a continued parent has them (estimate differs)
+
+
+def check_memory(p: Plan, data, available: float | None = None) -> None:
+    """`train`'s guards on every trial of the sweep before Ray starts (a GP on images; a fit's memory, with each
+    random dimension at its high end, the largest it may draw): the house error names the trial to drop."""
+    guards.check_config(p.config.kind, p.train.modalities)
+    shapes = {m: data.output_shape(m) for m in p.train.modalities}
+    available = guards.available_memory() if available is None else available
+    for point in p.space.points():
+        model_config = dataclasses.replace(p.train.model, **point)
+        model = build_model(dataclasses.replace(p.train, model=model_config), data.body, shapes)
+        try:
+            for shape in shapes.values():
+                guards.check_memory(p.config.kind, model, len(data.train), shape, available)
+        except ValueError as error:
+            trial = " ".join(f"{k}={_word(v)}" for k, v in point.items())
+            raise ValueError(f"{error} (sweep trial {trial}: drop its value from --grid / --space)") from None
+
+
+def _word(value) -> str:
+    return "x".join(map(str, value)) if isinstance(value, tuple) else str(value)
 
 
 def _sweep_name(p: Plan, dataset_sha256: str) -> str:

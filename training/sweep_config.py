@@ -13,6 +13,10 @@ from typing import Annotated
 
 import tyro
 
+from bodyschema.errors import must_be
+
+LIST_FLAGS = ("--grid", "--space")   # each takes its items after one flag: a second one would replace the first
+
 KindWord = Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="KIND")]
 
 
@@ -37,3 +41,16 @@ class SweepConfig:
     run_root: Path = Path("runs")  # the sweep folder is <run_root>/sweeps/<kind>-<modality>-<hash>
     register: bool = True  # register the best trial (champion only if better); False: runs only
     progress: bool = True  # Tune's trial table on the console
+
+
+def check_sweep_flags(argv: list[str]) -> None:
+    """`sweep --grid a=1 --grid b=2` would sweep b only (the parser keeps a list flag's last occurrence): the house
+    error, naming the one-flag form."""
+    if argv[:1] != ["sweep"]:
+        return
+    for flag in LIST_FLAGS:
+        given = [a for a in argv if a.split("=")[0] == flag]
+        if len(given) > 1:
+            raise ValueError(must_be(flag, "given once, all its items after it", f"{flag} {len(given)} times",
+                                     f"Write `{flag} lr=1e-3,3e-3 hidden=64x64,128x128`: items separated by spaces, "
+                                     "values by commas."))

@@ -9,14 +9,20 @@ the config class itself, so a sweep refuses exactly what `bodyschema train KIND`
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 import types
 import typing
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any, Literal
 
 from bodyschema.errors import must_be
 from bodyschema.models.configs import ModelConfig, _expected
+
+# Every trial is a whole fit (seconds to hours): far above a useful sweep (the README's: 6–24 trials), far below one
+# that would not end (a 1000×1000 grid: 10⁶ fits). A count like any other of the project: bounded, the bound named.
+MAX_TRIALS = 1_000
 
 
 @dataclass(frozen=True)
@@ -41,6 +47,15 @@ class SearchSpace:
     def first(self) -> dict[str, Any]:
         """The first configuration (first grid values, random dimensions at their low end): the cost probe's."""
         return {d.name: d.grid[0] if d.grid else d.low for d in self.dimensions}
+
+    def points(self) -> Iterator[dict[str, Any]]:
+        """Every grid point, each random dimension at its high end (the largest network it may draw): the points
+        whose fits the memory guard checks."""
+        high = {d.name: (int(d.high) if _hint(self.config_class, d.name) is int else d.high)
+                for d in self.dimensions if not d.grid}
+        grids = [d for d in self.dimensions if d.grid]
+        for values in itertools.product(*(d.grid for d in grids)):
+            yield {**{d.name: v for d, v in zip(grids, values)}, **high}
 
     def describe(self) -> dict[str, str]:
         """name → "v1, v2" or "lo..hi (log)": the parent run's params."""
@@ -79,17 +94,22 @@ def parse_space(config_class: type[ModelConfig], kind: str, grid: tuple[str, ...
                                 "Give all its values in one --grid entry."))
     if random < 0:
         problems.append(must_be("--random", "a count ≥ 0 of random draws", random))
-    if space and random < 1:
+    elif space and random < 1:
         problems.append(must_be("--random", "≥ 1 when --space is given", random, "Say how many draws: --random N."))
-    if random and not space:
+    if random > 0 and not space:
         problems.append(must_be("--space", "at least one name=lo:hi[:log] with --random", "nothing",
                                 "Name what to draw, e.g. --space lr=1e-4:1e-2:log."))
     if not dims and not problems:
         problems.append(must_be("the search space", "a non-empty --grid name=v1,v2 or --random N --space "
                                 "name=lo:hi[:log]", "nothing", f"See `bodyschema train {kind} --help` for the names."))
+    result = SearchSpace(config_class, tuple(dims), max(random, 1))
+    if not problems and result.trials > MAX_TRIALS:
+        problems.append(must_be("the number of trials (grid points × --random draws)", f"at most {MAX_TRIALS:,}",
+                                result.trials, "Every trial is a whole fit: sweep in stages, a coarse grid first, "
+                                "then a finer one around its best (or draw --random N over --space)."))
     if problems:
         raise ValueError("\n".join(problems))
-    return SearchSpace(config_class, tuple(dims), max(random, 1))
+    return result
 
 
 def tunable(config_class: type[ModelConfig]) -> list[str]:
@@ -101,7 +121,15 @@ def _grid_dimension(config_class, kind: str, item: str) -> Dimension:
     values = tuple(_parse(config_class, name, t.strip(), f"--grid {name}") for t in texts.split(",") if t.strip())
     if not values:
         raise ValueError(must_be(f"--grid {name}", "at least one value", item, f"Write {name}=v1,v2."))
-    return Dimension(name, grid=tuple(dict.fromkeys(values)))              # a repeated value is one trial, not two
+    repeated = sorted({_text(v) for v in values if values.count(v) > 1})
+    if repeated:                                                           # a typo for another value, most likely
+        raise ValueError(must_be(f"--grid {name}", "distinct values", item,
+                                 f"{', '.join(repeated)} is given twice: a repeated value is one trial, not two."))
+    return Dimension(name, grid=values)
+
+
+def _text(value: Any) -> str:
+    return "x".join(map(str, value)) if isinstance(value, tuple) else str(value)
 
 
 def _random_dimension(config_class, kind: str, item: str) -> Dimension:

@@ -34,6 +34,9 @@ from bodyschema.evaluation.tracking.streams import Streams, calibration_frames, 
 
 DEFAULT_MODELS = ("analytic:nao_arm:ee_xyz",)
 SENSED = ("ee_xyz", "ee_pixel", "image", "joints")
+# Every rate is a whole run's work again (its own streams, every condition and method): far above a curve's points
+# (default 3: 10, 30, 60 Hz), far below a run that would not end.
+MAX_RATES = 16
 
 
 @dataclass(frozen=True)
@@ -52,7 +55,8 @@ class TrackingConfig(TrialsConfig):
     noise: tuple[tuple[str, float], ...] = (         # σ per modality: m, px, intensity in [0, 1], rad (1°)
         ("ee_xyz", 0.001), ("ee_pixel", 1.0), ("image", 0.02), ("joints", math.radians(1.0)))
     hold_s: tuple[float, float] = (0.2, 1.0)         # s each babbling target is held: datagen's (the demo's) pace
-    precisions: tuple[tuple[str, float], ...] = ()   # fixed Π per modality instead of the noise rule, e.g. ee_xyz 1e6
+    precisions: tuple[tuple[str, float], ...] = ()   # fixed Π per modality instead of the noise rule, e.g. ee_xyz 1e6;
+    # 0 ignores that modality (as in every benchmark: a dead sensor), so a condition must keep one with Π > 0
     # for a GP (the demo's): its own variance (~1e-9 m²) is negligible beside the noise and costs more than its mean
     tracker: TrackerConfig = TrackerConfig()         # budget, motion order, lost-track threshold and restarts
     calibration_frames: int = 200      # poses from the model box whose F at the truth sets the lost-track threshold
@@ -65,6 +69,10 @@ class TrackingConfig(TrialsConfig):
         super().__post_init__()
         if not self.rates or not all(r > 0 for r in self.rates):
             raise ValueError(must_be("rates", "a non-empty tuple of frame rates > 0 in Hz", self.rates))
+        if len(self.rates) > MAX_RATES or len(set(self.rates)) != len(self.rates):
+            raise ValueError(must_be("rates", f"at most {MAX_RATES} distinct frame rates", f"{len(self.rates)} rates "
+                                     f"({len(set(self.rates))} distinct)", "Each rate reruns every stream, condition "
+                                     "and method; for more points on the curve, run again with other --rates."))
         within("frames (duration × rate)", self.duration * max(self.rates), "steps")
         check_names("methods", self.methods, METHODS)
         if not self.fuse_joints or len(set(self.fuse_joints)) != len(self.fuse_joints):
@@ -199,6 +207,7 @@ def run_tracking(config: TrackingConfig = TrackingConfig(), models: Sequence | N
     new run folder under config.out and logs one MLflow run. → name → path of what it wrote."""
     start = time.perf_counter()
     models = resolve_models(config.models, DEFAULT_MODELS, config.tracking_uri, models)
+    check_informed(config, models)
     robot = load_robot(models)
     encoder = resolve_encoder(config.encoder, robot, config.tracking_uri)
     rows, curves = measure(config, models, robot, encoder)
@@ -208,6 +217,18 @@ def run_tracking(config: TrackingConfig = TrackingConfig(), models: Sequence | N
                              report.title(robot, models, encoder))
     publish(config, folder, "tracking", {**table_metrics(rows, _label), "wall_s": wall}, paths, models)
     return paths
+
+
+def check_informed(config: TrackingConfig, models: Sequence) -> None:
+    """Every sensing condition keeps a modality that informs the belief: Π = 0 (--precisions m 0) ignores m, and a
+    condition that sees nothing else has nothing to follow (its flow step, 1/curvature, would be infinite)."""
+    ignored = {m for m, pi in config.precisions if pi == 0}
+    for name, used in conditions(config, models):
+        if used and all(m.modality in ignored for m in used):
+            raise ValueError(must_be("precisions", f"> 0 for one modality of each sensing condition ({name}: "
+                                     f"{', '.join(sorted(ignored))} ignored)", config.precisions,
+                                     "Π = 0 ignores a modality; fuse the joint encoders (--fuse-joints True) or give "
+                                     "the condition another model."))
 
 
 def _label(row: Mapping) -> str:
