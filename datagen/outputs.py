@@ -9,13 +9,18 @@
   folder holding them and a folder inside them are never replaced, marker or not.
 - Before writing: partials of the same OUT left by a killed export (a pid no longer alive) are removed, and the
   free space beside OUT is checked against the caller's estimate.
+- One writer per OUT: the whole write holds OUT's lock (`locks.store_lock`, the one datagen holds), and OUT is
+  checked again under it; a second writer is refused naming the holder's pid, or finds OUT written.
 - `write(tmp)` builds the output at `.<name>.partial-<pid>`; any failure (Ctrl-C included) removes it, and a full
-  disk is named as such. A file is moved in with one `os.replace`; a directory by renaming the old one aside, the
-  new one in, then deleting the old one.
+  disk is named as such. A new OUT is moved in with a rename that fails when OUT appeared meanwhile (renameat2
+  RENAME_NOREPLACE; a hard link for a file where that is missing), so nothing is silently replaced; --overwrite
+  moves a file in with one `os.replace`, a directory by renaming the old one aside, the new one in, then deleting
+  the old one. Folders made for OUT are removed again when nothing is written.
 """
 
 from __future__ import annotations
 
+import ctypes
 import errno
 import hashlib
 import json
@@ -26,6 +31,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
+from bodyschema.datagen.locks import store_lock
 from bodyschema.errors import must_be
 
 MARKER = "bodyschema-output.json"
@@ -41,9 +47,23 @@ def write_atomically(out: str | Path, write: Callable[[Path], None], overwrite: 
     """Run `write(tmp)` on a temporary sibling of `out`, then move it to `out`; returns `out` as given."""
     given, out = Path(out), Path(out).resolve()
     check_out(out, kind, overwrite, inputs)
+    made = [p for p in reversed(out.parents) if not p.exists()]
     out.parent.mkdir(parents=True, exist_ok=True)
-    replace_atomically(out, lambda tmp: _write_with_marker(tmp, write, kind, source), need_bytes)
+    try:
+        with store_lock(out, f"OUT {out}", LOCKED_HINT):
+            check_out(out, kind, overwrite, inputs)     # again: another writer may have finished meanwhile
+            replace_atomically(out, lambda tmp: _write_with_marker(tmp, write, kind, source), need_bytes,
+                               replace=out.exists() or out.is_symlink())
+    except BaseException:
+        for folder in reversed(made):                   # the folders made for OUT, when they stayed empty
+            if folder.is_dir() and not any(folder.iterdir()):
+                folder.rmdir()
+        raise
     return given
+
+
+LOCKED_HINT = ("Another bodyschema command (import, export or datagen) is writing it; wait for it to finish and "
+               "choose another path (or pass --overwrite), or stop that process. Nothing was written.")
 
 
 def check_out(out: str | Path, kind: str, overwrite: bool, inputs: Iterable[str | Path] = ()) -> None:
@@ -101,18 +121,22 @@ def _write_with_marker(tmp: Path, write: Callable[[Path], None], kind: str, sour
     Path(f"{tmp}.json").write_text(json.dumps(marker, indent=2, default=str))
 
 
-def replace_atomically(out: Path, write: Callable[[Path], None], need_bytes: int = 0) -> None:
+def replace_atomically(out: Path, write: Callable[[Path], None], need_bytes: int = 0, replace: bool = True) -> None:
     """`write(tmp)` at `.<name>.partial-<pid>`, then moved to `out` (and `<tmp>.json`, if written, to the marker's).
-    First the partials of `out` left by killed processes go, and the free space is checked against `need_bytes`."""
+    First the partials of `out` left by killed processes go, and the free space is checked against `need_bytes`.
+    replace=False: `out` must still not exist when the output is moved in (else FileExistsError, nothing moved)."""
     remove_stale_partials(out)
     check_free_space(out.parent, need_bytes)
     tmp = partial_path(out, os.getpid())
     aside, marker_tmp = Path(f"{tmp}.old"), Path(f"{tmp}.json")
     try:
         write(tmp)
-        if tmp.is_dir() and out.is_dir():
-            os.rename(out, aside)
-        os.replace(tmp, out)
+        if not replace:
+            rename_new(tmp, out)
+        else:
+            if tmp.is_dir() and out.is_dir():
+                os.rename(out, aside)
+            os.replace(tmp, out)
         if marker_tmp.exists():
             os.replace(marker_tmp, marker_path(out))
     except BaseException as error:      # Ctrl-C included: nothing half-written stays
@@ -126,6 +150,45 @@ def replace_atomically(out: Path, write: Callable[[Path], None], need_bytes: int
                                   f"{out}; the partial output was removed, nothing was written.")) from error
         raise
     _remove(aside)
+
+
+RENAME_NOREPLACE, AT_FDCWD = 1, -100      # linux/fs.h, fcntl.h
+
+
+def rename_new(tmp: Path, out: Path) -> None:
+    """Move `tmp` to `out`, which must not exist: a FileExistsError (the house message) when it appeared meanwhile,
+    and `tmp` stays where it was. renameat2(RENAME_NOREPLACE) where the kernel and file system have it; else a hard
+    link for a file (fails on an existing name) and, for a directory, a check just before the rename."""
+    try:
+        if _renameat2_noreplace(tmp, out):
+            return
+        if not tmp.is_dir():
+            os.link(tmp, out)
+            os.unlink(tmp)
+            return
+        if out.exists() or out.is_symlink():
+            raise FileExistsError(errno.EEXIST, os.strerror(errno.EEXIST), str(out))
+        os.rename(tmp, out)
+    except FileExistsError:
+        raise FileExistsError(must_be("OUT", "a path that does not exist yet", f"{out} (it appeared while this "
+                                      "command was writing)", "Another process wrote it meanwhile and it was kept; "
+                                      "choose another path, or pass --overwrite to replace it.")) from None
+
+
+def _renameat2_noreplace(tmp: Path, out: Path) -> bool:
+    """True when renameat2 moved `tmp` to `out`; False where it is unavailable (an older libc, a file system
+    without RENAME_NOREPLACE); FileExistsError when `out` exists."""
+    renameat2 = getattr(ctypes.CDLL(None, use_errno=True), "renameat2", None)
+    if renameat2 is None:
+        return False
+    if renameat2(AT_FDCWD, os.fsencode(tmp), AT_FDCWD, os.fsencode(out), RENAME_NOREPLACE) == 0:
+        return True
+    code = ctypes.get_errno()
+    if code in (errno.EINVAL, errno.ENOSYS, errno.EOPNOTSUPP):
+        return False
+    if code == errno.EEXIST:
+        raise FileExistsError(code, os.strerror(code), str(out))
+    raise OSError(code, os.strerror(code), str(out))
 
 
 def partial_path(out: Path, pid: int) -> Path:
