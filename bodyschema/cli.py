@@ -34,6 +34,7 @@ import dataclasses
 import logging
 import os
 import re
+import signal
 import sys
 import traceback
 from collections.abc import Mapping
@@ -424,13 +425,15 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"\n{command}: interrupted. {after_interrupt(command)}", file=sys.stderr)
         return 130
+    except BrokenPipeError:                                          # `bodyschema ... --help | head`: the reader left
+        return _stdout_closed()
     except expected_types() as error:
         line = explain(error)
         if line is None:                                             # e.g. a TypeError from our own code: a bug
             return _bug(command, error)
         if debug:
             traceback.print_exc()
-        print(f"{command}: error: {strip_tyro_names(line)}", file=sys.stderr)
+        print(f"{command}: error: {log.masked(strip_tyro_names(line))}", file=sys.stderr)   # a URL's password
         return 2
     except Exception as error:
         return _bug(command, error)
@@ -490,6 +493,18 @@ def _config_errors_as_ours():
 
     with hook(reject):
         yield
+
+
+def _stdout_closed() -> int:
+    """Stdout's reader went away (`| head`): nothing to say, and nothing more to write (Python's flush at exit would
+    raise again: stdout now goes to /dev/null). The status of a process killed by SIGPIPE, as `seq 1 1e6 | head`."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError, AttributeError):   # a replaced stdout (tests) has no file descriptor
+        pass
+    return 128 + signal.SIGPIPE
 
 
 def _bug(command: str, error: BaseException) -> int:

@@ -26,9 +26,7 @@ import logging
 import os
 import re
 import tempfile
-import urllib.error
 import urllib.parse
-import urllib.request
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -43,9 +41,11 @@ from bodyschema.training.digest import DIGEST_TAG, verify_directory, version_dig
 from bodyschema.training.locks import exclusive
 from bodyschema.training.mlmodel_file import artifact_dir as _artifact_dir
 from bodyschema.training.model_card import describe_registration
-from bodyschema.training.tracking_store import (
+from bodyschema.training.tracking_store import (  # noqa: F401 — TrackingUnreachable: importers name it here
+    TrackingUnreachable,
     check_database_driver,
     check_local_store,
+    check_server,
     check_sqlite_store,
     create_sqlite,
 )
@@ -58,10 +58,6 @@ _URI = re.compile(r"^models:/(?P<name>[^/@]+)(?:@(?P<alias>[^/]+)|/(?P<version>\
 SCHEMES = ("", "file", "sqlite", "postgresql", "mysql", "mssql", "http", "https", "databricks", "databricks-uc", "uc")
 _initialized: set[str] = set()         # sqlite URIs whose tables this process created or checked under the lock
 _log = logging.getLogger(__name__)
-
-
-class TrackingUnreachable(ConnectionError):
-    """The tracking server did not answer within the timeout (an OSError, so the CLI reports it as one)."""
 
 
 def tracking_uri(explicit: str | None = None) -> str:
@@ -101,24 +97,14 @@ def check_tracking(uri: str, timeout_s: float = 5.0) -> None:
         scheme = ""                          # a Windows drive letter (C:\\...): a local path
     if scheme not in SCHEMES:
         raise ValueError(must_be("tracking URI", "sqlite:///<file>.db, http(s)://<host>:<port>, file:<dir> or a "
-                                 "database URL", uri, "Fix --tracking-uri or $MLFLOW_TRACKING_URI (unset it for the "
-                                 "default sqlite:///<cwd>/mlflow.db)."))
+                                 "database URL", log.masked(uri), "Fix --tracking-uri or $MLFLOW_TRACKING_URI (unset "
+                                 "it for the default sqlite:///<cwd>/mlflow.db)."))
     if sqlite_path(uri) is not None:
         check_sqlite_store(sqlite_path(uri), uri)
     elif scheme in ("postgresql", "mysql", "mssql"):
         check_database_driver(uri)
-    if scheme not in ("http", "https"):
-        return
-    try:
-        with urllib.request.urlopen(f"{uri.rstrip('/')}/health", timeout=timeout_s):
-            pass
-    except urllib.error.HTTPError:
-        return                               # it answered (an error page is still an answer)
-    except (urllib.error.URLError, OSError) as error:
-        reason = getattr(error, "reason", error)
-        raise TrackingUnreachable(must_be("tracking server", f"answering within {timeout_s:g} s", f"{uri}: {reason}",
-                                          "Start it (`mlflow server --host 127.0.0.1 --port <port>`), or unset "
-                                          "MLFLOW_TRACKING_URI to use the local sqlite store.")) from None
+    if scheme in ("http", "https"):
+        check_server(uri, timeout_s)
 
 
 def sqlite_path(uri: str) -> Path | None:

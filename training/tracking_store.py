@@ -11,10 +11,13 @@ A mistyped local URI would otherwise be a new, empty registry ("no registered bo
 
 from __future__ import annotations
 
+import base64
 import errno
 import logging
 import os
+import urllib.error
 import urllib.parse
+import urllib.request
 from pathlib import Path
 
 from mlflow import MlflowClient
@@ -67,6 +70,41 @@ def check_local_store(uri: str, *, reads: bool, create: bool) -> None:
                                  shown, f"{store} does not exist: run from the folder holding your mlflow.db, or "
                                  "point --tracking-uri or $MLFLOW_TRACKING_URI at it (train a model first to make "
                                  "one; --create makes an empty store)."))
+
+
+class TrackingUnreachable(ConnectionError):
+    """The tracking server did not answer within the timeout (an OSError, so the CLI reports it as one)."""
+
+
+def server_request(uri: str, path: str = "/health") -> urllib.request.Request:
+    """A GET of `path` on the server of http(s) URI `uri`, its user:password@ (if any) sent as HTTP basic auth, as
+    MLflow 3 does (requests takes the credentials from the URL; MLFLOW_TRACKING_USERNAME/PASSWORD otherwise): the
+    host is dialled without them (urllib would look up "user:password@host" as the host name)."""
+    parts = urllib.parse.urlsplit(uri)
+    userinfo, _, host = parts.netloc.rpartition("@")
+    request = urllib.request.Request(urllib.parse.urlunsplit((parts.scheme, host, parts.path.rstrip("/") + path,
+                                                              "", "")))
+    if userinfo:
+        user, _, password = userinfo.partition(":")
+        token = f"{urllib.parse.unquote(user)}:{urllib.parse.unquote(password)}".encode()
+        request.add_header("Authorization", "Basic " + base64.b64encode(token).decode())
+    return request
+
+
+def check_server(uri: str, timeout_s: float) -> None:
+    """The http(s) tracking server `uri` answers within `timeout_s` seconds (any HTTP answer counts, an error page
+    or a 401 included), else TrackingUnreachable; its password is never shown."""
+    try:
+        with urllib.request.urlopen(server_request(uri), timeout=timeout_s):
+            pass
+    except urllib.error.HTTPError:
+        return                               # it answered (an error page is still an answer)
+    except (urllib.error.URLError, OSError, ValueError) as error:
+        reason = getattr(error, "reason", error)
+        raise TrackingUnreachable(must_be("tracking server", f"answering within {timeout_s:g} s",
+                                          f"{log.masked(uri)}: {reason}",
+                                          "Start it (`mlflow server --host 127.0.0.1 --port <port>`), or unset "
+                                          "MLFLOW_TRACKING_URI to use the local sqlite store.")) from None
 
 
 def check_sqlite_store(db: Path, uri: str) -> None:
