@@ -101,7 +101,23 @@ def build_model(record: RobotRecord, actuators: str = "position", text: str | No
             force = np.array(act.forcerange, dtype=float)
             act.set_to_motor()
             act.forcelimited, act.ctrlrange = mujoco.mjtLimited.mjLIMITED_FALSE, force
-    return Built(compile_spec(spec, source.path), source, site, camera)
+    if record.pd and len(record.pd["kp"]) != len(joints):
+        raise ValueError(must_be(f"record [pd] kp and kd of robot {record.name!r}", f"{len(joints)} gains each, one "
+                                 f"per joint of {joints}", (len(record.pd["kp"]), len(record.pd["kd"]))))
+    model = compile_spec(spec, source.path)
+    _check_ee_moves(model, site, record.name)
+    return Built(model, source, site, camera)
+
+
+def _check_ee_moves(model: mujoco.MjModel, site: str, robot: str) -> None:
+    """The ee must hang below at least one of the chosen joints (on the world, its Jacobian is zero)."""
+    body = int(model.site(site).bodyid[0])
+    while body != 0 and not model.body_jntnum[body]:
+        body = int(model.body_parentid[body])
+    if body == 0:
+        raise ValueError(must_be(f"the ee of robot {robot!r}", "moved by the chosen joints",
+                                 f"site {site!r} on body {model.body(int(model.site(site).bodyid[0])).name!r}, "
+                                 "which no chosen joint moves", "Fix [ee] in the record: name the arm's last body."))
 
 
 def compile_spec(spec: mujoco.MjSpec, path: str, fusestatic: bool | None = None) -> mujoco.MjModel:

@@ -15,6 +15,7 @@
 from __future__ import annotations
 
 import dataclasses
+import re
 from pathlib import Path
 
 import mujoco
@@ -42,7 +43,7 @@ def infer_record(path: Path, mesh_dir: Path | None = None, visual: str = "mesh",
     path = Path(path).resolve()
     mesh = str(Path(mesh_dir).resolve()) if mesh_dir else ""
     box = ((-1.0, 1.0),)
-    draft = RobotRecord(name=path.stem, model=path.name, image_size=tuple(image_size), base=path.parent,
+    draft = RobotRecord(name=safe_name(path.stem), model=path.name, image_size=tuple(image_size), base=path.parent,
                         workspaces={"full": box, "camera": box}, camera=_PLACEHOLDER_CAMERA, mesh_dir=mesh,
                         visual=visual, collisions="none")
     spec, _ = read_source(draft)
@@ -65,6 +66,12 @@ def infer_record(path: Path, mesh_dir: Path | None = None, visual: str = "mesh",
     draft = dataclasses.replace(draft, workspaces={"full": box, "camera": box}, actuators=actuators,
                                 pd={"kp": kp, "kd": kd})
     return dataclasses.replace(draft, camera=_infer_camera(draft, spec, ranges))
+
+
+def safe_name(stem: str) -> str:
+    """A record name (`robot_record.NAME_PATTERN`) from a file's stem: other characters become '_'."""
+    name = re.sub(r"[^A-Za-z0-9_.-]", "_", stem).lstrip(".-")[:64]
+    return name or "robot"
 
 
 # ---- ee and joints ----------------------------------------------------------------------------------------

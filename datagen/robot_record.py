@@ -16,6 +16,7 @@ A model file with a record of the same stem beside it uses that record; without 
 from __future__ import annotations
 
 import math
+import re
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
@@ -36,6 +37,7 @@ REQUIRED_WORKSPACES = ("full", "camera")     # every record names these two (dat
 SECTIONS = {"ee": ("site", "body", "offset"), "camera": ("name", "pos", "xyaxes", "fovy"),
             "actuators": ("kind", "kp", "kv"), "pd": ("kp", "kd"),
             "reaching": ("models", "control_hz", "duration_s", "actuators", "action")}
+NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}")   # a file name everywhere: stores, models, runs
 TOP_KEYS = ("name", "model", "joints", "image_size", "mesh_dir", "visual", "collisions", "hold", "workspaces",
             *SECTIONS)
 
@@ -171,13 +173,20 @@ def record_from_dict(values: dict[str, Any], base: Path, where: str = "robot rec
     for key in ("name", "model", "image_size", "workspaces"):
         if key not in values:
             raise ValueError(must_be(where, f"a record with a `{key}` key", sorted(values)))
+    for key in ("hold", "workspaces", *SECTIONS):
+        if key in values and not isinstance(values[key], dict):
+            raise ValueError(must_be(f"`{key}` of {where}", f"a table ([{key}] with its keys)", values[key]))
     kwargs = dict(values)
     kwargs["image_size"] = tuple(values["image_size"]) if isinstance(values["image_size"], list) else None
-    kwargs["joints"] = tuple(values.get("joints", ()))
-    kwargs["workspaces"] = {k: tuple(tuple(r) for r in v) if isinstance(v, list) else v
-                            for k, v in (values["workspaces"] or {}).items()} if isinstance(
-        values["workspaces"], dict) else values["workspaces"]
+    joints = values.get("joints", [])
+    kwargs["joints"] = tuple(joints) if isinstance(joints, list) else joints    # a string is refused, not split
+    kwargs["workspaces"] = {k: _tuples(v) for k, v in values["workspaces"].items()}
     return RobotRecord(**kwargs, base=base)
+
+
+def _tuples(box: Any) -> Any:
+    """[[lo, hi], ...] as tuples; anything else as it came (the checks name it)."""
+    return tuple(tuple(r) if isinstance(r, list) else r for r in box) if isinstance(box, list) else box
 
 
 # ---- writing ----------------------------------------------------------------------------------------------
@@ -234,8 +243,14 @@ def _plain(v: Any) -> Any:
 # ---- checks -----------------------------------------------------------------------------------------------
 def _problems(r: RobotRecord) -> list[str]:
     p = []
-    if not (isinstance(r.name, str) and r.name and "/" not in r.name and ":" not in r.name):
-        p.append(must_be("record `name`", "a non-empty name without '/' or ':'", r.name))
+    if not (isinstance(r.name, str) and NAME_PATTERN.fullmatch(r.name)):
+        p.append(must_be("record `name`", "1-64 letters, digits, '_', '-' or '.', not starting with '.' or '-'",
+                         r.name, "It names stores, models and runs: e.g. my_arm."))
+    for key in ("ee", "hold", "camera", "actuators", "pd", "reaching", "workspaces"):
+        if not isinstance(getattr(r, key), dict):
+            return [*p, must_be(f"record `{key}`", f"a table ([{key}] with its keys)", getattr(r, key))]
+    if not isinstance(r.mesh_dir, str):
+        p.append(must_be("record `mesh_dir`", "a folder path (text), relative to the record", r.mesh_dir))
     if not (isinstance(r.model, str) and Path(r.model).suffix.lower() in MODEL_SUFFIXES):
         p.append(must_be("record `model`", "a path to an MJCF (.xml) or URDF (.urdf) file", r.model,
                          "Other formats: convert them to MJCF or URDF first."))
@@ -243,9 +258,11 @@ def _problems(r: RobotRecord) -> list[str]:
     if not (isinstance(size, tuple) and len(size) == 2 and all(isinstance(s, int) and 8 <= s <= 1024 for s in size)):
         p.append(must_be("record `image_size`", "[H, W] with integers in [8, 1024] px", size))
     p += _ee_problems(r.ee)
-    if not all(isinstance(j, str) for j in r.joints) or len(set(r.joints)) != len(r.joints):
-        p.append(must_be("record `joints`", "distinct joint names", list(r.joints)))
-    if not all(isinstance(v, (int, float)) and math.isfinite(v) for v in r.hold.values()):
+    if not isinstance(r.joints, tuple) or not all(isinstance(j, str) and j for j in r.joints) or \
+            len(set(r.joints)) != len(r.joints):
+        p.append(must_be("record `joints`", "a list of distinct joint names, e.g. [\"shoulder\", \"elbow\"]",
+                         r.joints))
+    if not (all(isinstance(k, str) for k in r.hold) and _finite(r.hold.values())):
         p.append(must_be("record [hold]", "joint = finite value (rad or m)", r.hold))
     p += _camera_problems(r.camera)
     p += _workspace_problems(r.workspaces)
@@ -255,6 +272,11 @@ def _problems(r: RobotRecord) -> list[str]:
         p.append(must_be("record [actuators] kp and kv", "lists of finite gains >= 0, one per joint", r.actuators))
     if r.pd and not all(_gains(r.pd.get(k)) for k in ("kp", "kd")):
         p.append(must_be("record [pd] kp and kd", "lists of finite gains >= 0, one per joint", r.pd))
+    elif r.pd and isinstance(r.joints, tuple) and not len(r.pd["kp"]) == len(r.pd["kd"]) == (len(r.joints) or
+                                                                                             len(r.pd["kp"])):
+        p.append(must_be("record [pd] kp and kd", f"{len(r.joints) or len(r.pd['kp'])} gains each, one per joint",
+                         (len(r.pd["kp"]), len(r.pd["kd"]))))
+    p += _reaching_problems(r.reaching)
     if r.visual not in VISUALS:
         p.append(must_be("record `visual`", f"one of {VISUALS}", r.visual))
     if r.collisions not in COLLISIONS:
@@ -263,9 +285,29 @@ def _problems(r: RobotRecord) -> list[str]:
     return p
 
 
+def _reaching_problems(reaching: dict) -> list[str]:
+    p = []
+    for key, unit in (("control_hz", "Hz"), ("duration_s", "s")):
+        value = reaching.get(key, 1.0)
+        if not (_finite([value]) and value > 0):
+            p.append(must_be(f"record [reaching] {key}", f"a finite number > 0 ({unit})", value))
+    models = reaching.get("models", [])
+    if not (isinstance(models, list) and all(isinstance(m, str) and m for m in models)):
+        p.append(must_be("record [reaching] models", "a list of modalities, e.g. [\"ee_xyz\", \"joints\"]", models))
+    if reaching.get("actuators", "position") not in ("position", "torque"):
+        p.append(must_be("record [reaching] actuators", "'position' or 'torque'", reaching.get("actuators")))
+    if not isinstance(reaching.get("action", {}), dict):
+        p.append(must_be("record [reaching] action", "a table of velocity controller settings", reaching["action"]))
+    return p
+
+
 def _ee_problems(ee: dict) -> list[str]:
-    if not isinstance(ee, dict) or ("site" in ee) == ("body" in ee):
+    if ("site" in ee) == ("body" in ee) or not all(isinstance(ee.get(k, "x"), str) and ee.get(k, "x")
+                                                   for k in ("site", "body")):
         return [must_be("record [ee]", "either site = NAME or body = NAME (with offset = [x, y, z] m)", ee)]
+    if ee.get("body") == "world":
+        return [must_be("record [ee] body", "a body the joints move", "world",
+                        "Name the arm's last body (or a site on it).")]
     if "site" in ee and "offset" in ee:
         return [must_be("record [ee] offset", "given with a body only (a site is its own point)", ee)]
     offset = ee.get("offset", [0.0, 0.0, 0.0])
