@@ -11,8 +11,9 @@ and `episode`. Any other named column is taken as a joint, and a name the body d
 from __future__ import annotations
 
 import csv
+import os
 import re
-from pathlib import Path
+from pathlib import Path, PurePath
 
 import numpy as np
 
@@ -37,7 +38,7 @@ def read_folder(folder: Path, csv_path: Path | None, images: bool) -> Recording:
         if c.lower() in TIME_COLUMNS:
             arrays["t"] = _numbers(rows, [i], columns, csv_path)[:, 0].astype(np.float32)
         elif c.lower() == "episode":
-            arrays["episode"] = _numbers(rows, [i], columns, csv_path)[:, 0].astype(np.int32)
+            arrays["episode"] = _numbers(rows, [i], columns, csv_path)[:, 0]   # whole numbers checked in run.py
     image_paths: list[Path] = []
     if images:
         file_col = next((i for i, c in enumerate(columns) if c.lower() in FILE_COLUMNS), None)
@@ -61,11 +62,19 @@ def _read_csv(path: Path) -> tuple[list[str] | None, list[list[str]]]:
     """(header or None, data rows); a header is a first row holding a cell that is not a number."""
     if not path.is_file():
         raise FileNotFoundError(must_be("--csv", "an existing CSV file", str(path)))
-    with open(path, newline="") as f:
-        rows = [[cell.strip() for cell in row] for row in csv.reader(f) if any(cell.strip() for cell in row)]
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as f:
+            rows = [[cell.strip() for cell in row] for row in csv.reader(f) if any(cell.strip() for cell in row)]
+    except UnicodeDecodeError as e:
+        raise ValueError(must_be(f"CSV {path.name}", "UTF-8 text", f"byte {e.object[e.start:e.start + 1].hex()} at "
+                                 f"offset {e.start} (not UTF-8; latin-1?)", "Save it as UTF-8.")) from None
+    except csv.Error as e:
+        raise ValueError(must_be(f"CSV {path.name}", "comma-separated text", str(e))) from None
     if not rows:
         raise ValueError(must_be(f"CSV {path.name}", "at least one row of joint angles", "an empty file"))
     header = rows[0] if any(not _is_number(c) for c in rows[0]) else None
+    if header:
+        _check_header(header, path)
     data = rows[1:] if header else rows
     width = len(rows[0])
     for i, row in enumerate(data):
@@ -75,6 +84,22 @@ def _read_csv(path: Path) -> tuple[list[str] | None, list[list[str]]]:
     if not data:
         raise ValueError(must_be(f"CSV {path.name}", "at least one row of joint angles", "a header only"))
     return header, data
+
+
+def _check_header(header: list[str], path: Path) -> None:
+    """Each column named once: a joint named twice, or two columns of one role (image/file, t/time), is refused."""
+    roles = [_role(c) for c in header]
+    twice = sorted({c for c, r in zip(header, roles) if roles.count(r) > 1})
+    if twice:
+        raise ValueError(must_be(f"the header of CSV {path.name}", "each joint and column named once",
+                                 f"{twice} in {header}", "Drop or rename the repeated column; nothing is dropped "
+                                 "silently."))
+
+
+def _role(column: str) -> str:
+    low = column.lower()
+    return ("image" if low in FILE_COLUMNS else "t" if low in TIME_COLUMNS else "episode" if low == "episode"
+            else f"joint {column}")
 
 
 def _is_number(cell: str) -> bool:
@@ -108,6 +133,12 @@ def _in_order(folder: Path) -> list[Path]:
 
 
 def _listed(folder: Path, rows: list[list[str]], col: int) -> list[Path]:
+    for r, row in enumerate(rows):
+        cell = PurePath(row[col])
+        if cell.is_absolute() or ".." in PurePath(os.path.normpath(cell)).parts:
+            raise ValueError(must_be(f"the image of CSV row {r + 1}", f"a path inside the recording folder {folder}",
+                                     row[col], "Name each image relative to the folder, without '..'; copy images "
+                                     "from elsewhere into it."))
     paths = [folder / row[col] for row in rows]
     missing = [str(p.name) for p in paths if not p.is_file()]
     if missing:

@@ -14,6 +14,7 @@ from bodyschema.errors import must_be
 
 def prepare_images(images: list[np.ndarray], names: list[str], crop, resize, gray: bool) -> np.ndarray:
     """(N, H, W) or (N, H, W, 3) uint8; the house error on mixed sizes without --resize or mixed channels."""
+    images = [_pixels(im, name) for im, name in zip(images, names)]
     _check_same(images, names, lambda im: im.shape[:2], "image sizes (H, W)", "Pass --resize H W to bring "
                 "every image to one size" + (" (after --crop)" if crop else "") + ".", resize is None)
     _check_same(images, names, lambda im: 1 if im.ndim == 2 else im.shape[2], "image channels",
@@ -25,6 +26,22 @@ def prepare_images(images: list[np.ndarray], names: list[str], crop, resize, gra
         raise ValueError(must_be("image size (H, W)", f"each side in [{lo}, {hi}] px", (h, w),
                                  "Pass --resize H W (and --crop to keep the part that shows the arm)."))
     return np.stack(out)
+
+
+def _pixels(image: np.ndarray, name: str) -> np.ndarray:
+    """The image as (H, W) or (H, W, 3) uint8, as recorded: any other dtype or channel count is refused, never
+    converted (a float image in [0, 1] or a 16-bit one cast to uint8 would be all black or wrap modulo 256)."""
+    image = np.asarray(image)
+    if image.dtype != np.uint8:
+        raise ValueError(must_be(f"image {name}", "8-bit (uint8) pixels", str(image.dtype), "Convert the frames "
+                                 "to 8 bits per channel first (a float image in [0, 1]: round(x * 255)); nothing "
+                                 "is converted silently."))
+    if image.ndim == 3 and image.shape[2] == 1:
+        image = image[:, :, 0]
+    if image.ndim != 2 and not (image.ndim == 3 and image.shape[2] == 3):
+        raise ValueError(must_be(f"image {name}", "(H, W) gray or (H, W, 3) RGB", f"shape {image.shape}",
+                                 "Keep one or three channels (drop alpha or depth channels first)."))
+    return image
 
 
 def _check_same(images, names, key, what: str, hint: str, enforce: bool) -> None:

@@ -32,21 +32,21 @@ def read_lerobot(root: Path, joint_keys: tuple[str, ...], image_key: str | None,
     ours = _ours(root)
     frames = _frames(root)
     state_key = joint_keys[0] if joint_keys else "observation.state"
-    feats = info.get("features", {})
+    feats = info["features"]
     if state_key not in feats or state_key not in frames.column_names:
         raise ValueError(must_be(f"joint key {state_key!r}", "a feature of the dataset", sorted(feats),
                                  "Pass --joint-key with the feature of the joint angles."))
-    q = _vectors(frames, state_key)                                                  # (N, K)
-    arrays = _own_arrays(frames, q.shape[1], ours.get("arrays", {})) if ours else {}
+    q = _vectors(frames, state_key, root)                                            # (N, K)
+    arrays = _own_arrays(frames, q.shape[1], ours.get("arrays", {}), root) if ours else {}
     recorded = (ours or {}).get("store_attrs", {}).get("features")
     if recorded is None or "episode" in recorded:
-        arrays["episode"] = frames.column("episode_index").to_numpy().astype(np.int32)
+        arrays["episode"] = _column(frames, "episode_index", root)
     if recorded is None or "t" in recorded:
-        arrays["t"] = frames.column("timestamp").to_numpy().astype(np.float32)
+        arrays["t"] = _column(frames, "timestamp", root)
     key = _image_key(feats, image_key) if images else None
     pictures = _images(root, info, frames, key) if key else None
     return Recording(q, _names(feats[state_key], q.shape[1]), pictures,
-                     [f"frame {i}" for i in range(len(q))] if key else [], arrays,
+                     [f"{root.name} frame {i}" for i in range(len(q))] if key else [], arrays,
                      unit="rad" if ours else None, attrs=(ours or {}).get("store_attrs", {}),
                      files=[p for p in root.rglob("*") if p.is_file()],
                      params={"format": "lerobot", "codebase_version": info["codebase_version"],
@@ -59,10 +59,18 @@ def _info(root: Path) -> dict:
         info = json.loads(path.read_text())
     except (OSError, ValueError) as e:
         raise ValueError(must_be("SOURCE", "a LeRobot dataset with a readable meta/info.json", str(root))) from e
+    if not isinstance(info, dict):
+        raise ValueError(must_be(f"{path}", "a JSON object (LeRobot's info)", type(info).__name__))
     version = str(info.get("codebase_version"))
     if not version.startswith("v3"):
         raise ValueError(must_be("the LeRobot codebase_version", "v3.0", version,
                                  "Convert older datasets with LeRobot's v2.1 → v3.0 script."))
+    feats = info.get("features")
+    if not isinstance(feats, dict) or not all(isinstance(f, dict) for f in feats.values()):
+        got = type(feats).__name__ if not isinstance(feats, dict) else next(
+            f"{k!r}: {type(f).__name__}" for k, f in feats.items() if not isinstance(f, dict))
+        raise ValueError(must_be(f"features in {path}", "an object of features {key: {dtype, shape, names}}", got,
+                                 "Rewrite meta/info.json as LeRobot writes it."))
     return info
 
 
@@ -70,8 +78,20 @@ def _ours(root: Path) -> dict | None:
     path = root / "meta" / "bodyschema.json"
     if not path.is_file():
         return None
-    ours = json.loads(path.read_text())
-    return ours if ours.get("format") == OWN_FORMAT else None
+    try:
+        ours = json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        raise ValueError(must_be(f"{path}", "readable JSON (this project's export record)", str(e)[:80])) from None
+    if not isinstance(ours, dict):
+        raise ValueError(must_be(f"{path}", f"a JSON object (format {OWN_FORMAT!r})", type(ours).__name__,
+                                 "Remove the file to import the dataset as a foreign one, or export it again."))
+    if ours.get("format") != OWN_FORMAT:
+        return None
+    for key, kind in (("arrays", dict), ("store_attrs", dict)):
+        if not isinstance(ours.get(key, {}), kind):
+            raise ValueError(must_be(f"{key} in {path}", f"a JSON {kind.__name__}", type(ours[key]).__name__,
+                                     "Export the store again."))
+    return ours
 
 
 def _frames(root: Path):
@@ -81,18 +101,42 @@ def _frames(root: Path):
     files = sorted((root / "data").glob("chunk-*/file-*.parquet"))
     if not files:
         raise ValueError(must_be("SOURCE", "a LeRobot dataset with data/chunk-*/file-*.parquet", str(root)))
-    table = pa.concat_tables([pq.read_table(p) for p in files])
-    return table.take(np.argsort(table.column("index").to_numpy(), kind="stable"))
+    try:
+        table = pa.concat_tables([pq.read_table(p) for p in files])
+    except (pa.ArrowException, OSError) as e:
+        raise ValueError(must_be(f"the parquet files of {root / 'data'}", "readable and of one schema",
+                                 str(e).splitlines()[0][:120])) from None
+    return table.take(np.argsort(_column(table, "index", root), kind="stable"))
 
 
-def _vectors(frames, key: str) -> np.ndarray:
+def _column(frames, key: str, root: Path) -> np.ndarray:
+    """A scalar numeric column LeRobot writes for every frame (index, episode_index, timestamp)."""
+    import pyarrow as pa
+
+    if key not in frames.column_names:
+        raise ValueError(must_be(f"the {key!r} column of the frames in {root / 'data'}",
+                                 "present (LeRobot writes one)", f"absent; columns {frames.column_names[:12]}"))
+    column = frames.column(key)
+    if not (pa.types.is_integer(column.type) or pa.types.is_floating(column.type)):
+        raise ValueError(must_be(f"the {key!r} column of {root / 'data'}", "numbers", str(column.type)))
+    return column.to_numpy()
+
+
+def _vectors(frames, key: str, root: Path) -> np.ndarray:
     """A feature's column as (N, k): a list column (shape [k]) or a scalar one (shape [1], as LeRobot writes it)."""
     import pyarrow as pa
 
     values = frames.column(key).combine_chunks()
     is_list = any(test(values.type) for test in (pa.types.is_list, pa.types.is_large_list,
                                                  pa.types.is_fixed_size_list))
-    flat = (values.flatten() if is_list else values).to_numpy(zero_copy_only=False)
+    flat = values.flatten() if is_list else values
+    if not (pa.types.is_integer(flat.type) or pa.types.is_floating(flat.type)):
+        raise ValueError(must_be(f"the {key!r} column of {root / 'data'}", "numbers (or lists of numbers)",
+                                 str(values.type)))
+    flat = flat.to_numpy(zero_copy_only=False)
+    if len(values) and flat.size % len(values):
+        raise ValueError(must_be(f"the {key!r} column of {root / 'data'}", "lists of one length",
+                                 f"{flat.size} values in {len(values)} rows"))
     return np.asarray(flat, float).reshape(len(values), -1)
 
 
@@ -103,14 +147,14 @@ def _names(feature: dict, k: int) -> tuple[str, ...] | None:
     return tuple(map(str, names)) if isinstance(names, list) and len(names) == k else None
 
 
-def _own_arrays(frames, dq: int, mapping: dict[str, str]) -> dict[str, np.ndarray]:
+def _own_arrays(frames, dq: int, mapping: dict[str, str], root: Path) -> dict[str, np.ndarray]:
     """The store arrays this project's export wrote besides q and images (`mapping`: meta's key → array)."""
     out = {}
     if mapping.get(ACTION) == COMMANDS and ACTION in frames.column_names:
-        out[COMMANDS] = _vectors(frames, ACTION)                               # (N, Dq) rad, the servo targets
+        out[COMMANDS] = _vectors(frames, ACTION, root)                         # (N, Dq) rad, the servo targets
     for key, name in OWN_ARRAYS.items():
         if key in frames.column_names:
-            values = _vectors(frames, key)
+            values = _vectors(frames, key, root)
             out[name] = values.reshape(len(values), 3, dq) if name == "jacobian" else values
     return out
 
@@ -131,7 +175,7 @@ def _images(root: Path, info: dict, frames, key: str) -> list[np.ndarray]:
     if info["features"][key]["dtype"] == "image":
         import cv2
         cells = frames.column(key).to_pylist()
-        return [from_opencv(_decoded(cv2, cell, i), f"frame {i}") for i, cell in enumerate(cells)]
+        return [from_opencv(_decoded(cv2, cell, i), f"{root.name} frame {i}") for i, cell in enumerate(cells)]
     from bodyschema.datagen.importers.video import video_frames
     return video_frames(root, info, frames, key)
 

@@ -53,7 +53,18 @@ def import_recording(config: ImportConfig) -> Path:
 
 
 def read_source(source: Path, config: ImportConfig) -> Recording:
+    """The recording at `source`; a file of the wrong structure that a reader's own checks missed (a key absent, a
+    value of another type) is the house error naming the source, not a traceback."""
     fmt = config.format if config.format != "auto" else _detect(source)
+    try:
+        return _read(source, fmt, config)
+    except (KeyError, TypeError, AttributeError, IndexError) as e:
+        raise ValueError(must_be(f"SOURCE {source}", f"a well-formed {fmt} recording",
+                                 f"{type(e).__name__}: {str(e)[:120]}", "See `bodyschema import --help` for the "
+                                 "layouts read; rerun with --debug to see where it failed.")) from e
+
+
+def _read(source: Path, fmt: str, config: ImportConfig) -> Recording:
     if fmt == "hdf5":
         from bodyschema.datagen.importers.hdf5 import read_hdf5
         return read_hdf5(source, config.joint_key, config.image_key, config.ee_key, config.images)
@@ -76,16 +87,54 @@ def _detect(source: Path) -> str:
 
 
 def _extras(rec: Recording, config: ImportConfig) -> dict[str, np.ndarray]:
-    """The recorded readings besides q, finite, in the store's dtypes (qvel and target converted like the angles)."""
+    """The recorded readings besides q, finite, in the store's dtypes (qvel and target converted like the angles);
+    `episode` whole numbers in [0, 2^31), `t` and `touch` >= 0, ee readings of the schema's width."""
     out = {}
+    where = f"{name_of(rec, config)}"
     for name, values in rec.arrays.items():
         values = np.asarray(values)
+        if values.dtype.kind not in "biuf":
+            raise ValueError(must_be(f"{name} in {where}", "numbers", f"dtype {values.dtype}"))
         if name in ("qvel", "target") and config.angles == "deg":   # joint velocities and angles, as q
             values = values * config.to_rad
         if values.dtype.kind == "f":
-            check_finite(name, values, rec.image_names or None)
+            check_finite(f"{name} in {where}", values, rec.image_names or None)
+        _check_range(name, values, where, rec.image_names)
         out[name] = values.astype(EXTRA_ARRAYS[name])
     return out
+
+
+EPISODE_MAX = 2 ** 31 - 1        # the store keeps episode as int32
+WIDTHS = {"ee_xyz": (3,), "ee_pixel": (2,), "touch": None, "episode": (), "t": ()}   # per-frame shape (None: any)
+
+
+def name_of(rec: Recording, config: ImportConfig) -> str:
+    """The file the readings came from, for messages: the CSV of a folder, else the source."""
+    return rec.params.get("csv") or Path(config.source).name
+
+
+def _check_range(name: str, values: np.ndarray, where: str, labels: list[str]) -> None:
+    """What the store's schema (and validate) require of a recorded reading, said about the recording."""
+    def at(bad: np.ndarray) -> str:
+        row = int(np.flatnonzero(bad)[0])
+        return labels[row] if labels else f"row {row + 1}"
+
+    width = WIDTHS.get(name)
+    if width is not None and values.shape[1:] != width:
+        raise ValueError(must_be(f"{name} in {where}", f"one value per frame of shape {width}",
+                                 f"shape {values.shape[1:]} per frame"))
+    flat = values.reshape(len(values), -1)
+    if name == "episode":
+        bad = (flat != np.round(flat)).any(axis=1) | (flat < 0).any(axis=1) | (flat > EPISODE_MAX).any(axis=1)
+        if bad.any():
+            raise ValueError(must_be(f"episode in {where}", f"a whole number in [0, {EPISODE_MAX}]",
+                                     f"{flat[bad][0].item()!r} at {at(bad)}", "Number the episodes 0, 1, 2, ..."))
+    if name in ("t", "touch"):
+        bad = (flat < 0).any(axis=1)
+        if bad.any():
+            unit = "time (s) since the recording began" if name == "t" else "contact reading"
+            raise ValueError(must_be(f"{name} in {where}", f">= 0: a {unit}", f"{flat[bad].min().item()!r} at "
+                                     f"{at(bad)} ({int(bad.sum())} rows)", "Shift or repair the column."))
 
 
 def _forward_kinematics(body: Body, q: np.ndarray, arrays: dict[str, np.ndarray]) -> dict[str, np.ndarray]:

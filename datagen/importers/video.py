@@ -23,13 +23,32 @@ HINT = ("Re-encode the dataset with image (PNG) features, or use an OpenCV build
 def video_frames(root: Path, info: dict, frames, key: str) -> list[np.ndarray]:
     import pandas as pd
 
-    episodes = pd.concat([pd.read_parquet(p) for p in sorted((root / "meta" / "episodes").glob("chunk-*/*.parquet"))])
+    where = root / "meta" / "episodes"
+    files = sorted(where.glob("chunk-*/*.parquet"))
+    if not files:
+        raise ValueError(must_be(f"{where}", "LeRobot's episode table (chunk-*/*.parquet)", "no parquet file",
+                                 "A video feature needs it to find each episode's file."))
+    episodes = pd.concat([pd.read_parquet(p) for p in files])
+    needed = ["episode_index", *(f"videos/{key}/{c}" for c in ("chunk_index", "file_index", "from_timestamp"))]
+    missing = [c for c in needed if c not in episodes.columns]
+    if missing:
+        raise ValueError(must_be(f"the columns {missing} of the episode table {where}",
+                                 f"present (the video feature {key!r} needs {needed})", "absent", HINT))
     episodes = episodes.set_index("episode_index")
-    fps = float(info["fps"])
+    fps = info.get("fps")
+    if not isinstance(fps, (int, float)) or not fps > 0:
+        raise ValueError(must_be(f"fps in {root / 'meta' / 'info.json'}", "a frame rate > 0 (Hz)", fps))
+    fps = float(fps)
     template = info.get("video_path") or VIDEO_PATH
+    absent = [c for c in ("episode_index", "timestamp") if c not in frames.column_names]
+    if absent:
+        raise ValueError(must_be(f"the columns {absent} of the frames in {root / 'data'}",
+                                 "present (a video feature needs them)", "absent"))
     decoded: dict[Path, list[np.ndarray]] = {}
     out = []
     for episode, t in zip(frames.column("episode_index").to_numpy(), frames.column("timestamp").to_numpy()):
+        if int(episode) not in episodes.index:
+            raise ValueError(must_be(f"episode {int(episode)} of the frames", f"listed in {where}", "absent", HINT))
         row = episodes.loc[int(episode)]
         path = root / template.format(video_key=key, chunk_index=int(row[f"videos/{key}/chunk_index"]),
                                       file_index=int(row[f"videos/{key}/file_index"]))
@@ -47,7 +66,8 @@ def _decode(path: Path) -> list[np.ndarray]:
     import cv2
 
     if not path.is_file():
-        raise FileNotFoundError(must_be("video file", "present", str(path)))
+        raise FileNotFoundError(must_be("video file", "present", str(path), "The dataset is incomplete; copy "
+                                        "its videos/ folder too."))
     capture = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
     images = []
     try:
