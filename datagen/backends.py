@@ -3,6 +3,9 @@
 Two safety rules hold for both:
 - Workers die with their driver. A loky worker watches its parent pid and exits within `WATCH_S` once the driver
   is gone (after `kill -9` of `bodyschema datagen` they used to run on for ~6 min: loky's idle timeout).
+- A local Ray dies with its driver. Its processes (GCS, raylet, dashboard, monitor, the raylet's agents and
+  workers) outlived a `kill -9` of the driver by a minute or two, one agent listening on loopback; a watcher process
+  (`reap_when_gone`) kills the driver's process tree within `WATCH_S` of its death.
 - A local Ray binds to 127.0.0.1 only, without dashboard. Ray turns `_node_ip_address="127.0.0.1"` into the
   machine's routable address unless Ray clusters are disabled for this node (RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER=0,
   what Ray does by default on Windows/macOS); then GCS, raylet, object manager, runtime-env agent, workers and
@@ -17,7 +20,9 @@ from __future__ import annotations
 
 import contextlib
 import os
+import signal
 import socket
+import subprocess
 import sys
 import threading
 import time
@@ -99,10 +104,88 @@ def ray_session(workers: int) -> Iterator:
                 check_reachable(address)
                 ray.init()  # the cluster named by RAY_ADDRESS (its nodes need bodyschema installed)
             else:
+                stack.enter_context(_reaper())           # before ray.init: a kill during it is covered too
                 ray.init(address="local", num_cpus=workers, include_dashboard=False, _node_ip_address="127.0.0.1",
                          log_to_driver=False, configure_logging=False)
             stack.callback(ray.shutdown)
         yield ray
+
+
+@contextlib.contextmanager
+def _reaper() -> Iterator[None]:
+    """A watcher of this process for the `with` body: should it die (kill -9 included), the watcher kills what this
+    process started (the local Ray's processes); a normal end stops the watcher (ray.shutdown ends Ray)."""
+    watcher = subprocess.Popen([sys.executable, "-c", "import sys; from bodyschema.datagen.backends import "
+                                "reap_when_gone; reap_when_gone(int(sys.argv[1]))", str(os.getpid())],
+                               stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                               start_new_session=True)          # not in the driver's group: a Ctrl-C is not its
+    try:
+        yield
+    finally:
+        watcher.kill()
+        watcher.wait()
+
+
+def reap_when_gone(driver: int) -> None:
+    """Run in the watcher process: every WATCH_S, note the process tree of `driver` (pid and start time of each
+    descendant); once the driver is gone, SIGKILL that tree (its processes still alive, and their children), then
+    exit. Linux /proc only (elsewhere: returns at once, Ray's own timeouts end its processes)."""
+    started = _start_time(driver)
+    if started is None:
+        return
+    tree: dict[int, int] = {}
+    while _start_time(driver) == started:
+        tree = _descendants({driver: started})
+        time.sleep(WATCH_S)
+    for _ in range(3):                               # a process forked while the tree was being killed: again
+        alive = {pid: t for pid, t in tree.items() if _start_time(pid) == t}
+        tree = {**alive, **_descendants(alive, include_roots=False)}
+        tree.pop(os.getpid(), None)
+        if not tree:
+            return
+        for pid in tree:
+            with contextlib.suppress(OSError):
+                os.kill(pid, signal.SIGKILL)
+        time.sleep(0.1)
+
+
+def _descendants(roots: dict[int, int], include_roots: bool = False) -> dict[int, int]:
+    """pid → start time of every process below `roots` (pid → start time) in the process tree, read from /proc."""
+    children: dict[int, list[int]] = {}
+    for entry in os.scandir("/proc"):
+        if entry.name.isdigit():
+            parent = _stat_field(int(entry.name), 3)
+            if parent is not None:
+                children.setdefault(parent, []).append(int(entry.name))
+    found, todo = {}, list(roots)
+    while todo:
+        pid = todo.pop()
+        for child in children.get(pid, ()):
+            started = _start_time(child)
+            if started is not None and child not in found and child != os.getpid():
+                found[child] = started
+                todo.append(child)
+    if include_roots:
+        found.update(roots)
+    return found
+
+
+def _start_time(pid: int) -> int | None:
+    """The start time of process `pid` (clock ticks since boot; tells a reused pid apart); None: no such process."""
+    return _stat_field(pid, 21)
+
+
+def _stat_field(pid: int, index: int) -> int | None:
+    """Field `index` (0-based, as in proc(5) minus one) of /proc/<pid>/stat; None when the process is gone."""
+    try:
+        text = open(f"/proc/{pid}/stat").read()
+    except OSError:
+        return None
+    fields = text.rpartition(")")[2].split()                # after the command name, which may hold spaces
+    try:
+        return int(fields[index - 2])
+    except (IndexError, ValueError):
+        return None
 
 
 def _import_ray():

@@ -6,6 +6,12 @@ A run folder starts with `run.json`: the config's class and fields, and the robo
 on a robot also moves `<out>/latest-<robot>`, so `evaluate reaching --robot panda` after a nao_arm run leaves
 `latest-nao_arm` where it was: `latest` is the newest run of any robot, `latest-<robot>` the newest on each
 (`latest_runs`). A folder written before run.json existed has `latest` only, and reads as before.
+
+A run is complete once its `latest` links move to it: `mark_latest` first sets `"complete": true` in its run.json
+(written `false` by new_run), the run's last write. A run killed before has `false`: `report` skips it, saying so,
+and the next run of the same benchmark folder removes it once the process that wrote it is gone (its pid, host and
+process start time are in run.json: a run still going is never touched). A run.json without the key predates it and
+counts as complete.
 """
 
 from __future__ import annotations
@@ -14,6 +20,8 @@ import hashlib
 import json
 import os
 import re
+import shutil
+import socket
 import time
 from dataclasses import asdict, is_dataclass
 from pathlib import Path
@@ -21,6 +29,7 @@ from pathlib import Path
 LATEST = "latest"
 RUN_FILE = "run.json"                 # what the run is: its config's class and fields, its robot
 MAX_RUN_FILE_BYTES = 1_000_000        # a larger run.json was not written by new_run: not read
+COMPLETE = "complete"                 # run.json's key: false until the run's last write (mark_latest)
 MODELS_CSV = "models.csv"             # the models a run used (spec, name, version, source run, digest)
 RUN_NAME = re.compile(r"^\d{8}T\d{6}\.\d{3}Z-[0-9a-f]{8}(-\d+)?$")
 PLAIN_NAME = re.compile(r"^[\w.-]+$")  # a shipped robot's name, usable as is in a link name
@@ -47,7 +56,54 @@ def run_record(config) -> dict:
     none, the models decide), with which fields."""
     robot = getattr(config, "robot", None)
     return {"config": type(config).__name__, "module": type(config).__module__,
-            "robot": str(robot) if robot is not None else None, "fields": _fields(config)}
+            "robot": str(robot) if robot is not None else None, "fields": _fields(config), COMPLETE: False,
+            "writer": _writer()}
+
+
+def _writer() -> dict:
+    """Who writes the run: this process (pid, host, start time in clock ticks since boot: a pid reused after a
+    reboot or by a later process does not match)."""
+    return {"pid": os.getpid(), "host": socket.gethostname(), "started": _start_time(os.getpid())}
+
+
+def _start_time(pid: int) -> int | None:
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+        return int(stat.rpartition(")")[2].split()[19])        # field 22, starttime (after the comm in parentheses)
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def _writer_gone(writer) -> bool:
+    """The process that wrote a run is known to be gone: on this host, and no process with its pid and start time.
+    Unknown (another host, no /proc): not gone (the run is left alone)."""
+    if not isinstance(writer, dict) or writer.get("host") != socket.gethostname():
+        return False
+    pid, started = writer.get("pid"), writer.get("started")
+    if not isinstance(pid, int) or started is None or _start_time(os.getpid()) is None:
+        return False
+    return _start_time(pid) != started
+
+
+def is_complete(folder: Path) -> bool:
+    """The run finished (its run.json says so, or predates the marker); False for one killed, or still running."""
+    return read_run_record(folder).get(COMPLETE, True) is not False
+
+
+def mark_complete(folder: Path) -> None:
+    """Set the run's completion marker (run.json's `complete`), atomically."""
+    _rewrite_record(folder, {COMPLETE: True})
+
+
+def remove_abandoned(root: Path) -> list[Path]:
+    """Remove the incomplete runs under `root` whose writer is gone (killed runs); → the folders removed."""
+    removed = []
+    for folder in (p for p in Path(root).iterdir() if is_run_folder(p)):
+        record = read_run_record(folder)
+        if record.get(COMPLETE, True) is False and _writer_gone(record.get("writer")):
+            shutil.rmtree(folder, ignore_errors=True)
+            removed.append(folder)
+    return removed
 
 
 def new_run(config) -> Path:
@@ -55,6 +111,7 @@ def new_run(config) -> Path:
     start in the same millisecond): nothing another run wrote is touched."""
     root = Path(config.out)
     root.mkdir(parents=True, exist_ok=True)
+    remove_abandoned(root)
     base = run_id(config)
     for k in range(1000):
         folder = root / (base if k == 0 else f"{base}-{k}")
@@ -70,12 +127,18 @@ def new_run(config) -> Path:
 def record_robot(folder: Path, robot: str) -> None:
     """Name the robot in a run's run.json when its config named none (levels, robustness: the models' body decides),
     so its run gets its own `latest-<robot>` and a levels run on the panda leaves nao_arm's as it was."""
+    if read_run_record(folder).get("robot") is None:
+        _rewrite_record(folder, {"robot": str(robot)})
+
+
+def _rewrite_record(folder: Path, changes: dict) -> None:
+    """run.json with `changes`, replaced atomically (nothing for a run without one: a folder older than run.json)."""
     record = read_run_record(folder)
-    if not record or record.get("robot") is not None:
+    if not record:
         return
     path = Path(folder) / RUN_FILE
     tmp = path.with_name(f".{RUN_FILE}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps({**record, "robot": str(robot)}, indent=1, default=str) + "\n")
+    tmp.write_text(json.dumps({**record, **changes}, indent=1, default=str) + "\n")
     tmp.replace(path)
 
 
@@ -111,7 +174,9 @@ def run_robot(folder: Path) -> str | None:
 
 def mark_latest(folder: Path) -> Path:
     """Point `<folder's parent>/latest`, and `latest-<robot>` for a run on a robot, at `folder` (relative links,
-    each replaced atomically: a reader sees the old or the new run, never none); → the `latest` link."""
+    each replaced atomically: a reader sees the old or the new run, never none); → the `latest` link. The run is
+    marked complete first: this is its last write."""
+    mark_complete(folder)
     robot = run_robot(folder)
     if robot is not None:
         _link(folder, f"{LATEST}-{robot}")
@@ -138,8 +203,10 @@ def is_benchmark_folder(path: Path) -> bool:
 
 
 def latest_run(root: Path) -> Path | None:
-    """The run `<root>/latest` points at (as a path under root), else the newest run folder by name, else None."""
-    return _target(Path(root) / LATEST) or max((p for p in Path(root).iterdir() if is_run_folder(p)), default=None)
+    """The run `<root>/latest` points at (as a path under root), else the newest complete run folder by name, else
+    None."""
+    return _target(Path(root) / LATEST) or max((p for p in Path(root).iterdir() if is_run_folder(p)
+                                                and is_complete(p)), default=None)
 
 
 def latest_runs(root: Path) -> dict[str | None, Path]:

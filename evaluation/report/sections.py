@@ -3,21 +3,32 @@
 benchmark without a robot: its latest run), or the run named with `--runs` in its place; a plain folder holding a
 `summary.md` is a section too. The files of each run that the report may not use are returned as skipped, with the
 reason: empty or truncated, older than the summary.md by more than `stale_after_s`, or with a real path outside the
-run folder (a symlink elsewhere: never opened)."""
+run folder (a symlink elsewhere: never opened). An incomplete run (runs.is_complete: killed before its last write) is
+never a section: it is listed as skipped, and naming it with `--runs` is the house error."""
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from bodyschema.errors import must_be
-from bodyschema.evaluation.core.runs import is_benchmark_folder, latest_runs, read_run_record, run_robot
+from bodyschema.evaluation.core.runs import (
+    is_benchmark_folder,
+    is_complete,
+    is_run_folder,
+    latest_runs,
+    read_run_record,
+    run_robot,
+)
 from bodyschema.evaluation.report.confined import is_inside, resolved
 from bodyschema.evaluation.report.pipeline import benchmark_of, order_key
 
 MAX_DEPTH = 2                  # results/<benchmark>/<run> or results/<group>/<benchmark>/<run>
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 OUTSIDE = "outside its run folder (a link elsewhere): not read"
+INCOMPLETE = "an incomplete run (killed, or still running): not reported"
+_log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -44,6 +55,9 @@ def find_sections(results: Path, stale_after_s: float = 3600.0, runs=()
     skipped, sections = [], []
     folders = list(_folders(results, runs=[resolved(r) for r in runs]))
     _check_runs(runs, folders, results)
+    for run in _incomplete(results):
+        _log.warning("%s: %s", run, INCOMPLETE)
+        skipped.append((run, INCOMPLETE))
     for folder in folders:
         summary_path = _summary_file(folder)
         if summary_path is None:
@@ -92,10 +106,24 @@ def _folders(results: Path, depth: int = 1, runs=()):
                 yield from _folders(child, depth + 1, runs)
 
 
+def _incomplete(results: Path, depth: int = 1) -> list[Path]:
+    """The incomplete run folders of every benchmark folder under `results`."""
+    found = []
+    for child in sorted(p for p in results.iterdir() if p.is_dir() and not p.name.startswith((".", "_"))):
+        if is_benchmark_folder(child):
+            found += [r for r in sorted(child.iterdir()) if is_run_folder(r) and not is_complete(r)]
+        elif depth < MAX_DEPTH:
+            found += _incomplete(child, depth + 1)
+    return found
+
+
 def _check_runs(runs, folders: list[Path], results: Path) -> None:
     """Every run named with --runs is one the report shows: the house error, never a silent fallback to latest."""
     chosen = {resolved(f) for f in folders}
     for run in runs:
+        if is_run_folder(Path(run)) and not is_complete(Path(run)):
+            raise ValueError(must_be("runs", "complete runs", str(run), "It was killed (or is still running) before "
+                                     "its last write; rerun the benchmark, or name another run."))
         if resolved(run) not in chosen:
             hint = ("Name one run per benchmark and robot, as results/<benchmark>/<run-id>." if is_inside(run, results)
                     else f"It is outside {results.as_posix()!r}: pass --results with the folder that holds it.")
