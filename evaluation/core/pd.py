@@ -1,12 +1,20 @@
-"""The baseline ("built-in") joint controller of the torque-driven arms: PD plus gravity compensation tuned on Earth.
+"""The baseline ("built-in") joint controller of the torque-driven arms: PD plus model compensation tuned on Earth.
 
-    τ = K_p (q_d − q) − K_d q̇ + g_⊕(q),   clipped to the torque limits
-g_⊕(q) is the gravity torque of the same MJCF under Earth gravity (9.81 m/s², `qfrc_bias` at q̇ = 0), computed on
-a private copy of the model, so changing the simulated gravity (the Jupiter experiment) leaves the compensation
-wrong, as it would be on a real robot whose dynamic model was identified on Earth. Same interface as
-`aif.aic.AICController` (reset / act / failed / reasons), so benchmarks drive both through one loop.
-The gains are the robot record's [pd] (the Panda's: libfranka's joint impedance example), else inferred from the
-joints' inertia (`robot_infer.inertia_gains`), unless PDConfig gives them.
+Two laws, both clipped to the torque limits, both with their model on a private copy of the MJCF under Earth
+gravity (9.81 m/s²), so changing the simulated gravity (the Jupiter experiment) leaves the compensation wrong, as
+it would be on a real robot whose dynamic model was identified on Earth:
+  "record"  τ = K_p (q_d − q) − K_d q̇ + g_⊕(q)   diagonal gains someone tuned: the record's [pd] (the Panda's:
+            libfranka's joint impedance example) or PDConfig's kp, kd; g_⊕ = `qfrc_bias` at q̇ = 0.
+  "model"   the rule of `pd_gains` (issue 33): gains derived from the arm's own model and the control period, no
+            per-arm constant: τ = M(q)·s·(ω²(q_d − q) − 2ζω q̇) + b(q, q̇) − p(q) + friction, with
+            ω = min(20 rad/s, 0.4 / Δt), s fitting τ into the torque limits, b the bias (gravity + Coriolis), p the
+            springs, the friction the joints' own dry friction. Every joint critically damped at ω at every pose.
+PDConfig.gains "auto" takes "record" where the record's [pd] was tuned and "model" where there is none or it is
+what `robot init` inferred (`pd_gains.inferred_pd`): those diagonal gains, sized for each joint's largest
+inertia, oscillated at 50 Hz wherever the inertia is smaller (a UR5: 20 % of goals within 10 mm, TALOS's left
+arm 0 %; the model rule: 100 % on both, bench/pd_baseline.py).
+Same interface as `aif.aic.AICController` (reset / act / failed / reasons), so benchmarks drive both through one
+loop; act's dt (s, the control period) sets the model rule's ω.
 """
 
 from __future__ import annotations
@@ -19,6 +27,9 @@ import numpy as np
 
 from bodyschema.datagen.robot import GRAVITY, Robot
 from bodyschema.errors import must_be
+from bodyschema.evaluation.core.pd_gains import ModelLaw, inferred_pd
+
+GAINS = ("auto", "record", "model")
 
 
 @dataclass(frozen=True)
@@ -26,8 +37,13 @@ class PDConfig:
     kp: tuple[float, ...] | None = None    # N·m/rad per joint; None: the robot record's [pd] (else inferred)
     kd: tuple[float, ...] | None = None    # N·m·s/rad per joint; None: as kp
     gravity: float = GRAVITY               # m/s², the gravity the compensation model was identified under
+    gains: str = "auto"                    # "record" | "model" (module docstring) | "auto": record if tuned
 
     def __post_init__(self):
+        if self.gains not in GAINS:
+            raise ValueError(must_be("gains", f"one of {GAINS}", self.gains))
+        if self.kp is not None and self.gains == "model":
+            raise ValueError(must_be("gains", "'auto' or 'record' when kp and kd are given", self.gains))
         if (self.kp is None) != (self.kd is None):
             raise ValueError(must_be("kp and kd", "both given or both None (the robot's gains)", (self.kp, self.kd)))
         for name in ("kp", "kd") if self.kp is not None else ():
@@ -41,7 +57,7 @@ class PDConfig:
 
 
 class PDController:
-    """PD + Earth-gravity compensation for a torque-driven robot (a name, path, record or `Robot`: its record and
+    """PD + Earth-model compensation for a torque-driven robot (a name, path, record or `Robot`: its record and
     model text, so a robot rebuilt from a store or a model's body needs no file), batched over B episodes."""
 
     def __init__(self, robot, config: PDConfig = PDConfig()):
@@ -49,13 +65,18 @@ class PDController:
         self._robot = Robot.load(**given, actuators="torque", gravity=config.gravity)   # private model: g_⊕ only
         self._data = mujoco.MjData(self._robot.model)
         self.dq = self._robot.dq
-        kp, kd = (config.kp, config.kd) if config.kp is not None else robot_gains(self._robot)
-        if len(kp) != self.dq or len(kd) != self.dq:
-            raise ValueError(must_be("the PD gains kp and kd", f"{self.dq} gains each, one per joint of "
-                                     f"{self._robot.name}", (len(kp), len(kd)), "Fix [pd] in its record."))
         self.config = config
-        self._kp, self._kd = np.asarray(kp, dtype=float), np.asarray(kd, dtype=float)
         self.torque_limits = self._robot.model.actuator_ctrlrange.copy()          # (Dq, 2) N·m
+        self.law = config.gains if config.gains != "auto" else \
+            "record" if config.kp is not None or not inferred_pd(self._robot) else "model"
+        if self.law == "record":
+            kp, kd = (config.kp, config.kd) if config.kp is not None else robot_gains(self._robot)
+            if len(kp) != self.dq or len(kd) != self.dq:
+                raise ValueError(must_be("the PD gains kp and kd", f"{self.dq} gains each, one per joint of "
+                                         f"{self._robot.name}", (len(kp), len(kd)), "Fix [pd] in its record."))
+            self._kp, self._kd = np.asarray(kp, dtype=float), np.asarray(kd, dtype=float)
+        else:
+            self._model_law = ModelLaw(self._robot.model, self.torque_limits)
         self._goal = None
         self.failed, self.reasons = np.zeros(0, dtype=bool), []
 
@@ -69,8 +90,11 @@ class PDController:
             raise ValueError(must_be("goal['joints']", "finite", "NaN or inf"))
         self.failed, self.reasons = np.zeros(len(q), dtype=bool), [None] * len(q)
 
-    def act(self, q: np.ndarray, qd: np.ndarray, observations: Mapping | None = None, dt: float = 0.0) -> np.ndarray:
-        """τ (B, Dq) N·m for the sensed q, q̇; observations and dt are unused (interface of AICController)."""
+    def act(self, q: np.ndarray, qd: np.ndarray, observations: Mapping | None = None, dt: float = 0.0,
+            qd_ref: np.ndarray | None = None) -> np.ndarray:
+        """τ (B, Dq) N·m for the sensed q, q̇ (B, Dq) and a velocity reference qd_ref (B, Dq) rad/s (None: rest);
+        dt s is the control period (the model rule's ω; ≤ 0: 20 rad/s); observations are unused (interface of
+        AICController)."""
         if self._goal is None:
             raise RuntimeError("PDController.act before reset: call reset(q, qd, goal) first.")
         q, qd = self._check(q, "q", len(self._goal)), self._check(qd, "qd", len(self._goal))
@@ -80,7 +104,12 @@ class PDController:
         torque = np.zeros_like(q)
         ok = ~self.failed
         if ok.any():
-            tau = self._kp * (self._goal[ok] - q[ok]) - self._kd * qd[ok] + self.gravity_torque(q[ok])
+            ref = None if qd_ref is None else self._check(qd_ref, "qd_ref", len(q))[ok]
+            if self.law == "model":
+                torque[ok] = self._model_law.torque(self._goal[ok] - q[ok], q[ok], qd[ok], ref, dt)
+                return torque
+            damped = qd[ok] if ref is None else qd[ok] - ref
+            tau = self._kp * (self._goal[ok] - q[ok]) - self._kd * damped + self.gravity_torque(q[ok])
             torque[ok] = np.clip(tau, self.torque_limits[:, 0], self.torque_limits[:, 1])
         return torque
 
@@ -105,7 +134,8 @@ class PDController:
 
 
 def robot_gains(robot: Robot) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """(kp, kd) of the robot's record [pd], else inferred from its joints' inertia."""
+    """(kp, kd) of the robot's record [pd], else the old rule (`robot_infer.inertia_gains`: each joint's largest
+    diagonal inertia × (20 rad/s)², critically damped), what PDConfig(gains="record") runs without [pd]."""
     if robot.record.pd:
         return tuple(robot.record.pd["kp"]), tuple(robot.record.pd["kd"])
     from bodyschema.datagen.robot_infer import inertia_gains

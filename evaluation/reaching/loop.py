@@ -8,7 +8,8 @@ period. Policies wrap a controller into one interface: `reset(arm, goal)`, `comm
   VelocityPolicy  AIF velocity commands on position servos: ctrl ← clip(ctrl + a·Δt, ctrlrange)   (nao_arm)
   ServoPolicy     baseline on position servos: ctrl = the target's joint pose (its true inverse kinematics)
   TorquePolicy    torques on motors from a controller with AICController's interface: the AIC (aif/aic.py) or,
-                  as baseline, PD + gravity compensation on the target's joint pose (core/pd.py)  (panda)
+                  as baseline, PD + model compensation on the target's joint pose (core/pd.py: the record's tuned
+                  gains, else gains from the arm's model and the control period)  (panda, torque arms)
   ImpedancePolicy AIF velocity commands integrated into the setpoint of the arm's joint impedance servo (the
                   same PD + gravity compensation as the baseline, which gets the target pose instead): the panda's
                   counterpart of the nao_arm's position servos  (panda, `--panda-controller velocity`)
@@ -83,8 +84,8 @@ class ImpedancePolicy:
         velocity = self.controller.act(observations, dt)                   # (B, Dq) rad/s
         self.ctrl = np.clip(self.ctrl + velocity * dt, self.low, self.high)
         q = observations["joints"].numpy() if "joints" in observations else arm.q
-        self.servo.reset(q, arm.qd - velocity, {"joints": self.ctrl})      # K_p (ctrl − q) + K_d (a − q̇) + g(q):
-        return self.servo.act(q, arm.qd - velocity)                        # setpoint and velocity reference
+        self.servo.reset(q, arm.qd, {"joints": self.ctrl})                 # K_p (ctrl − q) + K_d (a − q̇) + g(q):
+        return self.servo.act(q, arm.qd, dt=dt, qd_ref=velocity)           # setpoint and velocity reference
 
     failed = property(lambda self: self.controller.failed)
     reasons = property(lambda self: self.controller.reasons)
