@@ -67,6 +67,10 @@ class PDController:
         self.dq = self._robot.dq
         self.config = config
         self.torque_limits = self._robot.model.actuator_ctrlrange.copy()          # (Dq, 2) N·m
+        if self._robot.model.nu != self.dq:
+            raise ValueError(must_be(f"robot {self._robot.name!r}", f"a motor on each of its {self.dq} joints for the "
+                                     "PD baseline", f"{self._robot.model.nu} actuators",
+                                     "Give the record [actuators] (`bodyschema robot init` infers servos)."))
         self.law = config.gains if config.gains != "auto" else \
             "record" if config.kp is not None or not inferred_pd(self._robot) else "model"
         if self.law == "record":
