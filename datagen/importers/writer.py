@@ -61,7 +61,16 @@ def _write(path: Path, arrays: dict[str, np.ndarray], attrs: dict[str, Any]) -> 
         mark_complete(root)
     except OSError as e:
         raise StoreWriteError.from_os_error(path, e) from e
-    problems = validate_store(path)
+    problems = [_about_the_recording(p) for p in validate_store(path)]
     if problems:
         raise ValueError(must_be("the imported store", "valid", f"{len(problems)} problem(s)",
                                  "Nothing was written. Fix the recording:\n - " + "\n - ".join(problems)))
+
+
+def _about_the_recording(problem: str) -> str:
+    """A validate line without its datagen hint (rerun or regenerate): for an import the recording is at fault."""
+    from bodyschema.datagen import validate
+
+    for hint in (validate.RESUME_HINT, validate.REPAIR_HINT, validate.REGENERATE_HINT, validate.EDITED_HINT):
+        problem = problem.replace(" " + hint, "").replace(hint, "")
+    return problem

@@ -54,6 +54,7 @@ CASES = [
     ("hdf5-not-hdf5", "import {W}/fake.h5 --angles rad --robot planar2 " + OUT),
     ("own-export-read-as-deg", "import {W}/own.h5 --angles deg " + OUT),
     ("own-export-edited-fails-validation", "import {W}/edited.h5 " + OUT),
+    ("own-export-jacobian-beyond-reach", "import {W}/far.h5 " + OUT),
     ("lerobot-v2", "import {W}/lerobot_v2 --angles rad --robot planar2 " + OUT),
     ("levels-targets-missing", "evaluate levels --targets {W}/missing.zarr " + LEVELS),
     ("levels-targets-not-a-store", "evaluate levels --targets {W}/rec " + LEVELS),
@@ -115,7 +116,8 @@ def _set_cell(path, row: int, col: int, value: str) -> None:
 
 
 def _own_exports(w) -> None:
-    """own.h5: a planar2 store exported; edited.h5: the same with ee_pixel moved 5 px off the camera's projection."""
+    """own.h5: a planar2 store exported; edited.h5: the same with ee_pixel moved 5 px off the camera's projection;
+    far.h5: with a jacobian 100 times the arm's reach."""
     import shutil
 
     from bodyschema.datagen.config import DatagenConfig
@@ -128,6 +130,9 @@ def _own_exports(w) -> None:
     shutil.copy(w / "own.h5", w / "edited.h5")
     with h5py.File(w / "edited.h5", "r+") as f:
         f["ee_pixel"][...] = f["ee_pixel"][()] + 5.0
+    shutil.copy(w / "own.h5", w / "far.h5")
+    with h5py.File(w / "far.h5", "r+") as f:
+        f["jacobian"][...] = f["jacobian"][()] * 100.0
 
 
 @pytest.mark.parametrize("case_id, command", CASES, ids=[c[0] for c in CASES])
@@ -142,3 +147,12 @@ def test_the_good_recording_of_the_world_imports(in_world, capsys):
     assert code == 0, err
     import shutil
     shutil.rmtree(in_world / "ok.zarr")
+
+
+def test_a_store_failing_validation_is_blamed_on_the_recording_not_on_datagen(in_world, capsys):
+    """The validate lines of an import carry no datagen hint ("rerun datagen", "the generator wrote impossible
+    values"): the recording is at fault, and the line says to fix it."""
+    err = run_and_check("own-export-jacobian-beyond-reach", dict(CASES)["own-export-jacobian-beyond-reach"],
+                        in_world, capsys)
+    assert "Fix the recording" in err and "jacobian" in err, err
+    assert "datagen" not in err and "generator" not in err, err
