@@ -93,3 +93,57 @@ def test_an_existing_store_passes_unchanged(clean_env, request):
     before = (clean_env / "mlflow.db").read_bytes()
     cli.check_tracking_first(tyro.cli(cli.COMMANDS, args=["registry", "list"]))
     assert (clean_env / "mlflow.db").read_bytes() == before
+
+
+# ---- a server URI with credentials (issue 32, item 17) -------------------------------------------------------------
+class _AuthRecorder:
+    """A tracking server on 127.0.0.1 that answers every request and records its Authorization header."""
+
+    def __enter__(self):
+        import http.server
+        import threading
+
+        seen = self.seen = []
+
+        class Handler(http.server.BaseHTTPRequestHandler):
+            def do_GET(self):                        # noqa: N802 — http.server's name
+                seen.append((self.path, self.headers.get("Authorization")))
+                self.send_response(200)
+                self.end_headers()
+
+            def log_message(self, *args):
+                pass
+
+        self.server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Handler)
+        threading.Thread(target=self.server.serve_forever, daemon=True).start()
+        self.port = self.server.server_address[1]
+        return self
+
+    def __exit__(self, *exc):
+        self.server.shutdown()
+        self.server.server_close()
+
+
+def test_a_server_uri_with_credentials_is_reached_and_sends_them_as_basic_auth():
+    """Before: urllib looked up "alice:s3cr%40t@127.0.0.1" as a host name ("Name or service not known") while the
+    server listened. MLflow 3 sends a URI's user:password as basic auth (requests takes them from the URL): so does
+    the check, on the host without them."""
+    import base64
+
+    from bodyschema.training.registry import check_tracking
+
+    with _AuthRecorder() as server:
+        check_tracking(f"http://alice:s3cr%40t@127.0.0.1:{server.port}", timeout_s=5)
+    assert server.seen == [("/health", "Basic " + base64.b64encode(b"alice:s3cr@t").decode())]
+
+
+def test_an_unreachable_server_uri_never_shows_its_password(clean_env, capsys):
+    import socket
+
+    with socket.socket() as probe:                   # a free loopback port: nothing listens there
+        probe.bind(("127.0.0.1", 0))
+        port = probe.getsockname()[1]
+    for uri in (f"http://alice:s3cret@127.0.0.1:{port}", "htp://alice:s3cret@127.0.0.1:9"):
+        assert cli.main(["registry", "list", "--tracking-uri", uri]) == 2
+        err = capsys.readouterr().err
+        assert "s3cret" not in err and "alice:***@127.0.0.1" in err and " must be " in err, err
