@@ -17,7 +17,8 @@ RECORD_KEY, MODEL_KEY = "robot_record", "robot_model"
 
 
 def robot_attrs(robot) -> dict[str, Any]:
-    """{robot_record: the record (absolute paths), robot_model: {path, sha256, text, meshes}} of a Robot."""
+    """{robot_record: the record (absolute paths), robot_model: {path, sha256, text, meshes[, replaced]}} of a
+    Robot (replaced: {link: meshes drawn as primitives}, with visual = "primitives")."""
     values = robot.record.to_toml_dict()
     values["model"] = str(robot.record.model_path)
     if robot.record.mesh_path is not None:
@@ -25,8 +26,10 @@ def robot_attrs(robot) -> dict[str, Any]:
     if robot.camera_name != robot.record.camera_name:          # loaded through another camera of the model
         values["camera"] = {"name": robot.camera_name}
     source = robot.source
-    return {RECORD_KEY: values,
-            MODEL_KEY: {"path": source.path, "sha256": source.sha256, "text": source.text, "meshes": source.meshes}}
+    model = {"path": source.path, "sha256": source.sha256, "text": source.text, "meshes": source.meshes}
+    if source.replaced:                                        # visual = "primitives": what was drawn instead
+        model["replaced"] = source.replaced
+    return {RECORD_KEY: values, MODEL_KEY: model}
 
 
 def record_of_attrs(attrs: dict[str, Any]) -> tuple[RobotRecord, str | None]:

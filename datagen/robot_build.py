@@ -33,12 +33,14 @@ _HINGE, _SLIDE = mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtJoint.mjJNT_SLIDE
 
 @dataclass(frozen=True)
 class Source:
-    """The model file as read: its text, its sha256 and its meshes' (path as written → sha256)."""
+    """The model file as read: its text, its sha256, its meshes' (path as written → sha256) and, with
+    `visual = "primitives"`, the links drawn as primitives with the meshes they replace."""
 
     path: str
     text: str
     sha256: str
     meshes: dict[str, str] = field(default_factory=dict)
+    replaced: dict[str, list[str]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -63,12 +65,13 @@ def read_source(record: RobotRecord, text: str | None = None) -> tuple[mujoco.Mj
     else:
         raw = text.encode()
     roots = [path.parent] + ([record.mesh_path] if record.mesh_path else [])
+    replaced = {}
     if path.suffix.lower() == ".urdf":
-        spec, meshes = load_urdf(path, text, record.mesh_path, record.visual, budget)
+        spec, meshes, replaced = load_urdf(path, text, record.mesh_path, record.visual, budget)
     else:
         spec, meshes = _mjcf_spec(path, text, roots, budget)
     check_spec(spec, path)
-    return spec, Source(str(path), text, hashlib.sha256(raw).hexdigest(), meshes)
+    return spec, Source(str(path), text, hashlib.sha256(raw).hexdigest(), meshes, replaced)
 
 
 def _mjcf_spec(path: Path, text: str, roots: list[Path], budget: Budget) -> tuple[mujoco.MjSpec, dict[str, str]]:

@@ -27,7 +27,11 @@ class RobotInitArgs:
     model: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="FILE")]   # the .xml or .urdf
     out: Path | None = None            # the record; None: <FILE stem>.toml beside the file (what --robot FILE reads)
     mesh_dir: Path | None = None       # URDF: where package:// meshes are, besides the file's folder and its parents
-    visual: Literal["mesh", "collision"] = "mesh"   # URDF: collision renders the collision geometry (e.g. .dae visuals)
+    # URDF: collision renders the collision geometry (e.g. .dae visuals); primitives draws capsules and boxes sized
+    # from the links instead of any mesh (meshes missing, elsewhere or in a format MuJoCo does not load)
+    visual: Literal["mesh", "collision", "primitives"] = "mesh"
+    ee: str | None = None              # the end effector, a body or site; None: the hand ending the longest arm chain
+    joints: tuple[str, ...] = ()       # the hinges used; (): the arm chain up to the ee (fingers, mimic joints out)
     image_size: tuple[int, int] = (64, 64)          # (H, W) px of the camera image
     overwrite: bool = False            # replace an existing record
 
@@ -41,7 +45,9 @@ class RobotShowArgs:
     out: Path | None = None            # the PNG; None: <robot>_robot_sheet.png in the current folder
     n: int = 16                        # poses on the sheet (uniform in the camera workspace, seed 0)
     mesh_dir: Path | None = None       # URDF without a record: as `robot init --mesh-dir`
-    visual: Literal["mesh", "collision"] = "mesh"   # URDF without a record: as `robot init --visual`
+    visual: Literal["mesh", "collision", "primitives"] = "mesh"   # URDF without a record: as `robot init --visual`
+    ee: str | None = None              # a file without a record: as `robot init --ee`
+    joints: tuple[str, ...] = ()       # a file without a record: as `robot init --joints`
 
 
 @dataclass(frozen=True)
@@ -63,11 +69,11 @@ def run_init(args: RobotInitArgs) -> int:
     out = args.out or args.model.with_suffix(".toml")
     if out.exists() and not args.overwrite:
         raise FileExistsError(must_be("--out", "a new path", str(out), "Pass --overwrite to replace the record."))
-    record = infer_record(args.model, args.mesh_dir, args.visual, args.image_size)
+    record = infer_record(args.model, args.mesh_dir, args.visual, args.image_size, args.ee, args.joints)
     if out.resolve().parent != record.base:                       # the record names the model relative to itself
         record = _rebased(record, out.resolve().parent)
     write_record(record, out, f"Robot record of {args.model.name}, written by `bodyschema robot init` with inferred "
-                              "values: edit them (see datagen/robot_record.py).")
+                              f"values: edit them (see datagen/robot_record.py).{_replaced_note(record)}")
     print(dumps_toml(record.to_toml_dict()))
     print(f"record: {out}")
     return 0
@@ -104,6 +110,17 @@ def run_camera(args: RobotCameraArgs) -> int:
     return 0
 
 
+def _replaced_note(record) -> str:
+    """With visual = "primitives": which links are drawn as primitives, and the meshes they replace."""
+    if record.visual != "primitives":
+        return ""
+    from bodyschema.datagen.robot_build import read_source
+    replaced = read_source(record)[1].replaced
+    meshes = sorted({mesh for found in replaced.values() for mesh in found})
+    return (f"\nvisual = \"primitives\": {len(replaced)} links drawn as capsules/boxes instead of {len(meshes)} "
+            "meshes:\n" + "\n".join(f"  {link}: {', '.join(found)}" for link, found in replaced.items()))
+
+
 def _rebased(record, folder: Path):
     import dataclasses
     import os
@@ -122,7 +139,7 @@ def run_show(args: RobotShowArgs) -> int:
     record = load_record(args.robot)
     note = ""
     if record is None:
-        record = infer_record(Path(args.robot), args.mesh_dir, args.visual)
+        record = infer_record(Path(args.robot), args.mesh_dir, args.visual, ee=args.ee, joints=args.joints)
         note = f"  (inferred: no record beside the file; `bodyschema robot init {args.robot}` writes one)"
     with Robot.load(record) as robot:
         print(describe(robot))

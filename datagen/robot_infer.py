@@ -1,8 +1,8 @@
 """`infer_record`: the robot record of a bare MJCF/URDF, every value the file does not hold inferred.
 
-- ee: the model's site `ee`; else the deepest body of the longest hinge chain (its first site, else the body
-  itself with a zero offset).
-- joints: the hinges from the world to that body; every other joint is held at its reference pose.
+- name: the file's own (URDF <robot name>, MJCF <mujoco model>), made a safe name; else the file's stem.
+- ee and joints: the arm (`arm_chain.infer_arm`: the longest hinge chain ending in a hand, wrist or tool body,
+  fingers and mimic joints left out; `--ee` and `--joints` as given); every other joint is held at its reference.
 - workspaces: each joint's limits ("full" = "camera"); a continuous joint gets ±π, a range wider than a turn the
   turn around its middle.
 - actuators: the model's own when every chosen joint has one; else position servos, critically damped, stiff
@@ -21,6 +21,8 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from bodyschema.datagen.arm_chain import infer_arm
+from bodyschema.datagen.model_files import parse_xml
 from bodyschema.datagen.robot_build import build_model, compile_spec, read_source
 from bodyschema.datagen.robot_record import AUTO_CAMERA, RobotRecord
 from bodyschema.errors import must_be
@@ -38,22 +40,24 @@ _PLACEHOLDER_CAMERA = {"name": AUTO_CAMERA, "pos": [0.0, 0.0, 1.0], "xyaxes": [1
 
 
 def infer_record(path: Path, mesh_dir: Path | None = None, visual: str = "mesh",
-                 image_size: tuple[int, int] = IMAGE_SIZE) -> RobotRecord:
-    """A record of the model file at `path` with every value inferred (see the module docstring)."""
+                 image_size: tuple[int, int] = IMAGE_SIZE, ee: str | None = None,
+                 joints: tuple[str, ...] = ()) -> RobotRecord:
+    """A record of the model file at `path` with every value inferred (see the module docstring); `ee` (a body or
+    site) and `joints` (hinges), when given, are used as they are."""
     path = Path(path).resolve()
     mesh = str(Path(mesh_dir).resolve()) if mesh_dir else ""
     box = ((-1.0, 1.0),)
     draft = RobotRecord(name=safe_name(path.stem), model=path.name, image_size=tuple(image_size), base=path.parent,
                         workspaces={"full": box, "camera": box}, camera=_PLACEHOLDER_CAMERA, mesh_dir=mesh,
                         visual=visual, collisions="none")
-    spec, _ = read_source(draft)
-    model = compile_spec(spec, str(path))
-    ee, body = _infer_ee(model)
-    joints = _chain_hinges(model, body)
+    spec, source = read_source(draft)
+    model = compile_spec(spec, str(path), fusestatic=False)     # every body of the file, fixed ones too (a hand)
+    ee, body, joints = infer_arm(model, ee, tuple(joints))
     if not joints:
         raise ValueError(must_be(f"the model {path}", "an arm with hinge joints up to its end effector",
-                                 f"no hinge between the world and body {model.body(body).name!r}"))
-    draft = dataclasses.replace(draft, ee=ee, joints=tuple(joints))
+                                 f"no hinge between the world and body {model.body(body).name!r}",
+                                 "Name the end effector with --ee and the joints with --joints."))
+    draft = dataclasses.replace(draft, name=file_name(source.text, path), ee=ee, joints=tuple(joints))
     built = build_model(draft)                            # the arm of the chosen hinges, welded, with its ee site
     ranges = _workspace(built.model)
     gains = inertia_gains(built.model, ranges, sag=True)
@@ -69,42 +73,16 @@ def infer_record(path: Path, mesh_dir: Path | None = None, visual: str = "mesh",
 
 
 def safe_name(stem: str) -> str:
-    """A record name (`robot_record.NAME_PATTERN`) from a file's stem: other characters become '_'."""
+    """A record name (`robot_record.NAME_PATTERN`) from a file's name or stem: other characters become '_'."""
     name = re.sub(r"[^A-Za-z0-9_.-]", "_", stem).lstrip(".-")[:64]
     return name or "robot"
 
 
-# ---- ee and joints ----------------------------------------------------------------------------------------
-def _infer_ee(model: mujoco.MjModel) -> tuple[dict, int]:
-    """({site} | {body, offset}, the ee's body id)."""
-    sites = [model.site(s).name for s in range(model.nsite)]
-    if "ee" in sites:
-        return {"site": "ee"}, int(model.site("ee").bodyid[0])
-    hinges = [len(_chain_hinges(model, b)) for b in range(model.nbody)]
-    depth = [_depth(model, b) for b in range(model.nbody)]
-    body = max(range(model.nbody), key=lambda b: (hinges[b], depth[b]))
-    own = [s for s in range(model.nsite) if model.site_bodyid[s] == body and model.site(s).name]
-    if own:
-        return {"site": model.site(own[0]).name}, body
-    return {"body": model.body(body).name, "offset": [0.0, 0.0, 0.0]}, body
-
-
-def _path(model: mujoco.MjModel, body: int) -> list[int]:
-    bodies = []
-    while body != 0:
-        bodies.append(body)
-        body = int(model.body_parentid[body])
-    return bodies[::-1]
-
-
-def _depth(model: mujoco.MjModel, body: int) -> int:
-    return len(_path(model, body))
-
-
-def _chain_hinges(model: mujoco.MjModel, body: int) -> list[str]:
-    """The hinge joints from the world to `body`, world first."""
-    return [model.joint(j).name for b in _path(model, body) for j in np.flatnonzero(model.jnt_bodyid == b)
-            if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE]
+# ---- name ------------------------------------------------------------------------------------------------
+def file_name(text: str, path: Path) -> str:
+    """The robot's name as its file gives it (URDF <robot name>, MJCF <mujoco model>), made safe; else the stem."""
+    root = parse_xml(text, path, "model file")
+    return safe_name(root.get("name" if root.tag == "robot" else "model") or path.stem)
 
 
 def _workspace(model: mujoco.MjModel) -> np.ndarray:

@@ -31,7 +31,8 @@ RECORD_SUFFIX = ".toml"
 AUTO_CAMERA = "auto"                         # the name of a camera placed by the record (not in the model file)
 EE_SITE = "bodyschema_ee"                    # the site added for an ee given as a body plus an offset
 ACTUATORS = ("model", "servos")              # the model's own actuators | position servos added with [actuators] gains
-VISUALS = ("mesh", "collision")              # URDF: render the visual meshes | the collision geometry instead
+VISUALS = ("mesh", "collision", "primitives")   # URDF: render the visual meshes | the collision geometry instead |
+                                                # capsules and boxes from the links (no mesh read; datagen/primitives)
 COLLISIONS = ("model", "none")               # contacts as the file has them | the arm's geoms collide with nothing
 REQUIRED_WORKSPACES = ("full", "camera")     # every record names these two (datagen picks one by --images)
 SECTIONS = {"ee": ("site", "body", "offset"), "camera": ("name", "pos", "xyaxes", "fovy"),
@@ -58,7 +59,7 @@ class RobotRecord:
     pd: dict[str, Any] = field(default_factory=dict)   # {kp, kd}: the torque PD baseline's gains per joint
     reaching: dict[str, Any] = field(default_factory=dict)   # models, control_hz, duration_s, actuators, action
     mesh_dir: str = ""                                 # URDF: where package:// meshes are found besides the file's
-    visual: str = "mesh"                               # URDF: "collision" renders the collision geometry
+    visual: str = "mesh"                               # URDF: "collision" | "primitives" (see VISUALS)
     # "none": no geom of the arm collides (as the shipped arms are built). A file's collision meshes often touch
     # each other across a joint's range, and a servo pushing into a contact jams: reaching failed for PD too.
     collisions: str = "model"

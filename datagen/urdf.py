@@ -5,8 +5,10 @@ resolved here: `package://PKG/REST` in the folder named PKG nearest above the UR
 PKG/REST or REST beside the URDF or in `mesh_dir`; a plain path against the URDF's folder, then `mesh_dir`. Nothing
 resolves outside those folders (`model_files`: no absolute path elsewhere, no `..` out, no walk up to `/`). Each mesh
 file is read once and goes to MuJoCo as one named asset however many links show it (no path guessing on its side).
-A format MuJoCo does not load (.dae, ...) is the house error naming the file, unless `visual="collision"` asks for
-the collision geometry to be rendered instead of the visual meshes.
+A format MuJoCo does not load (.dae, ...) or a mesh not found is the house error naming the file, unless
+`visual="collision"` asks for the collision geometry to be rendered instead of the visual meshes, or
+`visual="primitives"` replaces every mesh by capsules and boxes sized from the links (`primitives`: no mesh file is
+read, and the links that got primitives are returned with the meshes they lost).
 """
 
 from __future__ import annotations
@@ -18,18 +20,25 @@ from pathlib import Path
 import mujoco
 
 from bodyschema.datagen.model_files import MAX_ASSETS, Budget, inside, one_line, parse_xml
+from bodyschema.datagen.primitives import add_primitives, strip_meshes
 from bodyschema.errors import must_be
 
 MESH_SUFFIXES = (".stl", ".obj", ".msh")    # what MuJoCo loads
+MIN_MASS, MIN_INERTIA = 1e-4, 1e-8          # kg, kg·m²: MuJoCo's compiler raises lighter links to these
 
 
-def load_urdf(path: Path, text: str, mesh_dir: Path | None, visual: str,
-              budget: Budget | None = None) -> tuple[mujoco.MjSpec, dict[str, str]]:
-    """(spec, {mesh path as written in the URDF: sha256}) for the URDF `text` read from `path`."""
+PRIMITIVES = "`bodyschema robot init FILE --visual primitives` draws capsules and boxes sized from the links instead"
+
+
+def load_urdf(path: Path, text: str, mesh_dir: Path | None, visual: str, budget: Budget | None = None
+              ) -> tuple[mujoco.MjSpec, dict[str, str], dict[str, list[str]]]:
+    """(spec, {mesh path as written in the URDF: sha256}, {link: meshes replaced by primitives}) for the URDF
+    `text` read from `path`."""
     budget = budget or Budget()
     root = parse_xml(text, path, "URDF")
     if root.tag != "robot":
         raise ValueError(must_be(f"the URDF {path}", "a <robot> document", f"<{root.tag}>"))
+    replaced = strip_meshes(root) if visual == "primitives" else {}
     if visual == "collision":
         for link in root.iter("link"):
             for element in link.findall("visual"):
@@ -58,7 +67,11 @@ def load_urdf(path: Path, text: str, mesh_dir: Path | None, visual: str,
     except (ValueError, RuntimeError) as e:
         raise ValueError(must_be(f"the URDF {path}", "a robot MuJoCo parses", one_line(e),
                                  "Check its links and joints (one parent each, no cycles).")) from e
-    return spec, digests
+    add_primitives(spec, list(replaced))
+    # a moving link of zero mass (common: frames, fingers written with <mass value="0"/>) would not compile
+    spec.compiler.boundmass, spec.compiler.boundinertia = max(spec.compiler.boundmass, MIN_MASS), \
+        max(spec.compiler.boundinertia, MIN_INERTIA)
+    return spec, digests, replaced
 
 
 def resolve_mesh(written: str, folder: Path, mesh_dir: Path | None, urdf: Path | str = "the URDF") -> Path:
@@ -83,13 +96,14 @@ def resolve_mesh(written: str, folder: Path, mesh_dir: Path | None, urdf: Path |
         raise FileNotFoundError(must_be(f"mesh {written} of {urdf}", "found in a folder named "
                                         f"{package!r} above the URDF, beside it or in --mesh-dir",
                                         f"not in {[str(t) for t in tried[:4]]} ...",
-                                        f"Pass --mesh-dir pointing at the folder that holds {package}/ or {rest}."))
+                                        f"Pass --mesh-dir pointing at the folder that holds {package}/ or {rest}, "
+                                        f"or {PRIMITIVES}."))
     candidates = [(folder, written), *((p, written) for p in places)]
     found = next(((base, w) for base, w in candidates if (base / w).is_file()), None)
     if found is None:
         raise FileNotFoundError(must_be(f"mesh {written} of {urdf}", "an existing file (relative to the URDF or "
                                         "--mesh-dir)", [str(b / w) for b, w in candidates],
-                                        "Pass --mesh-dir with the mesh folder."))
+                                        f"Pass --mesh-dir with the mesh folder, or {PRIMITIVES}."))
     return inside(found[1], found[0], [folder, *places], "mesh", str(urdf))
 
 
@@ -100,6 +114,7 @@ def _check_format(file: Path, written: str, kind: str) -> None:
     if kind == "visual":
         hint += (", or render the collision geometry instead: `bodyschema robot init FILE --visual collision` "
                  "writes a record saying so")
+    hint += f", or {PRIMITIVES}"
     raise ValueError(must_be(f"{kind} mesh {written}", f"a format MuJoCo loads {MESH_SUFFIXES}", file.suffix,
                              hint + "."))
 
