@@ -30,8 +30,8 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 OUTCOMES = ("safe", "lost", "invalid", "unclear")
-SMALL = "--robot planar2 --n 48 --no-images --no-progress"
-IMPORT = "--angles deg --robot planar2 --no-progress"
+SMALL = "--robot planar2 --n 48 --no-images --quiet"
+IMPORT = "--angles deg --robot planar2 --quiet"
 
 
 @dataclass(frozen=True)
