@@ -23,8 +23,9 @@ import numpy as np
 
 from bodyschema.datagen.camera import project
 from bodyschema.datagen.chain import HingeChain
+from bodyschema.datagen.render_scope import render_model
 from bodyschema.datagen.robot_build import ACTUATOR_KINDS, Built, build_model
-from bodyschema.datagen.robot_record import SHIPPED, RobotRecord, load_record
+from bodyschema.datagen.robot_record import SHIPPED, RobotRecord, load_record, shipped_dir
 from bodyschema.errors import must_be
 
 ROBOT_NAMES = SHIPPED          # the shipped robots (datagen/robots/<name>.toml); any other is a file path
@@ -34,6 +35,7 @@ GRAVITY = 9.81                 # m/s², default magnitude (downward, −z)
 VECTORIZE_FROM = 256           # poses; smaller batches call MuJoCo per pose (numpy's per-op cost dominates)
 DEFAULT_WORKSPACE = "camera"   # a Robot renders and projects: by default it samples the poses its camera sees
 OFFSCREEN = 1024               # px: the offscreen buffer a model gets when its file asks for less
+RENDER_POSES = 64              # poses (seed 0) over which the renderer's copy finds the moving meshes' nearest depth
 _OPENCV_FROM_MUJOCO_CAM = np.diag([1.0, -1.0, -1.0])   # MuJoCo camera: x right, y up, looks along −z
 
 
@@ -317,7 +319,11 @@ class Robot:
     def _ensure_renderer(self):
         if self._renderer is None:
             h, w = self.image_size
-            self._renderer = mujoco.Renderer(self.model, height=h, width=w)
+            ranges = self.workspaces["full"]
+            poses = np.random.default_rng(0).uniform(ranges[:, 0], ranges[:, 1], (RENDER_POSES, self.dq))
+            shipped = self.record.model_path.parent == shipped_dir().resolve()
+            scene = render_model(self.model, self._cam, self.image_size, poses, simplify=not shipped)
+            self._renderer = mujoco.Renderer(scene, height=h, width=w)
             self._mjv_camera = mujoco.MjvCamera()
             self._mjv_camera.type = mujoco.mjtCamera.mjCAMERA_FIXED
             self._mjv_camera.fixedcamid = self._cam
