@@ -7,7 +7,8 @@ as training images), an ee pixel, an ee position (panda) or joint angles. Every 
 another random pose, with the belief at that pose.
 The controllers follow what the robot's actuators take (`robot.actuation`, its record's [reaching] actuators):
   position (nao_arm, planar2)  AIF: `aif.action.VelocityController` velocity commands integrated into the servo
-                      targets; baseline: the servos commanded to the target's joint pose (its true inverse kinematics).
+                      targets; baseline: the servos commanded to the target's joint pose (its true inverse kinematics)
+                      plus the servo's gravity feed-forward, from the model under Earth gravity (servo_baseline.py).
   torque (panda)      AIF: the same velocity controller on the arm's joint impedance servo (setpoint + velocity
                       reference, the baseline's PD + gravity compensation; `--panda-controller aic`: the torque AIC,
                       `aif.aic.AICController`); baseline: PD + gravity compensation on the target pose.
@@ -53,6 +54,7 @@ from bodyschema.evaluation.core.specs import load_robot, models_field, resolve_e
 from bodyschema.evaluation.reaching import goal_pose, report as reaching_report
 from bodyschema.evaluation.reaching.loop import ImpedancePolicy, ServoPolicy, TorquePolicy, VelocityPolicy, rollout
 from bodyschema.evaluation.reaching.robot_defaults import reaching_defaults
+from bodyschema.evaluation.reaching.servo_baseline import servo_targets
 
 PANDA_CONTROLLERS = ("velocity", "aic")
 GOAL_PREFERENCE = ("image", "ee_xyz", "ee_pixel", "joints")   # "auto": the first modality among the models
@@ -283,7 +285,7 @@ def with_sensor_precisions(config: ReachingRunConfig, models) -> ReachingRunConf
 
 def baseline_policy(config: ReachingConfig, robot, episodes: Episodes):
     if robot.actuation == "position":
-        return ServoPolicy(episodes.q_target)
+        return ServoPolicy(servo_targets(robot, episodes.q_target))        # the target pose + gravity feed-forward
     return TorquePolicy(PDController(robot), goal={"joints": episodes.q_target})
 
 

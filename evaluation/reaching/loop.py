@@ -6,7 +6,8 @@ or a stream frozen at its first value) → policy → actuation (servo targets o
 period. Policies wrap a controller into one interface: `reset(arm, goal)`, `command(arm, observations, dt) ->
 (B, nu)`, `failed`, `reasons`.
   VelocityPolicy  AIF velocity commands on position servos: ctrl ← clip(ctrl + a·Δt, ctrlrange)   (nao_arm)
-  ServoPolicy     baseline on position servos: ctrl = the target's joint pose (its true inverse kinematics)
+  ServoPolicy     baseline on position servos: ctrl = fixed servo commands, the target's joint pose (its true inverse
+                  kinematics) + the servo's gravity feed-forward (servo_baseline.py)
   TorquePolicy    torques on motors from a controller with AICController's interface: the AIC (aif/aic.py) or,
                   as baseline, PD + model compensation on the target's joint pose (core/pd.py: the record's tuned
                   gains, else gains from the arm's model and the control period)  (panda, torque arms)
@@ -92,10 +93,11 @@ class ImpedancePolicy:
 
 
 class ServoPolicy:
-    """Baseline on position servos: the target's joint pose (true inverse kinematics) as the servo target."""
+    """Baseline on position servos: fixed servo commands, the target's joint pose (true inverse kinematics) with
+    its gravity feed-forward (`servo_baseline.servo_targets`), or the bare pose (the old baseline)."""
 
     def __init__(self, q_target: np.ndarray):
-        self.q_target = q_target                                           # (B, Dq) rad
+        self.q_target = q_target                                           # (B, nu) servo commands (rad)
 
     def reset(self, arm: ArmBatch, goal) -> None:
         self.failed = np.zeros(len(self.q_target), dtype=bool)
