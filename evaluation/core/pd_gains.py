@@ -32,6 +32,7 @@ OMEGA_MAX = SERVO_RAD_S     # rad/s, the bandwidth where the control rate allows
 RATE_FRACTION = 0.4         # ω·Δt at most: the sampled loop's poles stay real (≤ 0.5) with a margin
 DAMPING_RATIO = 1.0         # ζ: critically damped, no overshoot into a joint limit
 FRICTION_WIDTH = 0.1        # ε as a fraction of the band where PD alone sticks on dry friction
+INFERRED_DRIFT = 1.5        # a [pd] kp within this factor of the model's I·ω² (and kd = 2kp/ω) is robot init's
 
 
 def bandwidth(dt: float) -> float:
@@ -40,14 +41,22 @@ def bandwidth(dt: float) -> float:
 
 
 def inferred_pd(robot) -> bool:
-    """Whether the record's [pd] is only what `bodyschema robot init` inferred (`robot_infer.inertia_gains`
-    without sag on this model and its full workspace), not gains someone tuned (the Panda's libfranka gains)."""
+    """Whether the record's [pd] is only what `bodyschema robot init` inferred (`robot_infer.inertia_gains` without
+    sag), not gains someone tuned (the Panda's libfranka gains). The inferred rule leaves two marks: kd = 2·kp/ω
+    on every joint (kp = I·ω², kd = 2√(kp·I)), whatever the model, and kp within INFERRED_DRIFT of this model's
+    own I·ω². The first survives a model that changed since `robot init` (mass lower bounds, meshes, MuJoCo's
+    inertia), which an exact recomputation did not; the second tells a hand tuning that is also critically
+    damped at ω (kp = 100, kd = 10) from the inferred gains."""
     pd = robot.record.pd
     if not pd:
         return True
-    kp, kd = inertia_gains(robot.model, robot.workspaces["full"], sag=False)
-    return (len(kp) == len(pd["kp"]) and np.allclose(kp, pd["kp"], rtol=1e-5, atol=1e-6)
-            and np.allclose(kd, pd["kd"], rtol=1e-5, atol=1e-6))
+    kp, kd = np.asarray(pd["kp"], dtype=float), np.asarray(pd["kd"], dtype=float)
+    ours, _ = inertia_gains(robot.model, robot.workspaces["full"], sag=False)
+    if len(kp) != len(ours) or len(kd) != len(ours):
+        return False
+    signature = np.allclose(kd, 2.0 * kp / SERVO_RAD_S, rtol=1e-4, atol=1e-5)
+    drift = np.abs(np.log(np.maximum(kp, 1e-12) / np.asarray(ours)))     # |ln(kp / I·ω²)| per joint
+    return bool(signature and np.all(drift <= np.log(INFERRED_DRIFT)))
 
 
 class ModelLaw:

@@ -96,7 +96,8 @@ def markdown(table: list[dict], config, modality: str, robot_name: str) -> str:
             f"{config.seconds:g} s at {config.rate:g} Hz, seed {config.seed}. `success`: final simulator "
             f"ee error < {config.success_mm:g} mm; `goal_success`: final error in the goal space < {tol}; "
             "`time_to_reach_s`: mean over the episodes that reached and stayed. "
-            "aif = active inference, pd = PD on the target's true joint pose.")
+            "aif = active inference, pd = the baseline on the target's true joint pose (position servos: plus "
+            "their gravity feed-forward; torque motors: PD + model compensation).")
     if "imagined_ee_err_mm" in table[0]:
         text += (" The AIF first inferred each goal's pose in imagination (goal inference, then a joint-space "
                  "attractor); `imagined_ee_err_mm`: median ee error of that pose.")

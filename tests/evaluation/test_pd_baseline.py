@@ -127,6 +127,15 @@ def test_the_old_rule_and_tuned_gains_stay_available(ur5):
         PDConfig(gains="fast")
 
 
+def test_robot_inits_gains_are_told_from_a_tuning_after_the_model_changed(ur5):
+    with Robot.load(ur5.record, actuators="torque") as drifted:            # masses 20 % up since `robot init`
+        for field in ("body_mass", "body_inertia", "dof_armature"):
+            getattr(drifted.model, field)[:] *= 1.2
+        assert inferred_pd(drifted)                                        # an exact recomputation: False
+    tuned = dataclasses.replace(ur5.record, pd={"kp": [100.0] * 6, "kd": [10.0] * 6})   # also kd = 2kp/ω
+    assert not inferred_pd(Robot.load(tuned, actuators="torque"))
+
+
 def test_an_arm_without_motors_is_the_house_error():
     record = dataclasses.replace(_talos_left_arm(), actuators={"kind": "model"})
     with pytest.raises(ValueError, match="a motor on each of its 4 joints"):
