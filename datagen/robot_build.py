@@ -99,6 +99,7 @@ def build_model(record: RobotRecord, actuators: str = "position", text: str | No
     camera = _camera(spec, record.camera, record.name)
     if record.actuators["kind"] == "servos":
         _add_servos(spec, joints, record.actuators)
+        _implicit_servo_damping(spec)
     if actuators == "torque":
         for act in spec.actuators:
             force = np.array(act.forcerange, dtype=float)
@@ -262,6 +263,15 @@ def _camera(spec: mujoco.MjSpec, camera: dict, robot: str) -> str:
         spec.worldbody.add_light(name=f"{name}_light", pos=list(camera["pos"]), dir=list(-np.cross(x, y)),
                                  diffuse=[0.8, 0.8, 0.8], ambient=[0.3, 0.3, 0.3])
     return name
+
+
+def _implicit_servo_damping(spec: mujoco.MjSpec) -> None:
+    """Servos we add are ours to keep stable: under MuJoCo's default Euler integrator a servo's velocity gain kv acts
+    explicitly and diverges where timestep·kv/M_jj > 2 (TALOS's elbow near straight: 7; its joints swung at 13 rad/s
+    for whole episodes). `implicitfast`, what the shipped MJCFs name, integrates that damping implicitly; a file that
+    names another integrator keeps it."""
+    if spec.option.integrator == mujoco.mjtIntegrator.mjINT_EULER:
+        spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
 
 
 def _add_servos(spec: mujoco.MjSpec, joints: list[str], gains: dict) -> None:

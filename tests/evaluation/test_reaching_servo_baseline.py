@@ -97,13 +97,13 @@ def test_the_feed_forward_is_the_models_gravity_torque_over_the_servo_gain_under
     assert np.abs(sagged.q - q).max() > 0.01                               # the bare pose sags
 
 
-def test_talos_reaches_once_its_servos_kv_is_integrated_implicitly():
-    """TALOS's inferred servos under MuJoCo's Euler integrator (the file says none): kv is explicit, h·kv/M > 2 on
-    arm_left_3 near a straight elbow, the joint oscillates whatever the command. With kv implicit (`implicitfast`,
-    as the shipped arms' MJCFs say) the feed-forward reaches every goal."""
+def test_talos_reaches_because_the_servos_we_add_integrate_kv_implicitly():
+    """TALOS's file names no integrator (MuJoCo's Euler): with kv explicit, h·kv/M > 2 on arm_left_3 near a straight
+    elbow and the joint oscillates whatever the command. The robot builder makes the servos it adds implicit
+    (`implicitfast`, as the shipped arms' MJCFs say); with that the feed-forward reaches every goal."""
     with Robot.load(_talos_left_arm4(), actuators="position") as talos:
         assert talos.model.dof_frictionloss.min() > 0                      # dry friction, stuck within f / kp
-        talos.model.opt.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+        assert talos.model.opt.integrator == mujoco.mjtIntegrator.mjINT_IMPLICITFAST
         err = _reach(talos)
         old = _reach(talos, feed_forward=False)
     assert (err < 0.010).mean() >= 0.95, f"final ee errors {np.round(1e3 * err, 1)} mm"
