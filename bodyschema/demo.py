@@ -198,7 +198,7 @@ def _levels_config(config: DemoConfig, uri: str, kind: str, encoder: str | None 
                         multistart=0 if pixel else LevelsConfig.multistart)
 
 
-def _evaluate(config: DemoConfig, uri: str, kind: str, models=None, encoder: str | None = None) -> None:
+def _evaluate(config: DemoConfig, uri: str, kind: str, models=None, encoder: str | None = None):
     from bodyschema.evaluation.levels import run_levels
 
     logger.info(f"== AIF perception, levels 1–3, with {uri} loaded from the registry"
@@ -206,17 +206,19 @@ def _evaluate(config: DemoConfig, uri: str, kind: str, models=None, encoder: str
     summary = run_levels(progress_of(_levels_config(config, uri, kind, encoder)), models)
     print(summary.paths["summary_md"].read_text())
     print("plots:", ", ".join(str(p) for k, p in summary.paths.items() if str(p).endswith(".png")))
+    return summary
 
 
 def _evaluate_pixel(config: DemoConfig, trained: dict):
     """The pixel decoder's levels, from the level's starts and from the encoder's guess ("+enc"), then what they are:
-    how the decoder was trained, its floor (started at the truth) and the README's recipe. → the loaded decoder."""
+    how the decoder was trained, its floor (the levels' floor row: started at the truth) and the README's recipe.
+    → the loaded decoder."""
     from bodyschema.evaluation.core.specs import resolve_models
 
     uri = _version_uri(trained["pixel"])
     decoder = resolve_models((uri,), (), config.tracking_uri)
-    _evaluate(config, uri, "pixel", decoder, _version_uri(trained["encoder"]))
-    print(_models_section(config, trained, decoder_floor(_levels_config(config, uri, "pixel"), decoder)))
+    summary = _evaluate(config, uri, "pixel", decoder, _version_uri(trained["encoder"]))
+    print(_models_section(config, trained, summary.floor["joint_err_deg"]))
     return decoder[0]
 
 
@@ -243,26 +245,6 @@ def _models_section(config: DemoConfig, trained: dict, floor: float) -> str:
     table = markdown_table(list(rows.values()), ("train_samples", "epochs", "fit_s", "val_rmse", "floor_deg"), "model")
     (folder / "summary.md").write_text(f"# The demo's models\n\n{table}\n{note}\n")
     return note
-
-
-def decoder_floor(levels, models) -> float:
-    """Mean |joint error| (deg) where perception started at the true poses ends, on the targets of the levels' first
-    run (same seed, trials and update): the floor F's own minimum sets, below which no start of the levels can end."""
-    import numpy as np
-    import torch
-
-    from bodyschema.aif.perception import Perception
-    from bodyschema.evaluation.core.seeds import eval_rng
-    from bodyschema.evaluation.core.specs import load_robot
-    from bodyschema.evaluation.levels.benchmark import levels_update
-    from bodyschema.evaluation.levels.targets import make_targets
-
-    robot = load_robot(models, levels.image_size)
-    has_image = any(m.modality == "image" for m in models)
-    targets = make_targets(robot, levels.trials, eval_rng(levels.seed, 0, "targets"), has_image)
-    perception = Perception(models, replace(levels_update(levels), record=False))
-    result = perception.infer(targets.tensors([m.modality for m in models]), torch.from_numpy(targets.q))
-    return float(np.rad2deg(np.abs(result.mu.numpy() - targets.q)).mean())
 
 
 def _history(result) -> list[str]:

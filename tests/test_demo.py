@@ -1,42 +1,13 @@
-"""The demo's own parts: the decoder floor it prints beside the pixel levels, its stage clock, and its new flags
-checked before any work (the flags' common bounds: tests/reliability/test_flag_bounds.py)."""
+"""The demo's own parts: its stage clock, its models section, and its new flags checked before any work (the flags'
+common bounds: tests/reliability/test_flag_bounds.py; the decoder floor it prints, now the levels' floor row:
+tests/evaluation/test_levels_floor.py)."""
 
 import dataclasses
 import types
 
-import numpy as np
 import pytest
-import torch
 
 from bodyschema import demo
-from bodyschema.evaluation.core.seeds import eval_rng
-from bodyschema.evaluation.core.specs import load_robot
-from bodyschema.evaluation.levels import LevelsConfig
-from bodyschema.evaluation.levels.targets import make_targets
-from bodyschema.models.analytic import AnalyticModel
-
-
-class ShiftedJoints(AnalyticModel):
-    """planar2's joint encoders reading δ too high: g(z) = z + δ, so F's minimum at a true pose q lies at q − δ."""
-
-    def __init__(self, shift_deg):
-        super().__init__("planar2", "joints")
-        self.shift = torch.deg2rad(torch.tensor(shift_deg, dtype=torch.float64))
-
-    def _predict(self, z):
-        return super()._predict(z + self.shift.to(z.dtype))
-
-
-@pytest.mark.parametrize("shift_deg", [(0.0, 0.0), (1.0, -3.0)])
-def test_the_floor_is_where_perception_started_at_the_truth_ends_the_models_own_bias(shift_deg):
-    levels, model = LevelsConfig(trials=12, seed=3), ShiftedJoints(shift_deg)
-    floor = demo.decoder_floor(levels, [model])
-    # the levels' first run's targets; a belief stays inside the joint box, so q − δ is clipped to it
-    q = make_targets(load_robot([model]), levels.trials, eval_rng(levels.seed, 0, "targets")).q      # (N, Dq) rad
-    low, high = model.robot.sampling_ranges.T
-    expected = np.rad2deg(np.abs(np.clip(q - np.deg2rad(shift_deg), low, high) - q)).mean()
-    assert floor == pytest.approx(expected, abs=0.01)
-    assert expected >= 0.9 * np.abs(shift_deg).mean(), "most targets are far from the box's edges"
 
 
 def test_the_stage_clock_keeps_every_stage_a_failing_one_too():

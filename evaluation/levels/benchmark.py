@@ -7,7 +7,8 @@ encoder every level also starts from its guess ("+enc" rows: see evaluate_level)
 (`workers`, pool.py). Metrics per
 level and run: joint error (deg, per joint and mean), end-effector error (mm, simulator FK at the belief),
 image MSE (with an image model), success rate (mean |joint error| < success_deg), steps, convergence,
-divergence and wall time. Tables, plots (report.py) and one MLflow run with them as artifacts.
+divergence and wall time. Every run also infers its targets from their true poses: the "floor" row (floor.py),
+per joint, and each level row's gap to it. Tables, plots (report.py) and one MLflow run with them as artifacts.
 Robustness: `noise_sweep` and `broken_sweep` repeat one level under observation noise or a dead sensor.
 
 Models come as objects (`run_levels(config, models=[...])`) or as specs: "analytic:<robot>:<modality>",
@@ -38,9 +39,11 @@ from bodyschema.evaluation.core.runs import new_run
 from bodyschema.evaluation.core.seeds import eval_rng
 from bodyschema.evaluation.core.specs import load_robot, models_field, on_device, resolve_encoder, resolve_models
 from bodyschema.evaluation.levels import report as level_report
+from bodyschema.evaluation.levels.floor import FLOOR_LABEL, UNOBSERVABLE_DEG, add_gaps, evaluate_floor
 from bodyschema.evaluation.levels.plain import PLAIN_LABEL, PLAIN_STEPS, PlainPixelAIF
 from bodyschema.evaluation.levels.pool import map_runs
 from bodyschema.evaluation.levels.recorded import RecordedTargets, plain_verdict
+from bodyschema.evaluation.levels.scoring import observations, score
 from bodyschema.evaluation.levels.targets import initial_beliefs, make_targets
 
 DEFAULT_MODELS = ("analytic:planar2:ee_xyz",)
@@ -83,9 +86,14 @@ class LevelsConfig(PerceptionRunConfig):
     targets: Path | None = None        # a store (e.g. imported): score its recorded frames instead of rendering
     plain_steps: int = PLAIN_STEPS     # --targets with an image model: Euler steps of the plain Pixel-AIF row (0: off)
     workers: int = 1                   # processes the runs go to, torch threads split among them (2–3 on 2 cores)
+    floor: bool = True                 # the "floor" row: perception started at the true pose, per joint (floor.py);
+                                       # one inference per run from the minimum's basin, cheap for every model
+    unobservable_deg: float = UNOBSERVABLE_DEG   # a joint whose floor is above this: "not observable" in summary.md
 
     def __post_init__(self):
         super().__post_init__()
+        if not self.unobservable_deg > 0:
+            raise ValueError(must_be("unobservable_deg", "a positive number of degrees", self.unobservable_deg))
         if not self.levels or any(level not in (1, 2, 3) for level in self.levels):
             raise ValueError(must_be("levels", "a non-empty subset of (1, 2, 3)", self.levels))
         if self.multistart < 0 or self.multistart == 1:
@@ -100,6 +108,8 @@ class LevelsSummary:
     paths: dict[str, Path] = field(default_factory=dict)
     run_id: str | None = None
     targets: dict | None = None                 # recorded targets: store path, digest, frames (None: simulator)
+    floor: dict | None = None                   # the floor row: mean (and std) over runs (None: --no-floor)
+    floor_rows: list[dict] = field(default_factory=list)   # the floor row of each run
 
 
 # ---- models ------------------------------------------------------------------------------------------
@@ -124,7 +134,7 @@ def evaluate_level(perception: Perception, robot, targets, level: int, rng: np.r
     ("1" and "1+enc" share the level's start, every "+enc" row the guess's). A row's evaluations and wall time are
     those of the inferences its result needed, reused or not."""
     shared = {} if shared is None else shared
-    obs = targets.tensors([m.modality for m in perception.models if m.modality not in _broken(perception)])
+    obs = observations(perception, targets)
     mu0 = initial_beliefs(level, targets.q, robot.sampling_ranges, rng)   # (N, Dq) rad
     label = str(level) + ("+enc" if encoder is not None else "") + ("+ms" if multistart else "")
     guess = None if encoder is None else _encoder_start(shared, encoder, robot, targets)
@@ -142,7 +152,7 @@ def evaluate_level(perception: Perception, robot, targets, level: int, rng: np.r
             runs.append(_inferred(shared, "encoder", perception, obs, guess))
         result = runs[0][0] if len(runs) == 1 else lowest_free_energy([r for r, _ in runs])[0]
         evaluations, wall = result.evaluations, sum(w for _, w in runs)
-    return (*_scored(perception.models, robot, targets, label, result, evaluations, wall, success_deg), result)
+    return (*score(perception.models, robot, targets, label, result, evaluations, wall, success_deg), result)
 
 
 def _encoder_start(shared: dict, encoder, robot, targets) -> np.ndarray:
@@ -164,33 +174,6 @@ def _inferred(shared: dict, key, perception: Perception, obs, mu0: np.ndarray):
     return shared[key]
 
 
-def _scored(models, robot, targets, label: str, result, evaluations: int, wall: float, success_deg: float):
-    """The metrics row of a level's final beliefs and its per-trial arrays (deg, mm)."""
-    mu = result.mu.numpy()                                                 # (N, Dq) rad
-    err = np.rad2deg(np.abs(mu - targets.q))                               # (N, Dq) deg
-    mean_err = err.mean(axis=1)
-    lim = robot.joint_limits
-    ee_mm = 1e3 * np.linalg.norm(robot.fk(np.clip(mu, lim[:, 0], lim[:, 1])) - robot.fk(targets.q), axis=1)
-    row = {"level": label,
-           "trials": len(mu),
-           "joint_err_deg": float(mean_err.mean()), "joint_err_median_deg": float(np.median(mean_err)),
-           **{f"joint_err_deg/{name}": float(e) for name, e in zip(robot.joint_names, err.mean(axis=0))},
-           "ee_err_mm": float(ee_mm.mean()), "success": float((mean_err < success_deg).mean()),
-           "all_joints_2deg": float((err <= 2.0).all(axis=1).mean()),   # Pixel-AIF's criterion: every joint ≤ 2°
-           "steps": float(result.steps.double().mean()), "converged": float(result.converged.double().mean()),
-           "diverged": int(result.n_diverged), "evaluations_per_trial": evaluations / len(mu), "wall_s": wall}
-    image = next((m for m in models if m.modality == "image"), None)
-    if image is not None:
-        with torch.no_grad():
-            pred = image.predict(result.mu.to(torch.float32)).double()
-        row["image_mse"] = float((pred - torch.from_numpy(targets.observations["image"])).pow(2).mean())
-    return row, {"mean_err_deg": mean_err, "ee_err_mm": ee_mm}
-
-
-def _broken(perception: Perception) -> set[str]:
-    return {name for name, pi in perception.precisions.items() if np.all(np.asarray(pi) == 0)}
-
-
 # ---- the benchmark ------------------------------------------------------------------------------------
 def run_levels(config: LevelsConfig = LevelsConfig(), models: Sequence | None = None) -> LevelsSummary:
     """Levels × runs on held-out targets; writes tables and plots to a new run folder under config.out and logs one
@@ -199,15 +182,16 @@ def run_levels(config: LevelsConfig = LevelsConfig(), models: Sequence | None = 
     summary, curves = measure_levels(config, models)
     folder = new_run(config)
     summary.paths = level_report.write_all(summary, curves, folder, plots=config.plots,
-                                           notes=plain_verdict(summary.table))
+                                           notes=plain_verdict(summary.table), unobservable_deg=config.unobservable_deg)
     tags = {}
     if summary.targets is not None:                       # lineage: which recorded frames were scored
         summary.paths["targets_json"] = folder / "targets.json"
         summary.paths["targets_json"].write_text(json.dumps(summary.targets, indent=2, default=str))
         tags = {"bodyschema.targets.path": summary.targets["path"], "bodyschema.targets.sha256":
                 summary.targets["sha256"]}
-    summary.run_id = publish(config, folder, "levels", table_metrics(summary.table, lambda r: f"L{r['level']}"),
-                             summary.paths, models, tags=tags)
+    table = ([summary.floor] if summary.floor else []) + summary.table           # floor.<metric>, L<level>.<metric>
+    metrics = table_metrics(table, lambda r: FLOOR_LABEL if r["level"] == FLOOR_LABEL else f"L{r['level']}")
+    summary.run_id = publish(config, folder, "levels", metrics, summary.paths, models, tags=tags)
     return summary
 
 
@@ -228,8 +212,11 @@ def measure_levels(config: LevelsConfig, models: Sequence) -> tuple[LevelsSummar
         for label, errors in run_trials:
             per_trial.setdefault(label, []).append(errors)
         curves = curves or run_curves
+    floor_rows = [r for r in rows if r["level"] == FLOOR_LABEL]
+    rows = [r for r in rows if r["level"] != FLOOR_LABEL]
     summary = LevelsSummary(rows, level_report.aggregate(rows), {k: np.concatenate(v) for k, v in per_trial.items()},
-                            targets=None if recorded is None else recorded.lineage())
+                            targets=None if recorded is None else recorded.lineage(),
+                            floor=level_report.aggregate(floor_rows)[0] if floor_rows else None, floor_rows=floor_rows)
     return summary, curves
 
 
@@ -242,8 +229,9 @@ def _setting(config: LevelsConfig, models: Sequence):
 
 
 def measure_run(config: LevelsConfig, models: Sequence, encoder, run: int, robot=None, recorded=None):
-    """Every level row of run `run`: (rows, [(level label, (N,) mean error deg)], F(t) curves if run 0). Each start
-    is inferred once (evaluate_level's `shared`); only run 0 records trajectories (the curves plot run 0)."""
+    """Every level row of run `run`, the floor's first: (rows, [(level label, (N,) mean error deg)], F(t) curves if
+    run 0). Each start is inferred once (evaluate_level's `shared`); only run 0 records trajectories (the curves plot
+    run 0)."""
     if robot is None:
         robot, recorded = _setting(config, models)
     perception = Perception(models, replace(levels_update(config), record=config.perception.record and run == 0))
@@ -272,6 +260,11 @@ def measure_run(config: LevelsConfig, models: Sequence, encoder, run: int, robot
                                              level, eval_rng(config.seed, run, "beliefs", level), config.success_deg)
             rows.append({"run": run, **plain, "level": f"{level} {PLAIN_LABEL}"})
             per_trial.append((rows[-1]["level"], trial["mean_err_deg"]))
+    if config.floor:                                                       # the same targets, started at the truth
+        floor, trial = evaluate_floor(perception, robot, targets, config.success_deg)
+        add_gaps(rows, floor)
+        rows.insert(0, {"run": run, **floor})
+        per_trial.insert(0, (FLOOR_LABEL, trial["mean_err_deg"]))
     return rows, per_trial, curves
 
 
@@ -302,7 +295,7 @@ def broken_sweep(config: PerceptionRunConfig, models: Sequence | None = None, le
 
 
 def at_level(config: PerceptionRunConfig, level: int, **changes) -> LevelsConfig:
-    """The levels config of one level (no multi-start, no plots, no MLflow) with config's shared fields."""
+    """The levels config of one level (no multi-start, floor, plots nor MLflow) with config's shared fields."""
     shared = {f.name: getattr(config, f.name) for f in fields(PerceptionRunConfig)}
     return LevelsConfig(**{**shared, "levels": (level,), "multistart": 0, "mlflow": False, "plots": False,
-                           "progress": False, **changes})
+                           "progress": False, "floor": False, **changes})

@@ -1,5 +1,6 @@
-"""Tables and plots of the levels benchmark: per-run CSV, per-level summary (CSV + Markdown), box plots of the
-per-trial joint error, free-energy curves, and error-vs-noise / broken-sensor plots of the robustness sweeps."""
+"""Tables and plots of the levels benchmark: per-run CSV, per-level summary (CSV + Markdown; the floor's row first,
+then its per-joint table and the joints it flags: floor.py), box plots of the per-trial joint error, free-energy
+curves, and error-vs-noise / broken-sensor plots of the robustness sweeps."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from bodyschema.evaluation.core.tables import markdown_table, write_csv
+from bodyschema.evaluation.levels.floor import FLOOR_LABEL, UNOBSERVABLE_DEG, floor_markdown
 
 MAIN_COLUMNS = ("joint_err_deg", "joint_err_median_deg", "ee_err_mm", "success", "all_joints_2deg",
                 "evaluations_per_trial", "converged", "diverged", "wall_s")
@@ -41,7 +43,7 @@ def plot_boxes(per_trial: Mapping[str, np.ndarray], path: Path) -> Path:
     fig, ax = plt.subplots(figsize=(1.6 + 1.2 * len(per_trial), 4))
     labels = list(per_trial)
     ax.boxplot([np.maximum(per_trial[k], 1e-9) for k in labels], showfliers=True)
-    ax.set_xticks(range(1, len(labels) + 1), [f"level {k}" for k in labels])
+    ax.set_xticks(range(1, len(labels) + 1), [k if k == FLOOR_LABEL else f"level {k}" for k in labels])
     ax.set_yscale("log")
     ax.axhline(1.0, color="grey", ls="--", lw=0.8, label="success threshold (1°)")
     ax.set_ylabel("final mean |joint error| (deg)")
@@ -87,13 +89,19 @@ def plot_sweep(rows: Sequence[Mapping], x: str, path: Path, y: str = "joint_err_
 
 
 def write_all(summary, curves: Mapping[str, np.ndarray], out: Path, plots: bool = True,
-              notes: str = "") -> dict[str, Path]:
-    """CSVs, summary.md (the table, then `notes`) and the plots of a levels run in `out`."""
+              notes: str = "", unobservable_deg: float = UNOBSERVABLE_DEG) -> dict[str, Path]:
+    """CSVs, summary.md (the table with the floor's row first, the floor per joint with the joints above
+    `unobservable_deg`, then `notes`) and the plots of a levels run in `out`."""
     out.mkdir(parents=True, exist_ok=True)
-    paths = {"runs_csv": write_csv(summary.rows, out / "runs.csv"),
-             "summary_csv": write_csv(summary.table, out / "summary.csv")}
+    floor = [summary.floor] if summary.floor else []
+    paths = {"runs_csv": write_csv(summary.floor_rows + summary.rows, out / "runs.csv"),
+             "summary_csv": write_csv(floor + summary.table, out / "summary.csv")}
     paths["summary_md"] = out / "summary.md"
-    paths["summary_md"].write_text(markdown(summary.table) + (f"\n{notes}\n" if notes else ""))
+    parts = [markdown(floor + summary.table)]
+    if summary.floor:
+        parts.append(floor_markdown(summary.floor, summary.table, unobservable_deg))
+    parts.append(notes)
+    paths["summary_md"].write_text("\n".join(f"{p.rstrip()}\n" for p in parts if p))
     if plots:
         paths["boxplot"] = plot_boxes(summary.per_trial, out / "levels_boxplot.png")
         if curves:

@@ -1,7 +1,8 @@
 """The report's headline: one line per section with the benchmark's key figure, read from the CSVs of the run the
 section shows (only those the section accepted: never a stale or outside file).
 
-models (a plain folder, the demo's): the floor of each model that has one; levels: mean joint error per level;
+models (a plain folder, the demo's): the floor of each model that has one; levels: mean joint error per level, the
+floor (started at the truth) and the joints it finds not observable;
 robustness: joint error at the largest noise and with the worst broken sensor;
 tracking: per frame rate and sensing condition, the tracker's mean joint error beside the other methods', its time
 per frame and lost-track events; reaching: AIF vs PD success; loop robustness: success at the largest noise and with
@@ -101,8 +102,17 @@ def models(section: Section) -> str:
 
 def levels(section: Section) -> str:
     table = rows(section, "summary.csv")
-    per_level = " · ".join(f"L{cell(r, 'level')} {fmt(number(r, 'joint_err_deg'), '°')}" for r in table)
-    return f"mean joint error {per_level}"
+    floor = next((r for r in table if r.get("level") == "floor"), None)   # a run before the floor row: none
+    per_level = " · ".join(f"L{cell(r, 'level')} {fmt(number(r, 'joint_err_deg'), '°')}" for r in table
+                           if r is not floor)
+    if floor is None:
+        return f"mean joint error {per_level}"
+    threshold = setting(section, "unobservable_deg")
+    unseen = [] if threshold is None else [
+        f"{escape_markdown(k.removeprefix('joint_err_deg/'))} {fmt(number(floor, k), '°')}" for k in floor
+        if k.startswith("joint_err_deg/") and number(floor, k) > threshold]
+    return (f"mean joint error {per_level}; floor {fmt(number(floor, 'joint_err_deg'), '°')} (started at the truth)"
+            + (f"; not observable by this model/camera: {', '.join(unseen)}" if unseen else ""))
 
 
 def robustness(section: Section) -> str:

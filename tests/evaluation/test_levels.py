@@ -212,7 +212,8 @@ def test_each_start_is_inferred_once_per_run_and_the_encoder_rows_count_the_work
         return infer(self, obs, mu0, goal)
 
     monkeypatch.setattr(Perception, "infer", counted)
-    config = LevelsConfig(trials=6, runs=2, multistart=0, encoder=spec, mlflow=False, plots=False, out=tmp_path / "o")
+    config = LevelsConfig(trials=6, runs=2, multistart=0, encoder=spec, mlflow=False, plots=False, out=tmp_path / "o",
+                          floor=False)                                     # the floor's own start: test_levels_floor
     summary, _ = benchmark.measure_levels(config, [planar2_xyz])
     assert len(calls) == 2 * 4, "per run: levels 1, 2, 3 and the encoder's guess, each once"
     for run in (0, 1):
