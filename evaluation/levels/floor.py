@@ -5,8 +5,10 @@ their gap to it (`gap_to_floor_deg`: judge an estimator by that gap), and a join
 `unobservable_deg` is flagged as not observable by this model/camera (measured on a 7-joint arm whose wrists the
 decoder did not see: floors 44° and 52° where the other joints' were 0.8–4.9°, and the level-2 starts landed on them).
 
-The floor is one more inference per run, from starts already in the minimum's basin: fewer steps than a level's,
-for every model (an analytic model or a GP: milliseconds; a pixel decoder: about a level row's cost or less).
+The floor is one more inference per run, for every model: an analytic model or a GP, milliseconds (one evaluation
+per trial from the exact minimum); a pixel decoder, about one level row's cost, the image update (adam+lm) taking
+its steps wherever it starts (a 16×16 test decoder, 50 trials, one thread: 1.19 s, 230 evaluations per trial, levels
+1–3 1.15–1.38 s each), so about a quarter more perception on a levels run; `--no-floor` skips it.
 A joint the model is strictly blind to (F exactly flat along it) is a limit of the measure: a first-order update
 (adam, the image default's first half) does not move along it from the truth, so its floor reads ≈ 0 and the level
 rows' gap shows it instead; a learned decoder is never exactly flat, and its spurious dependence is what moves the
