@@ -19,10 +19,11 @@ arm (7 joints) and its first 4 joints (the rest held), with the records
 `bodyschema robot init` would write (TALOS's: by hand, its servos inferred as `robot init` does; collisions off as
 `robot init` sets them: with the torso's collision meshes many uniform goals lie inside the body).
 Position: per arm, its position servos (the model's or those `robot init` infers), the same targets and starts:
-  old    the servos commanded to the target's joint pose (the baseline before issue 33);
-  ff     + the servo's gravity feed-forward (evaluation/reaching/servo_baseline.py), what the benchmark runs;
-  ff+imp the same on a copy of the model integrated with `implicitfast` (the actuators' kv implicit, as the
-         shipped arms' MJCFs say): a diagnosis of servos that Euler makes unstable, not what the benchmark runs.
+  old    the servos commanded to the target's joint pose, under the integrator the file names (MuJoCo's Euler
+         where it names none): the baseline and the model before issue 33;
+  ff     + the servo's gravity feed-forward (evaluation/reaching/servo_baseline.py), the same integrator;
+  ff+imp the same with the servos' kv implicit (`implicitfast`, what the robot builder now sets where the file
+         names no integrator, as the shipped arms' MJCFs say): what the benchmark runs.
 Prints success within 10 mm, mean/max final ee error (mm), mean joint error (°), mean settle time (s), how far
 an ee error still moves over the episode's last 10 % (mm, the largest: a servo still oscillating) and the new/old
 success ratio. Target: < 2 min on 2
@@ -103,8 +104,8 @@ def reach(robot: Robot, config: PDConfig | str, trials: int, seed: int = 0) -> d
         policy, law = TorquePolicy(pd, goal={"joints": q_target}), pd.law
     else:
         policy, law = ServoPolicy(q_target if config == "old" else servo_targets(robot, q_target)), "servo"
-        if config == "ff+imp":
-            robot.model.opt.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+        if config != "ff+imp" and "integrator" not in robot.source.text:   # as built before: the file's Euler
+            robot.model.opt.integrator = mujoco.mjtIntegrator.mjINT_EULER
     start = time.perf_counter()
     try:
         out = rollout(robot, policy, q_start, {}, robot.fk(q_target), Sensors((), {}, frozenset(), rng),

@@ -24,7 +24,7 @@ import numpy as np
 from bodyschema.datagen.arm_chain import infer_arm
 from bodyschema.datagen.model_files import parse_xml
 from bodyschema.datagen.robot_build import build_model, compile_spec, read_source
-from bodyschema.datagen.robot_record import AUTO_CAMERA, RobotRecord
+from bodyschema.datagen.robot_record import AUTO_CAMERA, SHIPPED, RobotRecord
 from bodyschema.errors import must_be
 
 IMAGE_SIZE = (64, 64)       # px: the default image of an inferred robot (small, quick to render and learn from)
@@ -82,7 +82,9 @@ def safe_name(stem: str) -> str:
 def file_name(text: str, path: Path) -> str:
     """The robot's name as its file gives it (URDF <robot name>, MJCF <mujoco model>), made safe; else the stem."""
     root = parse_xml(text, path, "model file")
-    return safe_name(root.get("name" if root.tag == "robot" else "model") or path.stem)
+    name = safe_name(root.get("name" if root.tag == "robot" else "model") or path.stem)
+    # a shipped robot's name would have its stores checked against the shipped model (example-robot-data's Panda)
+    return f"{name}_{path.suffix.lstrip('.').lower()}" if name in SHIPPED else name
 
 
 def _workspace(model: mujoco.MjModel) -> np.ndarray:

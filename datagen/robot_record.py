@@ -159,7 +159,15 @@ def read_record(path: Path) -> RobotRecord:
         values = tomllib.loads(Path(path).read_text())
     except tomllib.TOMLDecodeError as e:
         raise ValueError(must_be(f"robot record {path}", "valid TOML", str(e))) from e
-    return record_from_dict(values, Path(path).resolve().parent, str(path))
+    base = Path(path).resolve().parent
+    name = values.get("name")
+    if isinstance(name, str) and name in SHIPPED and base != shipped_dir().resolve():
+        # a store names its robot, and a shipped name is checked against the shipped model: refuse it here, not at
+        # `validate` after the whole datagen run
+        raise ValueError(must_be(f"record `name` in {path}", f"not a shipped robot's name {SHIPPED}", name,
+                                 f"Stores and models are checked against the shipped {name}; rename it, e.g. "
+                                 f"{name}_{Path(path).stem}."))
+    return record_from_dict(values, base, str(path))
 
 
 def record_from_dict(values: dict[str, Any], base: Path, where: str = "robot record") -> RobotRecord:

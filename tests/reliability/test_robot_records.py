@@ -49,6 +49,7 @@ RECORDS = {   # file stem → the one change to a good record of the shipped pla
     "ee_fixed_site": {"ee": 'site = "fixed"', "model": "fixed_site.xml"},
     "name_dotdot": {"name": ".."},
     "name_script": {"name": "a\\nb<script>"},
+    "name_shipped": {"name": "planar2"},      # a copy's store would be checked against the shipped planar2
 }
 SHOW = "robot show {W}/%s.toml --n 1 --out {W}/s.png"
 GEN = "datagen --robot {W}/%s.toml --n 4 --no-images --out {W}/o.zarr"
@@ -65,6 +66,7 @@ CASES = [
     ("record-name-dotdot", SHOW % "name_dotdot"),
     ("record-name-dotdot-datagen", GEN % "name_dotdot"),
     ("record-name-with-newline-and-markup", GEN % "name_script"),
+    ("record-name-a-shipped-robots", GEN % "name_shipped"),
 ]
 WORDS = {
     "record-hold-a-number": "`hold` of",
@@ -80,6 +82,7 @@ WORDS = {
     "record-name-dotdot": "record `name` must be",
     "record-name-dotdot-datagen": "record `name` must be",
     "record-name-with-newline-and-markup": "record `name` must be",
+    "record-name-a-shipped-robots": "must be not a shipped robot's name",
 }
 
 
@@ -126,3 +129,13 @@ def test_a_robot_id_refuses_another_robot():
     env = gymnasium.make(env_id("planar2"), robot="planar2")            # naming its own robot is fine
     assert env.unwrapped.robot.name == "planar2"
     assert gymnasium.make(GENERIC_ID, robot="planar2").unwrapped.robot.name == "planar2"
+
+
+def test_a_file_named_like_a_shipped_robot_gets_a_name_of_its_own(tmp_path):
+    """example-robot-data's Panda URDF says <robot name="panda">: `robot init` must not call it the shipped panda,
+    whose model its stores would be validated against (they failed `validate` after a whole datagen run)."""
+    from bodyschema.datagen.robot_infer import file_name
+
+    urdf = '<robot name="panda"><link name="base"/></robot>'
+    assert file_name(urdf, tmp_path / "panda.urdf") == "panda_urdf"
+    assert file_name(urdf.replace("panda", "my_panda"), tmp_path / "panda.urdf") == "my_panda"
