@@ -38,8 +38,7 @@ def _ur5_table_top() -> RobotRecord:
     gains = {k: record.actuators[k][:5] for k in ("kp", "kv")}
     return dataclasses.replace(record, joints=record.joints[:5], hold={"wrist_3_joint": 0.0},
                                workspaces={"full": UR5_BOX, "camera": UR5_BOX},
-                               actuators={"kind": "servos", **gains},
-                               pd={k: record.pd[k][:5] for k in ("kp", "kd")})
+                               actuators={"kind": "servos", **gains})
 
 
 def _talos_left_arm4() -> RobotRecord:
