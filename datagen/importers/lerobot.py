@@ -1,6 +1,6 @@
 """A LeRobot dataset, codebase v3.0 (the inverse of datagen/export_lerobot.py): meta/info.json, the frames in
-data/chunk-*/file-*.parquet, images as PNG bytes in the parquet or as video files (decoded with OpenCV's FFmpeg
-where it has the codec; else the house error).
+data/chunk-*/file-*.parquet, images as PNG bytes in the parquet or as video files (video.py: PyAV where installed,
+which decodes every codec LeRobot writes, else OpenCV's FFmpeg where it has the codec; else the house error).
 
 Joint angles: `observation.state` (or --joint-key), its names from the features. This project's export also
 brings back velocity, ee_xyz, ee_pixel, jacobian (3·Dq values → (3, Dq)), touch, its units and store attrs

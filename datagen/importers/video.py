@@ -1,9 +1,11 @@
-"""LeRobot v3.0 video features: the frame of each row, decoded with OpenCV's FFmpeg backend.
+"""LeRobot v3.0 video features: the frame of each row, decoded with PyAV where it is installed (the `export` extra;
+LeRobot decodes with it too), else with OpenCV's FFmpeg backend.
 
 An episode's frames sit in one video file (meta/episodes: `videos/<key>/chunk_index`, `file_index`,
 `from_timestamp`); the row's frame is number round((from_timestamp + timestamp) · fps) of that file. Each file is
-decoded once, front to back (seeking in long-GOP codecs is not frame-exact). A codec the installed FFmpeg cannot
-decode is the house error, not an empty image.
+decoded once, front to back (seeking in long-GOP codecs is not frame-exact). The codecs LeRobot writes (AV1 through
+libsvtav1, its default; h264; hevc) all decode with PyAV's wheel (av 18: dav1d for AV1), while OpenCV's wheel has no
+AV1 decoder. A codec the decoder cannot read is the house error, not an empty image.
 """
 
 from __future__ import annotations
@@ -16,8 +18,8 @@ from bodyschema.datagen.importers.folder_csv import from_opencv
 from bodyschema.errors import must_be
 
 VIDEO_PATH = "videos/{video_key}/chunk-{chunk_index:03d}/file-{file_index:03d}.mp4"   # LeRobot's default
-HINT = ("Re-encode the dataset with image (PNG) features, or use an OpenCV build whose FFmpeg decodes this codec "
-        "(LeRobot encodes AV1 by default).")
+HINT = ("Install PyAV (`pip install av`, in the export extra), which decodes every codec LeRobot writes (AV1 by "
+        "default, h264, hevc); or re-encode the dataset with image (PNG) features.")
 
 
 def video_frames(root: Path, info: dict, frames, key: str) -> list[np.ndarray]:
@@ -63,11 +65,42 @@ def video_frames(root: Path, info: dict, frames, key: str) -> list[np.ndarray]:
 
 
 def _decode(path: Path) -> list[np.ndarray]:
-    import cv2
-
+    """Every frame of the file, in order, (H, W, 3) RGB or (H, W) gray uint8: PyAV where installed, else OpenCV."""
     if not path.is_file():
         raise FileNotFoundError(must_be("video file", "present", str(path), "The dataset is incomplete; copy "
                                         "its videos/ folder too."))
+    try:
+        import av
+    except ImportError:
+        av = None
+    images, why = _decode_pyav(av, path) if av is not None else _decode_opencv(path)
+    if not images:
+        decoder = "PyAV" if av is not None else "the installed OpenCV/FFmpeg (PyAV is not installed)"
+        raise ValueError(must_be(f"video {path.name}", f"decodable by {decoder}", why or "no frame decoded", HINT))
+    return images
+
+
+GRAY = ("gray", "gray8", "gray10le", "gray12le", "gray16le")   # FFmpeg's gray pixel formats: decoded as 8-bit gray
+
+
+def _decode_pyav(av, path: Path) -> tuple[list[np.ndarray], str | None]:
+    """(frames, why none were decoded): the first video stream, every frame converted by FFmpeg's swscale."""
+    images = []
+    try:
+        with av.open(str(path)) as container:
+            if not container.streams.video:
+                return [], "no video stream"
+            for frame in container.decode(video=0):
+                rgb = frame.format.name not in GRAY
+                images.append(frame.to_ndarray(format="rgb24" if rgb else "gray"))
+    except av.FFmpegError as e:
+        return [], f"{type(e).__name__} after {len(images)} frames: {str(e)[:120]}"
+    return images, None
+
+
+def _decode_opencv(path: Path) -> tuple[list[np.ndarray], str | None]:
+    import cv2
+
     capture = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
     images = []
     try:
@@ -78,7 +111,4 @@ def _decode(path: Path) -> list[np.ndarray]:
             images.append(from_opencv(image, path.name))
     finally:
         capture.release()
-    if not images:
-        raise ValueError(must_be(f"video {path.name}", "decodable by the installed OpenCV/FFmpeg", "no frame decoded",
-                                 HINT))
-    return images
+    return images, None
