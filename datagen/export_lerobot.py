@@ -2,7 +2,8 @@
 
     meta/info.json                          codebase_version, robot_type, fps, totals, splits, data_path, features
                                             ({key: {dtype, shape, names}}, LeRobot's five index columns included)
-    meta/stats.json                         per feature: min, max, mean, std, count (images per channel, in [0, 1])
+    meta/stats.json                         per feature: min, max, mean, std, count, q01, q10, q50, q90, q99 as
+                                            LeRobot writes them (images per channel, in [0, 1]; export_lerobot_stats)
     meta/tasks.parquet                      one task (the sampler), index = task text, column task_index
     meta/episodes/chunk-000/file-000.parquet  per episode: length, tasks, dataset_from/to_index, data/chunk/file_index
     data/chunk-XXX/file-YYY.parquet         the frames, whole episodes per file (≤ ~100 MB each)
@@ -34,6 +35,7 @@ import numpy as np
 import zarr
 
 from bodyschema.datagen.export import row_blocks
+from bodyschema.datagen.export_lerobot_stats import LeRobotStats
 from bodyschema.datagen.integrity import data_arrays
 from bodyschema.datagen.store_reader import attrs_json, feature, read, store_body
 from bodyschema.errors import must_be
@@ -65,7 +67,7 @@ def write_lerobot(root: zarr.Group, out: Path) -> None:
     fps = int(fps) if fps.is_integer() else fps                        # LeRobot's fps is an int where it can be
     feats = lerobot_features(root)
     task = f"{attrs.get('sampler')} sampling of the {attrs.get('robot')} joints"
-    stats = _Stats()
+    stats = LeRobotStats()
     files = _files(episodes, _row_bytes(root))
     for file_no, eps in enumerate(files):
         path = out / DATA_PATH.format(chunk_index=file_no // CHUNKS_SIZE, file_index=file_no % CHUNKS_SIZE)
@@ -134,7 +136,7 @@ def _files(episodes: list[tuple[int, int]], row_bytes: int) -> list[list[int]]:
 
 
 def _write_data_file(root: zarr.Group, path: Path, eps: list[tuple[int, tuple[int, int]]], fps: float,
-                     feats: dict, stats: "_Stats") -> None:
+                     feats: dict, stats: "LeRobotStats") -> None:
     """One parquet file holding the frames of episodes `eps` = [(episode_index, (from, to))], a row group per read."""
     import pyarrow.parquet as pq
 
@@ -152,7 +154,7 @@ def _write_data_file(root: zarr.Group, path: Path, eps: list[tuple[int, tuple[in
 
 
 def _frames(root: zarr.Group, rows: tuple[int, int], episode: tuple[int, int], first_frame: int, fps: float,
-            feats: dict, stats: "_Stats"):
+            feats: dict, stats: "LeRobotStats"):
     """Rows [start, stop) of the store, inside the episode (index, its end row), as an arrow table with LeRobot's
     columns."""
     import pyarrow as pa
@@ -167,8 +169,7 @@ def _frames(root: zarr.Group, rows: tuple[int, int], episode: tuple[int, int], f
     columns[ACTION] = _vector_column(ACTION, _action(root, start, stop, episode_stop), stats)
     if "image" in root.array_keys():
         images = read(root, "image", start, stop)                                      # (b, H, W[, C]) uint8
-        stats.add(image_key(root), images.reshape(len(images), -1, images.shape[3] if images.ndim == 4 else 1)
-                  / 255.0, per_channel=True)
+        stats.add_images(image_key(root), images)
         columns[image_key(root)] = pa.array([{"bytes": _png(img), "path": None} for img in images],
                                             type=pa.struct([("bytes", pa.binary()), ("path", pa.string())]))
     index = {"timestamp": np.asarray(t, np.float32), "frame_index": frame,
@@ -200,7 +201,7 @@ def _next_state(root: zarr.Group, start: int, stop: int, episode_stop: int) -> n
     return q_next                                                                    # (b, Dq)
 
 
-def _vector_column(key: str, values: np.ndarray, stats: "_Stats"):
+def _vector_column(key: str, values: np.ndarray, stats: "LeRobotStats"):
     """(b, k) values as LeRobot reads a feature of shape [k]: one scalar per row when k = 1, else a k-list."""
     import pyarrow as pa
 
@@ -232,40 +233,8 @@ def _hf_features(feats: dict) -> dict:
     return out
 
 
-class _Stats:
-    """Running min, max, mean, std and count per feature (images: per channel), for meta/stats.json."""
-
-    def __init__(self):
-        self.acc: dict[str, dict[str, np.ndarray]] = {}
-
-    def add(self, key: str, values: np.ndarray, per_channel: bool = False) -> None:
-        v = values.astype(np.float64)
-        axes = (0, 1) if per_channel else 0                   # images (b, pixels, C): reduce rows and pixels
-        part = {"min": v.min(axes), "max": v.max(axes), "sum": v.sum(axes), "sq": (v ** 2).sum(axes),
-                "count": np.asarray(v.shape[0]), "n": np.asarray(v.size // v.shape[-1])}
-        part["image"] = np.asarray(per_channel)
-        acc = self.acc.get(key)
-        if acc is None:
-            self.acc[key] = part
-            return
-        acc["min"], acc["max"] = np.minimum(acc["min"], part["min"]), np.maximum(acc["max"], part["max"])
-        for k in ("sum", "sq", "count", "n"):
-            acc[k] = acc[k] + part[k]
-
-    def as_json(self) -> dict[str, dict[str, list]]:
-        out = {}
-        for key, a in self.acc.items():
-            mean = a["sum"] / a["n"]
-            std = np.sqrt(np.maximum(a["sq"] / a["n"] - mean ** 2, 0.0))
-            shape = (-1, 1, 1) if a["image"] else (-1,)           # LeRobot keeps image stats as (C, 1, 1)
-            out[key] = {k: v.reshape(shape).tolist() for k, v in
-                        (("min", a["min"]), ("max", a["max"]), ("mean", mean), ("std", std))}
-            out[key]["count"] = [int(a["count"])]
-        return out
-
-
 def _write_meta(out: Path, attrs: dict, feats: dict, episodes: list[tuple[int, int]], files: list[list[int]],
-                fps: float, task: str, stats: _Stats, root: zarr.Group) -> None:
+                fps: float, task: str, stats: LeRobotStats, root: zarr.Group) -> None:
     import pandas as pd
 
     meta = out / "meta"

@@ -77,7 +77,8 @@ def test_the_layout_follows_lerobot_v3(stores, which, tmp_path):
     assert tasks["task_index"].tolist() == [0] and episodes[0]["tasks"] == [tasks.index[0]]
     stats = json.loads((out / "meta" / "stats.json").read_text())
     assert set(stats) == set(info["features"])
-    assert all(set(s) == {"min", "max", "mean", "std", "count"} for s in stats.values())
+    assert all(set(s) == {"min", "max", "mean", "std", "count", "q01", "q10", "q50", "q90", "q99"}
+               for s in stats.values())                         # LeRobot's keys (test_export_lerobot_stats.py)
 
 
 def lerobot_arrow_type(feat: dict):
