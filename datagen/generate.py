@@ -288,10 +288,21 @@ def _checked(config: DatagenConfig, path: Path) -> tuple[dict, dict]:
             probe_babble(config, robot, ranges)
         if config.images:
             check_view(robot, ranges)  # a camera that hardly sees the ee: the house error, before any write
+            report_observability(robot, ranges)
             probe_render(robot)  # an unusable MUJOCO_GL fails here, not as a store full of NaN
     finally:
         robot.close()
     return feats, attrs
+
+
+def report_observability(robot: Robot, ranges: np.ndarray) -> None:
+    """Log the camera's observability table (pixels changed, ee mm per degree of each joint) and a house warning per
+    joint under the threshold: a warning, not an error (the store is still worth making for the joints it sees)."""
+    from bodyschema.datagen.observability import observability
+    seen = observability(robot, ranges, np.random.default_rng(0))
+    logger.info(seen.table())
+    for warning in seen.warnings():
+        logger.warning(warning)
 
 
 def _run(path: Path, config: DatagenConfig, feats: dict, attrs: dict, run_jobs: Runner, progress: bool) -> None:

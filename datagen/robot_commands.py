@@ -2,14 +2,17 @@
 
     bodyschema robot init arm.urdf --mesh-dir meshes/     writes arm.toml beside it with the inferred values
     bodyschema robot show arm.urdf                        joints, limits, sites, bodies, cameras, the record, the
-                                                          fraction of poses whose ee is in view, a contact sheet
-    bodyschema robot camera arm.toml                      places the record's camera anew for its edited workspace
+                                                          fraction of poses whose ee is in view, how much the image
+                                                          changes per degree of each joint, a contact sheet
+    bodyschema robot camera arm.toml                      places the record's camera (and image size) anew for its
+                                                          edited workspace, so that every joint is seen
 
 The configs are light (the CLI imports them at start-up); the runners import MuJoCo when they run.
 """
 
 from __future__ import annotations
 
+import logging
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,6 +21,8 @@ from typing import Annotated, Literal
 import tyro
 
 from bodyschema.errors import must_be
+
+logger = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -38,8 +43,9 @@ class RobotInitArgs:
 
 @dataclass(frozen=True)
 class RobotShowArgs:
-    """Print a robot's joints, limits, sites, bodies, cameras and record, how often its camera sees the ee, and
-    write a contact sheet of rendered poses (PNG) with the ee pixel on each."""
+    """Print a robot's joints, limits, sites, bodies, cameras and record, how often its camera sees the ee, how many
+    pixels each joint changes per degree (a warning for a joint under the threshold), and write a contact sheet of
+    rendered poses (PNG) with the ee pixel on each."""
 
     robot: Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="FILE|NAME")]   # shipped name or model file
     out: Path | None = None            # the PNG; None: <robot>_robot_sheet.png in the current folder
@@ -53,11 +59,13 @@ class RobotShowArgs:
 @dataclass(frozen=True)
 class RobotCameraArgs:
     """Place a record's camera anew from sampled forward kinematics, framing the ee over one of its workspaces
-    (after you narrowed it, or changed image_size), and rewrite the record in place (its leading comment kept,
-    other comments not)."""
+    (after you narrowed it, or changed image_size): of several views and framings, the one whose image changes most
+    for its weakest joints, and a larger image (up to --max-image-size) where that sees more joints; joints still
+    not seen are named with why. Rewrites the record in place (its leading comment kept, other comments not)."""
 
     record: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RECORD")]   # a robot record (.toml)
     workspace: str = "camera"          # the joint box whose ee positions the camera frames
+    max_image_size: int = 128          # px: the image's longer side may grow up to this (never shrinks)
 
 
 def run_init(args: RobotInitArgs) -> int:
@@ -85,8 +93,9 @@ def run_camera(args: RobotCameraArgs) -> int:
 
     import numpy as np
 
+    from bodyschema.datagen.camera_choice import choose_camera
     from bodyschema.datagen.robot import Robot
-    from bodyschema.datagen.robot_infer import ee_samples, place_camera, view_fraction
+    from bodyschema.datagen.robot_infer import check_view
     from bodyschema.datagen.robot_record import RECORD_SUFFIX, read_record, write_record
 
     if args.record.suffix.lower() != RECORD_SUFFIX or not args.record.is_file():
@@ -95,17 +104,23 @@ def run_camera(args: RobotCameraArgs) -> int:
     record = read_record(args.record)
     if args.workspace not in record.workspaces:
         raise ValueError(must_be("--workspace", f"one of the record's {sorted(record.workspaces)}", args.workspace))
+    if not isinstance(args.max_image_size, int) or args.max_image_size < 1:
+        raise ValueError(must_be("--max-image-size", "an integer >= 1 (px)", args.max_image_size))
     box = np.array(record.workspaces[args.workspace])
-    with Robot.load(record) as robot:
-        camera = place_camera(ee_samples(robot, box), record.image_size)
-    placed = dataclasses.replace(record, camera=camera)
+    choice = choose_camera(record, box, max(args.max_image_size, *record.image_size))
+    placed = dataclasses.replace(record, camera=choice.camera, image_size=choice.image_size)
     with Robot.load(placed) as robot:
-        fraction = view_fraction(robot, box)
+        fraction = check_view(robot, box)                    # refused before the record is touched
     lines = args.record.read_text().splitlines()
     header = list(itertools.takewhile(lambda line: line.startswith("#"), lines))   # the leading comment is kept
     write_record(placed, args.record, "\n".join(line.lstrip("#").removeprefix(" ") for line in header))
-    print(f"camera {record.camera.get('pos')} → {camera['pos']} (m), framing the ee over workspace "
+    print(f"before: {choice.before.table()}")
+    print(f"after:  {choice.seen.table()}")
+    print(f"camera {record.camera.get('pos')} → {choice.camera['pos']} (m), image {tuple(record.image_size)} → "
+          f"{choice.image_size} px, the best of {choice.tried} views and framings of the ee over workspace "
           f"{args.workspace!r}: ee in view {fraction:.1%}")
+    for warning in choice.warnings():
+        logger.warning(warning)
     print(f"record: {args.record}")
     return 0
 
@@ -130,6 +145,9 @@ def _rebased(record, folder: Path):
 
 
 def run_show(args: RobotShowArgs) -> int:
+    import numpy as np
+
+    from bodyschema.datagen.observability import observability
     from bodyschema.datagen.robot import Robot
     from bodyschema.datagen.robot_infer import check_view, infer_record
     from bodyschema.datagen.robot_record import dumps_toml, load_record, robot_label
@@ -146,6 +164,10 @@ def run_show(args: RobotShowArgs) -> int:
         print(f"record{note}:\n{dumps_toml(record.to_toml_dict())}")
         fraction = check_view(robot, robot.sampling_ranges)
         print(f"ee in view: {fraction:.1%} of uniform poses in workspace {robot.workspace!r}")
+        seen = observability(robot, robot.sampling_ranges, np.random.default_rng(0))
+        print(seen.table())
+        for warning in seen.warnings():
+            logger.warning(warning)
         out = args.out or Path(f"{robot_label(args.robot)}_robot_sheet.png")
         print(f"contact sheet: {robot_sheet(robot, out, args.n)}")
     return 0

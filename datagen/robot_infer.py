@@ -153,30 +153,40 @@ def check_view(robot, ranges: np.ndarray) -> float:
     return fraction
 
 
-def place_camera(points: np.ndarray, image_size: tuple[int, int], fovy: float = FOVY_DEG) -> dict:
+def place_camera(points: np.ndarray, image_size: tuple[int, int], fovy: float = FOVY_DEG,
+                 view: np.ndarray | None = None, cover: float = 1.0) -> dict:
     """A camera pose framing `points` (N, 3) m: it looks along their direction of least spread (principal axes),
     from the side above them, with the widest spread along the image's longer side, far enough that every point
-    falls inside FRAME_MARGIN of the image. Returns the record's [camera] values."""
+    falls inside FRAME_MARGIN of the image. `view` (3,): look along -view instead (the image's up as near the
+    world's +z as it goes); `cover`: the fraction of the points framed (closer: the others may leave the image).
+    Returns the record's [camera] values."""
     centre = (points.max(axis=0) + points.min(axis=0)) / 2
     spread = points - centre
     _, axes = np.linalg.eigh(spread.T @ spread)                  # columns by increasing variance
-    view, widest = axes[:, 0], axes[:, 2]
-    if view[2] < 0 or (view[2] == 0 and view[0] < 0):            # come from above (else from +x)
-        view = -view
     h, w = image_size
-    if w >= h:                                                   # x (right) × y (up) = view (toward the camera)
-        x = widest
-        y = np.cross(view, x)
+    if view is not None:
+        view = np.asarray(view, dtype=float) / np.linalg.norm(view)
+        up = np.array([0.0, 0.0, 1.0]) if abs(view[2]) < 0.99 else axes[:, 2]
+        y = up - (up @ view) * view
+        y /= np.linalg.norm(y)
+        x = np.cross(y, view)                                    # x × y = view (toward the camera)
     else:
-        y = widest
-        x = np.cross(y, view)
-    if y[2] < 0:                                                 # keep the world's up upward in the image
-        x, y = -x, -y
+        view, widest = axes[:, 0], axes[:, 2]
+        if view[2] < 0 or (view[2] == 0 and view[0] < 0):        # come from above (else from +x)
+            view = -view
+        if w >= h:                                               # x (right) × y (up) = view (toward the camera)
+            x = widest
+            y = np.cross(view, x)
+        else:
+            y = widest
+            x = np.cross(y, view)
+        if y[2] < 0:                                             # keep the world's up upward in the image
+            x, y = -x, -y
     tan_y = np.tan(np.deg2rad(fovy) / 2) * FRAME_MARGIN
     tan_x = tan_y * w / h
     along = spread @ view                                        # (N,) m toward the camera
     reach = np.maximum(np.abs(spread @ x) / tan_x, np.abs(spread @ y) / tan_y)
-    distance = float(np.max(along + reach)) + 0.05
+    distance = float(np.quantile(along + reach, cover)) + 0.05
     pos = centre + distance * view
     return {"name": AUTO_CAMERA, "pos": _rounded(pos), "xyaxes": _rounded(np.concatenate([x, y])), "fovy": fovy}
 

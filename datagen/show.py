@@ -1,11 +1,15 @@
 """`show_store`: what a dataset store holds, in words (`summarize_store`) and at a glance (a contact sheet PNG).
 
 The sheet goes beside the store (`<store name>_contact_sheet.png`) unless `out` says where; a store without images
-(generated with --no-images) gets the summary only, and the result says why there is no sheet.
+(generated with --no-images) gets the summary only, and the result says why there is no sheet. A store with images
+whose robot it can rebuild (a generated one) also gets its camera's observability table (`observability.py`: pixels
+changed and ee mm per degree of each joint, over the store's sampling ranges), and a house warning per joint under
+the threshold.
 """
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -14,15 +18,18 @@ from bodyschema.datagen.store import open_store
 from bodyschema.datagen.validate import summarize_store
 from bodyschema.errors import must_be
 
+logger = logging.getLogger(__name__)
 
 @dataclass(frozen=True)
 class Shown:
     summary: str                # summarize_store's text (validity included)
     sheet: Path | None          # the contact sheet PNG, None when the store has no images
     note: str = ""              # why there is no sheet
+    seen: str = ""              # the observability table ("" without images or a robot record)
 
     def __str__(self) -> str:
-        return "\n".join([self.summary, f"contact sheet: {self.sheet}" if self.sheet else self.note])
+        return "\n".join([self.summary, *([self.seen] if self.seen else []),
+                          f"contact sheet: {self.sheet}" if self.sheet else self.note])
 
 
 def show_store(path: str | Path, out: str | Path | None = None, n: int = 16) -> Shown:
@@ -37,7 +44,26 @@ def show_store(path: str | Path, out: str | Path | None = None, n: int = 16) -> 
         return Shown(summary, None, "no contact sheet: the store has no images (it was generated with "
                                     "--no-images); summary only")
     sheet = Path(out) if out is not None else default_sheet_path(path)
-    return Shown(summary, write_contact_sheet(path, sheet, n=n))
+    return Shown(summary, write_contact_sheet(path, sheet, n=n), seen=store_observability(path))
+
+
+def store_observability(path: Path) -> str:
+    """The observability table of the store's robot and camera over its sampling ranges, warnings logged; "" for a
+    store that does not hold its robot (an import without --robot)."""
+    import numpy as np
+
+    from bodyschema.datagen.observability import observability
+    from bodyschema.datagen.robot import Robot
+    from bodyschema.datagen.robot_attrs import RECORD_KEY
+
+    attrs = dict(open_store(path).attrs)
+    if RECORD_KEY not in attrs or not attrs.get("sampling_ranges"):
+        return ""
+    with Robot.from_attrs(attrs) as robot:
+        seen = observability(robot, np.array(attrs["sampling_ranges"]), np.random.default_rng(0))
+    for warning in seen.warnings():
+        logger.warning(warning)
+    return seen.table()
 
 
 def default_sheet_path(store: Path) -> Path:

@@ -1,0 +1,115 @@
+"""Observability (issue 33 item 2): pixels changed and ee mm per degree of each joint, printed by `robot show` and
+datagen with a house warning for a joint under the threshold, and `robot camera` choosing a camera that sees more."""
+
+import dataclasses
+import logging
+import shutil
+
+import numpy as np
+import pytest
+
+from bodyschema.cli import main
+from bodyschema.datagen.config import DatagenConfig
+from bodyschema.datagen.generate import generate
+from bodyschema.datagen.observability import MIN_PX_PER_DEG, observability
+from bodyschema.datagen.robot import Robot
+from bodyschema.datagen.robot_infer import ee_samples, infer_record, place_camera
+from bodyschema.datagen.robot_record import read_record, write_record
+from bodyschema.datagen.show import show_store
+
+# A shoulder swinging a forearm, and a roll about the forearm's own axis turning a round tool whose tip is on it.
+ROLL = """<mujoco model="roll">
+  <compiler angle="radian"/>
+  <worldbody>
+    <body name="upper">
+      <joint name="shoulder" axis="0 1 0" range="-1 1"/>
+      <geom type="capsule" fromto="0 0 0 0 0 0.3" size="0.03" mass="0.3" rgba="0.9 0.9 0.9 1"/>
+      <body name="tool" pos="0 0 0.3">
+        <joint name="roll" axis="0 0 1" range="-1 1"/>
+        <geom type="sphere" size="0.04" mass="0.05" rgba="0.9 0.9 0.9 1"/>
+        <site name="tip" pos="0 0 0"/>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+
+
+@pytest.fixture(scope="module")
+def roll(tmp_path_factory):
+    path = tmp_path_factory.mktemp("roll") / "roll.xml"
+    path.write_text(ROLL)
+    return infer_record(path, ee="tip")
+
+
+def test_a_roll_of_a_round_tool_is_flagged_with_its_figure_and_the_swinging_joint_is_not(roll):
+    with Robot.load(roll) as robot:
+        seen = observability(robot)
+    shoulder, tool = seen.joints
+    assert shoulder.px_per_deg > 3 * MIN_PX_PER_DEG and not shoulder.weak
+    assert tool.weak and tool.px_per_deg < 2.0 and tool.mm_per_deg < 0.01   # shading of its facets only
+    assert [j.name for j in seen.weak] == ["roll"] and seen.in_view == 1.0 and 0 < seen.arm_fraction < 0.5
+    (warning,) = seen.warnings()
+    assert warning.startswith("joint 'roll' seen by camera 'auto' must be at least 10 pixels changed per degree")
+    assert f"Got '{tool.px_per_deg:.2f} px/°'" in warning and "a roll about the tool's own axis" in warning
+    assert "roll " in seen.table() and "not seen" in seen.table().splitlines()[3]
+
+
+def test_pixels_per_degree_grow_as_the_camera_moves_closer(roll):
+    with Robot.load(roll) as robot:
+        points = ee_samples(robot, robot.sampling_ranges)
+    centre = (points.max(axis=0) + points.min(axis=0)) / 2
+    far = place_camera(points, roll.image_size)
+    figures = []
+    for scale in (1.0, 0.7):                       # the same view, 30 % nearer
+        pos = centre + scale * (np.array(far["pos"]) - centre)
+        with Robot.load(dataclasses.replace(roll, camera={**far, "pos": pos.tolist()})) as robot:
+            figures.append(observability(robot).joints[0].px_per_deg)
+    assert figures[1] > 1.5 * figures[0]           # ≈ 1/0.7² = 2× the pixels the swinging capsule sweeps
+
+
+def test_robot_show_and_datagen_print_the_table_and_warn_of_the_unseen_joint(roll, tmp_path, capsys, caplog,
+                                                                              monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    shutil.copy(roll.model_path, tmp_path / "roll.xml")
+    caplog.set_level(logging.INFO, logger="bodyschema")
+    assert main(["robot", "show", "roll.xml", "--ee", "tip", "--n", "2"]) == 0
+    out = capsys.readouterr().out
+    assert "observability: camera 'auto', 64×64 px" in out and "px/°" in out
+    assert "joint 'roll' seen by camera 'auto' must be" in caplog.text and "'shoulder'" not in caplog.text
+    caplog.clear()
+    store = generate(DatagenConfig(robot=str(tmp_path / "roll.xml"), n=4, shard_size=4, out=tmp_path / "r.zarr"))
+    assert "joint 'roll' seen by camera" in caplog.text and "observability: camera 'auto'" in caplog.text
+    caplog.clear()
+    shown = show_store(store)
+    assert "observability: camera 'auto', 64×64 px" in str(shown) and "joint 'roll'" in caplog.text
+
+
+def test_robot_camera_raises_the_weakest_joint_of_a_ur5_or_names_it(tmp_path, capsys, caplog):
+    import importlib.metadata
+    try:
+        urdf = importlib.metadata.distribution("example-robot-data").locate_file(
+            "cmeel.prefix/share/example-robot-data/robots/ur_description/urdf/ur5_robot.urdf")
+    except importlib.metadata.PackageNotFoundError:
+        pytest.skip("example-robot-data is not installed (pip install -e '.[test]')")
+    inferred = infer_record(urdf, visual="collision")                  # README "Your own robot": 5 joints, a box
+    box = ((-0.8, 0.8), (-2.2, -0.9), (0.6, 2.2), (-2.4, -0.6), (-1.6, 1.6))
+    record = dataclasses.replace(inferred, joints=inferred.joints[:5], hold={"wrist_3_joint": 0.0},
+                                 workspaces={"full": box, "camera": box}, base=tmp_path, model=str(urdf),
+                                 actuators={k: v[:5] if isinstance(v, list) else v
+                                            for k, v in inferred.actuators.items()})
+    with Robot.load(record) as robot:
+        record = dataclasses.replace(record, camera=place_camera(ee_samples(robot, np.array(box)), (64, 64)))
+    with Robot.load(record) as robot:
+        before = observability(robot)
+    write_record(record, tmp_path / "ur5.toml")
+    assert before.weakest.name == "wrist_2_joint" and before.weakest.weak
+    assert main(["robot", "camera", str(tmp_path / "ur5.toml"), "--max-image-size", "96"]) == 0
+    after = read_record(tmp_path / "ur5.toml")
+    assert max(after.image_size) <= 96
+    with Robot.load(after) as robot:
+        seen = observability(robot)
+    assert seen.weakest.px_per_deg > 3 * before.weakest.px_per_deg
+    out = capsys.readouterr().out
+    assert "before: observability" in out and "after:  observability" in out
+    assert (not seen.weak) or "Not seen at the best of" in caplog.text
