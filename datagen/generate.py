@@ -288,8 +288,8 @@ def _checked(config: DatagenConfig, path: Path) -> tuple[dict, dict]:
             probe_babble(config, robot, ranges)
         if config.images:
             check_view(robot, ranges)  # a camera that hardly sees the ee: the house error, before any write
-            report_observability(robot, ranges)
             probe_render(robot)  # an unusable MUJOCO_GL fails here, not as a store full of NaN
+            report_observability(robot, ranges)
     finally:
         robot.close()
     return feats, attrs
