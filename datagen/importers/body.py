@@ -1,7 +1,8 @@
-"""The body of an imported store: joint names, limits and the joint box, from a shipped robot, from `--joints` with
-`--ranges`, or from the attrs a bodyschema export carries; and the recorded angles mapped onto it (order, unit,
-limits). A named CSV/state column the body does not have, a joint the recording lacks, NaN, a unit left unstated or
-an angle outside the limits is the house error before anything is written.
+"""The body of an imported store: joint names, limits and the joint box, from a shipped robot, from `--joints`
+(limits: `--ranges`, else the box of the recorded joint values), or from the attrs a bodyschema export carries; and
+the recorded angles mapped onto it (order, unit, limits). A named CSV/state column the body does not have, a joint
+the recording lacks, NaN, a unit left unstated or an angle outside the limits is the house error before anything is
+written.
 """
 
 from __future__ import annotations
@@ -36,15 +37,18 @@ def resolve_body(config: ImportConfig, rec: Recording, image_size: tuple[int, in
     if config.robot is not None:
         body = _robot_body(config.robot, image_size)
     elif config.joints is not None:
-        limits = np.asarray(config.ranges, float) * _factor(config, rec)
-        body = Body(config.name, tuple(config.joints), limits, None, dict.fromkeys(ROBOT_ATTRS))
+        body = Body(config.name, tuple(config.joints), np.empty((len(config.joints), 2)), None,
+                    dict.fromkeys(ROBOT_ATTRS))
+        body.joint_limits = (np.asarray(config.ranges, float) * _factor(config, rec) if config.ranges is not None
+                             else data_box(rec, body) * _factor(config, rec))
     elif rec.attrs:
         a, spec = rec.attrs, attrs_body(rec.attrs, rec.q.shape[1])       # the body the export's models scale by
         body = Body(spec["robot"], tuple(spec["joint_names"]), np.asarray(a["joint_limits"], float),
                     np.array([spec["q_low"], spec["q_high"]]).T,
                     {**{k: a.get(k) for k in ROBOT_ATTRS}, **{k: a[k] for k in SELF_CONTAINED if k in a}})
     else:
-        raise ValueError(must_be("the body", "--robot NAME, or --joints NAMES with --ranges", "neither",
+        raise ValueError(must_be("the body", "--robot NAME, or --joints NAMES (with --ranges, or the data's box)",
+                                 "neither",
                                  "Only a bodyschema export records its body."))
     if config.ranges is not None:
         body.ranges = _checked_ranges(np.asarray(config.ranges, float) * _factor(config, rec), body)
@@ -111,13 +115,28 @@ def joint_angles(config: ImportConfig, rec: Recording, body: Body) -> np.ndarray
     return q
 
 
+def data_box(rec: Recording, body: Body) -> np.ndarray:
+    """(Dq, 2) in the recorded unit: the box of every joint value recorded (the angles and, where kept, the commanded
+    targets): the joint limits of a --joints body without --ranges."""
+    recorded = [in_body_order(rec, body, rec.q)]
+    if "target" in rec.arrays:
+        recorded.append(in_body_order(rec, body, np.asarray(rec.arrays["target"], float)))
+    values = np.concatenate(recorded)
+    return np.stack([values.min(axis=0), values.max(axis=0)], axis=1)
+
+
 def _in_body_order(rec: Recording, body: Body) -> np.ndarray:
+    return in_body_order(rec, body, rec.q)
+
+
+def in_body_order(rec: Recording, body: Body, values: np.ndarray) -> np.ndarray:
+    """`values` (N, K) with q's columns (rec.columns) → (N, Dq) in the body's joint order."""
     names, dq = list(body.joint_names), len(body.joint_names)
     if rec.columns is None:
-        if rec.q.shape[1] != dq:
-            raise ValueError(must_be("joint-angle columns", f"{dq}, one per joint of {names}", rec.q.shape[1],
+        if values.shape[1] != dq:
+            raise ValueError(must_be("joint-angle columns", f"{dq}, one per joint of {names}", values.shape[1],
                                      "Name the columns in a header row to pick and order them."))
-        return rec.q
+        return values
     unknown = [c for c in rec.columns if c not in names]
     if unknown:
         raise ValueError(must_be(f"joint keys {unknown}", f"joints of the body {body.name!r}: {names}",
@@ -126,7 +145,7 @@ def _in_body_order(rec: Recording, body: Body) -> np.ndarray:
     missing = [n for n in names if n not in rec.columns]
     if missing:
         raise ValueError(must_be(f"joints {missing}", "recorded", f"columns {list(rec.columns)}"))
-    return rec.q[:, [rec.columns.index(n) for n in names]]
+    return values[:, [rec.columns.index(n) for n in names]]
 
 
 def joint_box(q: np.ndarray, body: Body) -> np.ndarray:

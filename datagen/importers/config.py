@@ -32,7 +32,7 @@ class ImportConfig:
     format: Literal["auto", "folder", "hdf5", "lerobot"] = "auto"   # auto: .h5 file, meta/info.json, else folder
     angles: Literal["deg", "rad"] | None = None   # unit of the angles and --ranges; required unless the source says
     robot: str | None = None               # the body: a shipped robot (joints, limits, camera, --fk); or --joints
-    joints: tuple[str, ...] | None = None  # the body without a robot: joint names in q's order (needs --ranges)
+    joints: tuple[str, ...] | None = None  # the body without a robot: joint names in q's order (limits: --ranges)
     ranges: tuple[tuple[float, float], ...] | None = None   # (lo, hi) per joint, --angles unit; None: the data's box
     name: str = "recorded"                 # the body's name with --joints (models trained on the store carry it)
     csv: Path | None = None                # folder: the CSV of angles; None: the one *.csv in SOURCE
@@ -55,13 +55,11 @@ class ImportConfig:
         if self.robot is not None and self.joints is not None:
             problems.append(must_be("the body", "--robot NAME or --joints NAMES, not both",
                                     f"robot={self.robot}, joints={self.joints}",
-                                    "A robot gives joints, limits and camera; --joints needs --ranges."))
+                                    "A robot gives joints, limits and camera; --joints gives names (limits: "
+                                    "--ranges, else the data's box)."))
         if self.joints is not None:
             if not self.joints or len(set(self.joints)) != len(self.joints):
                 problems.append(must_be("--joints", "distinct joint names", self.joints))
-            if self.ranges is None:
-                problems.append(must_be("--ranges", "one (lo, hi) per joint with --joints", None,
-                                        "Pass --ranges LO HI ... in the --angles unit."))
         if self.ranges is not None and not all(len(r) == 2 and all(math.isfinite(v) for v in r) and r[0] < r[1]
                                                for r in self.ranges):
             problems.append(must_be("--ranges", "finite (lo, hi) pairs with lo < hi", self.ranges))

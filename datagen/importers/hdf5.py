@@ -147,4 +147,13 @@ def _demo(f, path: Path, joint_keys, image_key, ee_key, images: bool) -> Recordi
         arrays["ee_xyz"] = np.concatenate(ee)
     return Recording(np.concatenate(q), None, frames if images else None, names, arrays, files=[path],
                      params={"format": "hdf5", "layout": "demo", "episodes": len(episodes),
-                             "joint_keys": list(joint_keys), "image_key": image_key, "ee_key": ee_key})
+                             "joint_keys": list(joint_keys), "image_key": image_key, "ee_key": ee_key},
+                     dropped=_not_read(episodes[0], {*joint_keys, image_key, ee_key}))
+
+
+def _not_read(episode, read: set) -> dict[str, str]:
+    """What an episode holds besides the obs keys read (other obs keys; actions, rewards, states beside obs): the
+    demo layout names no joint-angle commands (robomimic's actions are end-effector deltas), so nothing more is kept."""
+    out = {f"obs/{k}": "not asked for (--joint-key, --image-key, --ee-key)" for k in episode["obs"] if k not in read}
+    out |= {k: "no store array of it (not a joint-angle reading)" for k in episode if k != "obs"}
+    return out

@@ -6,8 +6,10 @@ Joint angles: `observation.state` (or --joint-key), its names from the features.
 brings back velocity, ee_xyz, ee_pixel, jacobian (3·Dq values → (3, Dq)), touch, its units and store attrs
 (meta/bodyschema.json); a foreign dataset gives the state, the image and `episode_index` / `timestamp`. A feature of
 shape [1] may be a list or a scalar column (LeRobot writes the scalar); both come back as (N, 1). `action` comes back
-as the store's `target` where meta/bodyschema.json maps it to that array (a babbling store's servo targets); else
-the export derived it from the state (the next frame's), which the store does not keep.
+as the store's `target` where meta/bodyschema.json maps it to that array (a babbling store's servo targets; else the
+export derived it from the state, the next frame's, which the store does not keep), and in a foreign dataset where its
+names are the state's joints (goal positions, as LeRobot's arms record them). Every feature not imported is listed in
+`Recording.dropped` with the reason, and said in one line by the import.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from bodyschema.errors import must_be
 
 OWN_FORMAT = "bodyschema-lerobot"
 ACTION, COMMANDS = "action", "target"     # LeRobot's command column; the store array it comes from, when one does
+INDEX_COLUMNS = ("timestamp", "frame_index", "episode_index", "index", "task_index")   # LeRobot's, per frame
 OWN_ARRAYS = {"observation.velocity": "qvel", "observation.ee_xyz": "ee_xyz", "observation.ee_pixel": "ee_pixel",
               "observation.jacobian": "jacobian", "observation.touch": "touch"}
 
@@ -45,12 +48,57 @@ def read_lerobot(root: Path, joint_keys: tuple[str, ...], image_key: str | None,
         arrays["t"] = _column(frames, "timestamp", root)
     key = _image_key(feats, image_key) if images else None
     pictures = _images(root, info, frames, key) if key else None
-    return Recording(q, _names(feats[state_key], q.shape[1]), pictures,
+    columns = _names(feats[state_key], q.shape[1])
+    dropped = {}
+    if ours is None and ACTION in feats and ACTION in frames.column_names and state_key != ACTION:
+        action, why = _foreign_action(frames, feats, state_key, columns, root)
+        if action is not None:
+            arrays[COMMANDS] = action
+        else:
+            dropped[ACTION] = why
+    used = {state_key, *INDEX_COLUMNS, *([key] if key else []), *(OWN_ARRAYS if ours else ()),
+            *([ACTION] if COMMANDS in arrays else [])}
+    for name in feats:
+        if name not in used and name not in dropped:
+            dropped[name] = _why_dropped(name, feats[name], ours, images)
+    return Recording(q, columns, pictures,
                      [f"{root.name} frame {i}" for i in range(len(q))] if key else [], arrays,
                      unit="rad" if ours else None, attrs=(ours or {}).get("store_attrs", {}),
                      files=[p for p in root.rglob("*") if p.is_file()],
                      params={"format": "lerobot", "codebase_version": info["codebase_version"],
-                             "state_key": state_key, "image_key": key, "fps": info.get("fps")})
+                             "state_key": state_key, "image_key": key, "fps": info.get("fps")},
+                     dropped=dropped)
+
+
+def _foreign_action(frames, feats: dict, state_key: str, columns: tuple[str, ...] | None,
+                    root: Path) -> tuple[np.ndarray | None, str]:
+    """(`action` as the store's `target`, with q's columns, in q's unit; or None and why not). A LeRobot `action` is
+    kept where it commands the state's joints: its names are the state's (any order), so each value is a target angle
+    of a joint q reads, in q's unit (LeRobot's arms record goal positions this way). Any other action (fewer or other
+    names, none, end-effector or velocity commands) has no place in the store."""
+    names = _names(feats[ACTION], _width(feats[ACTION]))
+    if columns is None or names is None:
+        return None, (f"not the store's `target`: the joints it commands are not named (names of {state_key}: "
+                      f"{columns}, of {ACTION}: {names})")
+    if sorted(names) != sorted(columns):
+        return None, f"not the store's `target`: it commands {list(names)}, not the joints of {state_key}"
+    values = _vectors(frames, ACTION, root)                                              # (N, K) names' order
+    if values.shape[1] != len(names):
+        return None, f"not the store's `target`: {values.shape[1]} values per frame for {len(names)} names"
+    return values[:, [names.index(c) for c in columns]], ""
+
+
+def _width(feature: dict) -> int:
+    shape = feature.get("shape")
+    return int(np.prod(shape)) if isinstance(shape, list) and all(isinstance(v, int) for v in shape) else -1
+
+
+def _why_dropped(name: str, feature: dict, ours: dict | None, images: bool) -> str:
+    if feature.get("dtype") in ("image", "video"):
+        return "--no-images" if not images else "another camera (--image-key picks one)"
+    if ours is not None and name == ACTION:
+        return "made by the export from the state (the next frame's), which the store does not keep"
+    return "no store array of it"
 
 
 def _info(root: Path) -> dict:

@@ -33,6 +33,7 @@ class Recording:
     attrs: dict[str, Any] = field(default_factory=dict)   # a bodyschema export's store attrs ({} otherwise)
     files: list[Path] = field(default_factory=list)       # every file read (the source digest)
     params: dict[str, Any] = field(default_factory=dict)  # how it was read (format, keys): sampler_params
+    dropped: dict[str, str] = field(default_factory=dict)  # each feature of the source not imported → why (said once)
 
     def __post_init__(self) -> None:
         n = len(self.q)

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bodyschema.datagen.importers.body import Body, joint_angles, joint_box, resolve_body
+from bodyschema.datagen.importers.body import RANGE_TOL, Body, in_body_order, joint_angles, joint_box, resolve_body
 from bodyschema.datagen.importers.config import ImportConfig
 from bodyschema.datagen.importers.images import prepare_images
 from bodyschema.datagen.importers.recording import EXTRA_ARRAYS, Recording, check_finite, source_sha256
@@ -41,6 +41,8 @@ def import_recording(config: ImportConfig) -> Path:
         q = joint_angles(config, rec, body)                                          # (N, Dq) rad
         arrays["q"] = q.astype(np.float32)
         arrays.update(_extras(rec, config))
+        if "target" in arrays:
+            _place_targets(rec, body, arrays)
         foreign = {k for k in FK_ARRAYS if k in arrays} if not rec.attrs else set()
         if config.fk:
             arrays.update(_forward_kinematics(body, q, arrays))
@@ -49,7 +51,25 @@ def import_recording(config: ImportConfig) -> Path:
     finally:
         if body.robot is not None:
             body.robot.close()
+    if rec.dropped:
+        logger.warning("import: not imported (no place in the store): " + "; ".join(
+            f"{name} ({why})" for name, why in rec.dropped.items()))
     return write_store(Path(config.out), arrays, attrs, config.overwrite, source)
+
+
+def _place_targets(rec: Recording, body: Body, arrays: dict[str, np.ndarray]) -> None:
+    """The recorded commands (rad, q's columns) in the body's joint order as the store's `target`; commands outside
+    the joint limits (which `validate` requires of a target) are dropped, and `rec.dropped` says so."""
+    target = in_body_order(rec, body, arrays["target"])                               # (N, Dq) rad
+    lo, hi = body.joint_limits.T
+    outside = ((target < lo - RANGE_TOL) | (target > hi + RANGE_TOL)).any(axis=1)
+    if outside.any():
+        del arrays["target"]
+        j = int(np.nonzero((target[outside] < lo - RANGE_TOL) | (target[outside] > hi + RANGE_TOL))[1][0])
+        rec.dropped["action"] = (f"commands outside the joint limits in {int(outside.sum())} rows (first: "
+                                 f"{body.joint_names[j]}); a store's `target` lies inside them")
+        return
+    arrays["target"] = target
 
 
 def read_source(source: Path, config: ImportConfig) -> Recording:
@@ -167,5 +187,5 @@ def _attrs(config: ImportConfig, rec: Recording, body: Body, arrays: dict, sourc
             "versions": versions(), "created_at": now(), "n": n, "chunk_len": step, "n_shards": -(-n // step),
             "features": feats,
             "source": {"format": rec.params.get("format"), "path": str(source.resolve()), "files": len(rec.files),
-                       "sha256": source_sha256(rec.files, root)},
+                       "sha256": source_sha256(rec.files, root), "not_imported": dict(rec.dropped)},
             "recorded_attrs": rec.attrs or None}

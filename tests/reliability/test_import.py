@@ -30,7 +30,6 @@ CASES = [
     ("bad-cell", "import {W}/word --angles deg --robot planar2 " + OUT),
     ("no-body", "import {W}/rec --angles deg " + OUT),
     ("two-bodies", "import {W}/rec --angles deg --robot planar2 --joints shoulder elbow " + OUT),
-    ("joints-without-ranges", "import {W}/rec --angles deg --joints shoulder elbow " + OUT),
     ("ranges-reversed", "import {W}/rec --angles deg --joints shoulder elbow --ranges 1 0 0 1 " + OUT),
     ("ranges-count", "import {W}/rec --angles deg --robot planar2 --ranges -90 90 " + OUT),
     ("ranges-outside-limits", "import {W}/rec --angles deg --robot planar2 --ranges -900 90 -90 90 " + OUT),
