@@ -49,8 +49,8 @@ class _EpisodePolicy:
         if new:
             self._episode = self.env.episode
             self.start(observation, arm)
-        action = np.asarray(self.act(observation, arm), dtype=np.float64).reshape(self.env.action_space.shape)
-        return np.clip(action, self.env.action_space.low, self.env.action_space.high)
+        command = np.asarray(self.act(observation, arm), dtype=np.float64).reshape(self.env.action_space.shape)
+        return self.env.to_action(command)                    # native (clipped into its box) → float32 [-1, 1]
 
     def start(self, observation, arm: _Sensed) -> None:
         raise NotImplementedError

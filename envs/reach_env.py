@@ -70,7 +70,8 @@ class ReachEnv(gym.Env):
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": self.control_hz}
         self.observation_space = env_spaces.observation_space(self.robot, goal, self.image)
-        self.action_space = env_spaces.action_space(self.robot, self.action_kind, self.max_velocity)
+        self.native_action_space = env_spaces.action_space(self.robot, self.action_kind, self.max_velocity)
+        self.action_space = env_spaces.normalized_space(self.native_action_space)   # float32 [-1, 1]
         self.episode = -1            # counts resets: a policy bound to the env sees a new episode begin
         self.arm = None
 
@@ -164,8 +165,16 @@ class ReachEnv(gym.Env):
         integrator.reset(self.arm, {})
         return integrator
 
+    def to_native(self, action) -> np.ndarray:
+        """(nu,) in [-1, 1] → the native command (rad, N·m or rad/s) in `native_action_space`."""
+        return env_spaces.to_native(self.native_action_space, action)
+
+    def to_action(self, command) -> np.ndarray:
+        """A native command (clipped into `native_action_space`) → the float32 action in [-1, 1] that gives it."""
+        return env_spaces.to_normalized(self.native_action_space, command)
+
     def _ctrl(self, action: np.ndarray) -> np.ndarray:
-        action = np.clip(action, self.action_space.low, self.action_space.high)[None]   # (1, nu)
+        action = self.to_native(action)[None]                                      # (1, nu) native, clipped
         if self._integrator is None:
             return action
         self._integrator.controller.velocity = action

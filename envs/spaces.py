@@ -7,8 +7,10 @@
     image     uint8 the camera image (H, W) or (H, W, 3)
     goal            the goal modality's own space: a pose inside the joint limits, an ee inside the reach box, a
                     pixel inside the image, an image
-Actions: position servo targets (their ctrlrange, rad), motor torques (their ctrlrange, N·m) or joint velocity
-commands (± the velocity controller's max_velocity, rad/s).
+Actions: float32 in [-1, 1] per actuator (what Gymnasium's and SB3's checkers ask of a continuous action), mapped
+affinely onto the native box: position servo targets (their ctrlrange, rad), motor torques (their ctrlrange, N·m) or
+joint velocity commands (± the velocity controller's max_velocity, rad/s); -1 is the low end, +1 the high one, 0 the
+middle (a torque range symmetric about 0 keeps 0 N·m at 0). `native_action_space` is that box (float64).
 """
 
 from __future__ import annotations
@@ -67,6 +69,26 @@ def action_space(robot, action: str, max_velocity: float) -> spaces.Box:
         return _box(np.full(robot.dq, -max_velocity), np.full(robot.dq, max_velocity))
     low, high = robot.model.actuator_ctrlrange.T
     return _box(low, high)
+
+
+def normalized_space(native: spaces.Box) -> spaces.Box:
+    """The action space an agent sees: float32 [-1, 1] of the native box's shape."""
+    return spaces.Box(-1.0, 1.0, native.shape, dtype=np.float32)
+
+
+def to_native(native: spaces.Box, action: np.ndarray) -> np.ndarray:
+    """(nu,) in [-1, 1] (clipped there first) → float64 in the native box: low + (a + 1) / 2 · (high − low)."""
+    a = np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0)
+    return native.low + (a + 1.0) * 0.5 * (native.high - native.low)
+
+
+def to_normalized(native: spaces.Box, command: np.ndarray) -> np.ndarray:
+    """The inverse of to_native: a native command (clipped into its box) → float32 in [-1, 1]; an actuator whose
+    range is one value maps to 0."""
+    x = np.clip(np.asarray(command, dtype=np.float64), native.low, native.high)
+    width = native.high - native.low
+    a = np.divide(2.0 * (x - native.low), width, out=np.ones_like(x), where=width > 0) - 1.0
+    return np.clip(a, -1.0, 1.0).astype(np.float32)
 
 
 def clip_to(space: spaces.Box, x: np.ndarray) -> np.ndarray:
