@@ -15,6 +15,8 @@
     bodyschema --debug ...    (or BODYSCHEMA_DEBUG=1): show the traceback behind an error message
     bodyschema --quiet ... | --verbose ...   (before or after the subcommand): warnings only, no progress bars |
                               debug lines (configs resolved, steps timed) and MLflow's own logging (bodyschema/log.py)
+    bodyschema --threads N ...   (or BODYSCHEMA_THREADS=N): torch's intra-op threads; by default measured, 1 on a busy
+                              machine (bodyschema/threads.py; --verbose says the count and why)
     bodyschema --create ...   a command that talks to MLflow may create its local tracking store and the store's
                               folder (else a mistyped URI is an error, not a new empty registry)
 
@@ -44,7 +46,7 @@ from typing import Annotated, Union
 
 import tyro
 
-from bodyschema import log
+from bodyschema import log, threads
 from bodyschema.datagen.config import DatagenConfig
 from bodyschema.datagen.importers.config import ImportConfig
 from bodyschema.datagen.robot_commands import RUNNERS as ROBOT_RUNNERS, RobotCameraArgs, RobotInitArgs, RobotShowArgs
@@ -413,14 +415,14 @@ def main(argv: list[str] | None = None) -> int:
     debug = "--debug" in argv or os.environ.get("BODYSCHEMA_DEBUG", "") not in ("", "0")
     global _create_store
     _create_store = "--create" in argv
-    argv = [a for a in argv if a not in ("--debug", "--create")]
+    argv = threads.split_flag([a for a in argv if a not in ("--debug", "--create")])
     command = "bodyschema " + " ".join(_command_words([a for a in argv if a not in log.FLAGS]))
     try:
         verbosity, argv = log.split_flags(argv)
         log.configure(verbosity)
         config = log.progress_of(parse_command(argv), progress_flag(argv))   # a config's own default: the library's
         logger.debug("%s: %r", command, config)
-        with log.timed(logger, command):
+        with log.timed(logger, command), threads.applied_for(command):     # torch threads: bodyschema/threads.py
             return run(config)
     except KeyboardInterrupt:
         print(f"\n{command}: interrupted. {after_interrupt(command)}", file=sys.stderr)
@@ -458,8 +460,9 @@ def after_interrupt(command: str) -> str:
 DESCRIPTION = ("A robot learns its body by motor babbling and perceives it by active inference. --debug (or "
                "BODYSCHEMA_DEBUG=1) shows the traceback behind an error; --quiet: warnings only, no progress bars; "
                "--verbose: debug lines (configs resolved, steps timed) and MLflow's own logging; --create: a command "
-               "that talks to MLflow may create a local tracking store and its folder (each before or after the "
-               "subcommand).")
+               "that talks to MLflow may create a local tracking store and its folder; --threads N (or "
+               "BODYSCHEMA_THREADS): torch's threads, by default measured, 1 on a busy machine (each before or after "
+               "the subcommand).")
 # tyro names a nested subcommand's inner dataclass `__tyro-dummy-inner__` (and its flags `__tyro_dummy_inner__.x`);
 # a value error raised while it builds the config can carry that name, which means nothing to a user.
 TYRO_DUMMY = re.compile(r"_{1,2}tyro[-_]dummy[-_]inner_{1,2}[.\-_]?")

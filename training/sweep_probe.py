@@ -12,8 +12,8 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-import torch
 
+from bodyschema.threads import pinned
 from bodyschema.training.config import build_model
 
 PROBE_ROWS = 256          # rows the probe trains on: a second or so for the shipped kinds on one core
@@ -52,14 +52,10 @@ def estimate(p, data) -> Cost:
     rows = np.random.default_rng(config.seed).choice(len(data.train), n, replace=False)
     sub = data.train.take(np.sort(rows))
     model = build_model(config, data.body, {config.modality: data.output_shape(config.modality)})
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
+    with pinned(1):
         started = time.perf_counter()
         model.fit(sub.q, sub.x, seed=config.seed, progress=False)
         probe = time.perf_counter() - started
-    finally:
-        torch.set_num_threads(threads)
     per_row = probe / n
     trial = per_row * (len(data.train) + len(data.val)) * epochs      # + the validation pass of every epoch
     return Cost(probe, trial, p.space.trials, p.concurrent)

@@ -31,6 +31,7 @@ from bodyschema.evaluation.core.seeds import eval_rng
 from bodyschema.evaluation.core.sensing import sense_all
 from bodyschema.evaluation.core.sim import ArmBatch, control_substeps
 from bodyschema.evaluation.core.specs import check_models_match, models_field, resolve_models
+from bodyschema.threads import pinned
 
 TIMESTEP = 0.002                   # s, the panda MJCF's MuJoCo step
 READY = (0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785)   # rad, Franka's "ready" pose: goals and starts around it
@@ -98,12 +99,8 @@ def simulate(robot: Robot, controller, models: Sequence, starts: np.ndarray, goa
              config: JupiterConfig, desc: str = "") -> dict[str, np.ndarray | list]:
     """Run B episodes side by side through one controller (reset/act interface); gravity switches at switch_time.
     → t (T,) s, q (T, B, Dq) rad at every control tick, failed (B,), reasons."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)               # per-tick tensors are tiny: intra-op threads only add sync (6× slower)
-    try:
+    with pinned(1):                        # per-tick tensors are tiny: intra-op threads only add sync (6× slower)
         return _simulate(robot, controller, [m.modality for m in models], starts, goals, config, desc)
-    finally:
-        torch.set_num_threads(threads)
 
 
 def _simulate(robot: Robot, controller, sensed: Sequence[str], starts: np.ndarray, goals: np.ndarray,

@@ -1,0 +1,145 @@
+"""The thread policy (bodyschema/threads.py): the measured choice with an injected measurement (no timing here;
+bench/busy.py measures), the override, a user's own setting, the CLI flag and the --verbose line."""
+
+from __future__ import annotations
+
+import logging
+import os
+
+import pytest
+import torch
+
+from bodyschema import cli, log, threads
+from bodyschema.threads import ENV, Choice, choose, pinned
+
+
+def loaded(n: int) -> dict:
+    """A loaded machine: the N-thread step 10× slower than one thread's (issue 36 measured 11×)."""
+    return {1: 0.004, n: 0.040, "won": 0, "rounds": 2}
+
+
+def idle(n: int) -> dict:
+    return {1: 0.004, n: 0.002, "won": 2, "rounds": 2}
+
+
+@pytest.fixture(autouse=True)
+def restore_logging_and_env():
+    """The CLI's configure() sets environment defaults and the logger's level (as tests/test_cli_logging.py)."""
+    env = dict(os.environ)
+    yield
+    os.environ.clear()
+    os.environ.update(env)
+    logging.getLogger(log.LOGGER).setLevel(logging.NOTSET)
+    log._verbosity = None
+
+
+@pytest.fixture
+def policy(monkeypatch):
+    """No user setting in the environment, torch at 4 threads as if it had started there, no measurement kept."""
+    for name in (ENV, *threads.USER_ENV):
+        monkeypatch.setenv(name, "")          # recorded, so whatever the test (or the CLI's --threads) sets is undone
+    monkeypatch.setattr(threads, "_import_threads", 4)
+    monkeypatch.setattr(threads, "_measurements", {})
+    with pinned(4):
+        yield
+    threads.reset()
+
+
+def test_one_thread_on_a_loaded_machine(policy):
+    calls = []
+    choice = choose(lambda n: calls.append(n) or loaded(n))
+    assert (choice.threads, calls) == (1, [4])
+    assert "1 thread 4 ms, 4 threads 40 ms" in choice.reason and "0 of 2 rounds" in choice.reason
+    assert torch.get_num_threads() == 4                     # choose sets nothing
+
+
+def test_n_threads_where_they_are_faster(policy):
+    assert choose(idle).threads == 4
+
+
+def test_a_tie_is_one_thread(policy):
+    assert choose(lambda n: {1: 0.004, n: 0.004, "won": 1, "rounds": 2}).threads == 1
+
+
+def test_override_wins_without_measuring(policy, monkeypatch):
+    monkeypatch.setenv(ENV, "3")
+    assert choose(lambda n: pytest.fail("measured despite the override")) == Choice(3, f"{ENV}=3")
+    monkeypatch.setenv(ENV, "auto")
+    assert choose(loaded).threads == 1
+
+
+@pytest.mark.parametrize("bad", ["0", "-1", "two", "1.5"])
+def test_bad_override_is_the_house_error(policy, monkeypatch, bad):
+    monkeypatch.setenv(ENV, bad)
+    with pytest.raises(ValueError, match=f"{ENV} must be a positive integer or 'auto'. Got '{bad}'"):
+        choose(loaded)
+
+
+def test_the_users_omp_num_threads_is_kept(policy, monkeypatch):
+    monkeypatch.setenv("OMP_NUM_THREADS", "4")
+    choice = choose(lambda n: pytest.fail("measured despite OMP_NUM_THREADS"))
+    assert choice.threads == 4 and "OMP_NUM_THREADS=4 set by you" in choice.reason
+
+
+def test_the_callers_set_num_threads_is_kept(policy):
+    with pinned(3):                                          # the host script's torch.set_num_threads(3)
+        choice = choose(lambda n: pytest.fail("measured despite set_num_threads"))
+    assert choice.threads == 3 and "set_num_threads" in choice.reason
+
+
+def test_apply_sets_measures_once_and_reset_restores(policy):
+    calls = []
+
+    def counted(n):
+        calls.append(n)
+        return loaded(n)
+
+    assert threads.apply(counted).threads == 1
+    assert torch.get_num_threads() == 1
+    threads.reset()
+    assert torch.get_num_threads() == 4
+    threads._measurements[4] = loaded(4)                     # what a first measurement in this process kept
+    assert threads.apply().threads == 1 and calls == [4]     # kept: not measured again
+    threads.reset()
+
+
+def test_applied_for_network_commands_only_and_restored(policy):
+    threads._measurements[4] = loaded(4)
+    with threads.applied_for("bodyschema train") as choice:
+        assert choice.threads == 1 and torch.get_num_threads() == 1
+    assert torch.get_num_threads() == 4
+    with threads.applied_for("bodyschema registry list") as choice:
+        assert choice is None and torch.get_num_threads() == 4
+
+
+def test_split_flag():
+    env = {}
+    assert threads.split_flag(["--threads", "2", "demo", "--threads=3", "-v"], env) == ["demo", "-v"]
+    assert env == {ENV: "3"}                                  # the last one given
+    assert threads.split_flag(["demo", "--threads"], env) == ["demo", "--threads"]   # no value: left to the parser
+
+
+def test_measure_probe_restores_the_count(policy):
+    seconds = threads.measure_probe(2, rounds=1)
+    assert seconds["rounds"] == 1 and seconds[1] > 0 and seconds[2] > 0
+    assert torch.get_num_threads() == 4
+
+
+def test_verbose_line_states_the_count_and_why(policy, tmp_path, capsys, monkeypatch):
+    """A network command with --verbose says the count and its reason on stderr before it runs (here it then fails
+    at its data: nothing is trained)."""
+    monkeypatch.chdir(tmp_path)
+    threads._measurements[4] = loaded(4)
+    code = cli.main(["--verbose", "train", "gpr", "--data", str(tmp_path / "none.zarr"), "--modality", "ee_xyz"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "torch intra-op threads: 1 (a small decoder's training step measured: 1 thread 4 ms, 4 threads 40 ms" in err
+    assert torch.get_num_threads() == 4                     # restored after the command
+    cli.main(["train", "gpr", "--threads", "2", "-v", "--data", str(tmp_path / "none.zarr")])
+    assert f"torch intra-op threads: 2 ({ENV}=2)" in capsys.readouterr().err
+
+
+def test_bad_threads_flag_is_the_house_error(policy, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["--threads", "0", "train", "gpr", "--data", str(tmp_path / "none.zarr")]) == 2
+    assert f"{ENV} must be a positive integer or 'auto'. Got '0'" in capsys.readouterr().err
