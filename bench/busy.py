@@ -11,7 +11,7 @@ instead of spinning); first on the machine as it is (its load average printed), 
 `while True: pass` process per core. Ratios are N / 1 thread and hog / as-is. Last, what `bodyschema.threads`
 chooses in each condition and what its measurement cost.
 
-    MUJOCO_GL=egl .venv/bin/python bench/busy.py [--steps 12] [--evals 10] [--threads N]
+    MUJOCO_GL=egl .venv/bin/python bench/busy.py [--steps 8] [--evals 3] [--threads N]
 
 About 1–2 min on 2 loaded cores. "As it is" is not idle on a shared machine: read its load average.
 """
@@ -95,8 +95,8 @@ def measure(label: str, n: int, steps: int, evals: int) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--steps", type=int, default=12, help="decoder minibatches timed (scaled to the epoch)")
-    parser.add_argument("--evals", type=int, default=10, help="decoder evaluation pairs timed (scaled to 100)")
+    parser.add_argument("--steps", type=int, default=8, help="decoder minibatches timed (scaled to the epoch)")
+    parser.add_argument("--evals", type=int, default=3, help="decoder evaluation pairs timed (scaled to 100)")
     parser.add_argument("--threads", type=int, default=os.cpu_count(), help="N (default: one per core)")
     parser.add_argument("--child", choices=("run", "policy"), help=argparse.SUPPRESS)
     args = parser.parse_args()

@@ -15,11 +15,12 @@ The rule (`choose`; the first that applies wins):
   4. Measured: training steps of a small decoder (the demo's lean pixel decoder at batch 16) at 1 and at N threads
      (torch's count), in rounds of one step each; N only when it is `FASTER_BY` faster in most rounds: one thread
      loses at most N× on an idle machine and only on these small ops, N threads lost 10× and more beside other work.
-The measurement is made once per process (about 0.1 s idle, about a second on a loaded machine) and kept.
+The measurement is made once per process and kept (0.5–2 s measured at load 5–7 on 2 cores, the N-thread steps being
+the slow ones; a few 10–30 ms steps where the cores are free). Load that starts after it is not seen.
 
-Who applies it: the CLI, for the commands that run networks (`apply_for`); a library call keeps the host's torch
-threads unless it calls `apply()` (as a library call prints nothing unless asked, bodyschema/log.py). Code that
-needs one thread whatever the policy (per-tick tensors of a simulation loop) uses `pinned(1)`.
+Who applies it: the CLI, around the commands that run networks (`applied_for`); a library call keeps the host's
+torch threads unless it calls `apply()` (as a library call prints nothing unless asked, bodyschema/log.py). Code
+that needs one thread whatever the policy (per-tick tensors of a simulation loop) uses `pinned(1)`.
 
 Float rounding: a convolution or matrix product sums in an order that depends on the thread split, so the thread
 count changes the last digits of a training run (the README's reproductions pin `OMP_NUM_THREADS=1` or
@@ -45,8 +46,7 @@ ENV = "BODYSCHEMA_THREADS"
 USER_ENV = ("OMP_NUM_THREADS", "MKL_NUM_THREADS")   # what torch itself reads at start
 FASTER_BY = 1.25          # N threads must make a step this much faster than 1 to be chosen (asymmetric risk, above)
 ROUNDS = 3                # measured steps per thread count, after one warm-up step each (oneDNN primitive creation)
-# The commands that run networks or GPs in their own process (`reproduce` runs each step as a child CLI, but
-# estimates its cost in-process first).
+# The commands that run networks or GPs in their own process (`reproduce` runs its steps in-process).
 NETWORK_COMMANDS = ("train", "sweep", "evaluate", "demo", "reproduce")
 _log = logging.getLogger(__name__)
 
@@ -134,7 +134,7 @@ def applied_for(command: str) -> Iterator[Choice | None]:
 
 def split_flag(argv: list[str], environ: dict | None = None) -> list[str]:
     """argv without the global `--threads N` / `--threads=N` (before or after the subcommand), N put in
-    BODYSCHEMA_THREADS of `environ` (os.environ) so that child processes (reproduce's steps, levels workers) see it.
+    BODYSCHEMA_THREADS of `environ` (os.environ) so that child processes see it.
     N is checked when the choice is made (`choose`: the house error); a `--threads` without a value stays in argv
     (the parser names it)."""
     environ = os.environ if environ is None else environ
