@@ -15,7 +15,7 @@ The rule (`choose`; the first that applies wins):
   4. Measured: training steps of a small decoder (the demo's lean pixel decoder at batch 16) at 1 and at N threads
      (torch's count), in rounds of one step each; N only when it is `FASTER_BY` faster in most rounds: one thread
      loses at most N× on an idle machine and only on these small ops, N threads lost 10× and more beside other work.
-The measurement is made once per process and kept (0.5–2 s measured at load 5–7 on 2 cores, the N-thread steps being
+The measurement is made once per process and kept (0.7–2.7 s measured at load 5–8.5 on 2 cores, the N-thread steps being
 the slow ones; a few 10–30 ms steps where the cores are free). Load that starts after it is not seen.
 
 Who applies it: the CLI, around the commands that run networks (`applied_for`); a library call keeps the host's
