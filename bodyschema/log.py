@@ -138,10 +138,11 @@ def phase(desc: str, show: bool) -> Iterator[None]:
     from tqdm.auto import tqdm
 
     bar = tqdm(desc=desc, bar_format="{desc}: {elapsed}", leave=False)
+    interval = max(1.0, getattr(bar, "mininterval", 1.0))   # a disabled bar (TQDM_DISABLE=1) has no mininterval
     stop = threading.Event()
 
     def redraw() -> None:
-        while not stop.wait(max(1.0, bar.mininterval)):
+        while not stop.wait(interval):
             bar.refresh()
 
     ticker = threading.Thread(target=redraw, daemon=True)

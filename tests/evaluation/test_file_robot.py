@@ -133,8 +133,10 @@ def test_shipped_robots_are_found_by_name_and_saved_as_before(arm):
     model = AnalyticModel("planar2", "ee_xyz")
     assert model.body.source is None and "source" not in model.body.to_dict()
     assert attrs_source({"robot": "planar2", **robot_attrs(Robot.load("planar2"))}) is None
-    with Robot.load(write_arm(arm.parent / "named_planar2", name="planar2")) as impostor:
-        assert robot_source(impostor) is not None, "a file robot that takes a shipped name is not the shipped one"
+    with Robot.load(arm) as file_robot:
+        assert robot_source(file_robot) is not None, "a file robot carries its model's source"
+    with pytest.raises(ValueError, match="must be not a shipped robot's name"):   # its stores would fail validate
+        Robot.load(write_arm(arm.parent / "named_planar2", name="planar2"))
 
 
 def test_datagen_uniform_and_babble_with_images_on_the_file_robot(stores, arm):
