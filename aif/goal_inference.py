@@ -34,6 +34,7 @@ from tqdm.auto import tqdm
 from bodyschema import log
 from bodyschema.aif.free_energy import model_input, sensory_terms
 from bodyschema.aif.perception import Perception
+from bodyschema.aif.precisions import perceived_precisions
 from bodyschema.errors import must_be
 
 
@@ -93,9 +94,9 @@ def goal_precision(models, mu: torch.Tensor, gain: float,
                    precisions: Mapping[str, float] | None = None) -> float:
     """Π of a joint-space goal that outweighs every sense by `gain`: gain × the median over the batch of the mean
     diagonal of Σ_m J_mᵀ Π_m J_m at beliefs mu (B, Dz) rad (the senses' information about the joints, each
-    model's own precision unless overridden). A goal weaker than the senses cannot lead the belief, and action
-    follows the belief: an image sense (JᵀΠJ ~ 1e6–1e7 rad⁻² per joint) would hold it where the arm is."""
-    mu, overrides = mu.to(torch.float64), dict(precisions or {})
+    model's as perception sees it, aif/precisions.py). A goal weaker than the senses cannot lead the belief, and
+    action follows the belief: an image sense (JᵀΠJ ~ 1e6–1e7 rad⁻² per joint) would hold it where the arm is."""
+    mu, overrides = mu.to(torch.float64), perceived_precisions(models, precisions)   # perception's rule
     live = [m for m in models if overrides.get(m.modality) != 0]              # a broken sense informs nothing
     given = {m.modality: torch.full((len(mu), *m.output_shape), float(overrides[m.modality]), dtype=torch.float64)
              for m in live if m.modality in overrides}

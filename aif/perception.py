@@ -27,6 +27,7 @@ from bodyschema.aif.free_energy import (
     sensory_terms,
 )
 from bodyschema.aif.perception_config import DEFAULTS, PerceptionConfig, resolve
+from bodyschema.aif.precisions import perceived_precisions
 from bodyschema.aif.priors import attractor, prior_terms
 from bodyschema.errors import must_be
 from bodyschema.models.contract import as_input
@@ -68,7 +69,9 @@ class Perception:
     models: one model per modality, all over the same robot and joints (checked).
     config: what to run; its "auto" method and step control are resolved for these models (`self.config`).
     precisions: modality → float or tensor (broadcast to (B, *out)) overriding `model.precision`; 0 = broken
-        sensor, its observation may then be omitted. Overrides here win over `config.precisions`.
+        sensor, its observation may then be omitted. Overrides here win over `config.precisions`; a modality named
+        in neither follows the precision rule (aif/precisions.py: a pose-varying Π → the sensor's). `self.precisions`
+        holds what was resolved.
     limits: (low, high) rad per joint; defaults to the models' `body.q_low / q_high`.
     """
 
@@ -80,12 +83,12 @@ class Perception:
         known = {m.modality for m in self.models}
         self.config = resolve(config, known)                               # "auto" → the update for these models
         self._overrides = dict(precisions or {})
-        merged = {**dict(config.precisions), **self._overrides}
-        for name in merged:
+        given = {**dict(config.precisions), **self._overrides}
+        for name in given:
             if name not in known:
                 raise ValueError(must_be("precision override key", f"one of the models' modalities {sorted(known)}",
                                          name))
-        self.precisions = merged
+        self.precisions = perceived_precisions(self.models, given)         # the one rule (aif/precisions.py)
         low, high = limits if limits is not None else (self.body.q_low, self.body.q_high)
         self.low = torch.as_tensor(low, dtype=torch.float64)
         self.high = torch.as_tensor(high, dtype=torch.float64)

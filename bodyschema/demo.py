@@ -21,12 +21,6 @@ from pathlib import Path
 from bodyschema.log import progress_bars, progress_of
 
 logger = logging.getLogger(__name__)   # the section headers (info); tables and paths written are printed
-# The ee sensor's own noise (1 mm → Π = 1e6 m⁻²) sets its precision. A GP claims Π ≈ 1e9 near its data, varying
-# with the pose; along the pose direction ee_xyz leaves unobserved (4 joints, 3 outputs) F is flat but for
-# −½ ln|Π(μ)|, which slides the belief toward the GP's surest poses and beyond them, off the reading (measured on an
-# 800-point GPR like the demo's: level 1 9.9° and 12.7 mm off the reading with the GP's own Π, 10.6° with one
-# trained on a 1 mm noise floor, 0.69° and 0.002 mm with the sensor's; reaching 0 of 10 within 1 cm vs 9 of 10).
-EE_PRECISION = (("ee_xyz", 1e6),)
 # What the README's levels table was measured with (`make reproduce ONLY=levels`), for the line beside the demo's.
 RECIPE = ("the README's recipe (`make reproduce ONLY=levels`: 18 000 images, decoder 60 epochs, encoder 40) "
           "reaches 0.65° at every level with the encoder")
@@ -186,15 +180,12 @@ def _version_uri(result) -> str:
 def _levels_config(config: DemoConfig, uri: str, kind: str, encoder: str | None = None):
     from bodyschema.evaluation.levels import LevelsConfig
 
-    perception = LevelsConfig().perception
-    if kind == "gpr":
-        perception = replace(perception, precisions=EE_PRECISION)
     # The pixel decoder's level-3 remedy is the encoder (one start from its guess), not 8 multi-starts at ~3× the cost
     # of the level; the GPR keeps the multi-start row.
     pixel = kind == "pixel"
     return LevelsConfig(models=(uri,), trials=config.pixel_trials if pixel else config.trials, runs=config.runs,
                         seed=config.seed, out=config.out / "results" / f"levels_{kind}",
-                        tracking_uri=config.tracking_uri, perception=perception, encoder=encoder,
+                        tracking_uri=config.tracking_uri, encoder=encoder,
                         multistart=0 if pixel else LevelsConfig.multistart)
 
 
@@ -282,10 +273,9 @@ def _act_configs(config: DemoConfig, gpr_uri: str) -> tuple:
     from bodyschema.evaluation.self_recognition import SelfRecognitionConfig
 
     results = config.out / "results"
-    sensed = replace(ReachingConfig().perception, precisions=EE_PRECISION)
     reaching = ReachingConfig(robot="nao_arm", models=(gpr_uri, "analytic:nao_arm:joints"), goal="ee_xyz",
                               trials=config.reach_targets, seed=config.seed, out=results / "reaching",
-                              tracking_uri=config.tracking_uri, perception=sensed)
+                              tracking_uri=config.tracking_uri)
     panda = ReachingConfig(robot="panda", trials=10, seed=config.seed, out=results / "reaching_panda",
                            tracking_uri=config.tracking_uri)
     recognition = SelfRecognitionConfig(robot="nao_arm", models=(gpr_uri,), trials=config.episodes,

@@ -116,7 +116,7 @@ class AIFPolicy(_EpisodePolicy):
         if "image" in names and not env.image:
             raise ValueError(must_be("the env's image", "True for an image model", env.image,
                                      "Make the env with image=True."))
-        self.config = benchmark.with_sensor_precisions(config, self.models)
+        self.config = config
         self.infer_pose = benchmark.goal_inference_on(self.config, env.goal_modality, names, env.robot)
         self.encoder = resolve_encoder(encoder, env.robot, tracking_uri) if self.infer_pose else None
         self.rng = np.random.default_rng(seed)

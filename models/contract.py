@@ -65,6 +65,15 @@ class BaseSensoryModel(Estimator, Capabilities):
     # True when Π depends on z (GPR predictive variance, MDN mixture): F = ½εᵀΠ(z)ε − ½ln|Π(z)| then needs ∂Π/∂z
     precision_varies: ClassVar[bool] = False
 
+    @property
+    def sensor_precision(self) -> float | None:
+        """Π of the sensor that reads this modality (datagen/modalities.py: 1/σ², σ = 1 mm, 1 px, 1°), or None (an
+        image, a modality outside the table): what perception uses instead of a Π that varies with the pose
+        (aif/precisions.py)."""
+        from bodyschema.datagen import modalities
+        row = modalities.MODALITIES.get(self.modality)
+        return None if row is None else row.precision
+
     def __init__(self, body: BodySpec, modality: str, output_shape: tuple[int, ...]):
         self.body = check_body(body)
         self.latent_dim = body.latent_dim

@@ -93,13 +93,15 @@ class Sensors:
 def through_noise(models: Sequence, sigma: Mapping[str, float], given: Mapping[str, float]
                   ) -> tuple[list, dict[str, float]]:
     """The models as sensors with additive noise σ per modality see them, and the precisions that follows. An exact
-    (analytic) model's only error is the noise: Π = 1/σ². A learned model's precision covers its own error, the noise
-    adds to it: Π = 1/(1/Π_model(μ) + σ²) (`NoisySensor`). A modality in `given` keeps its given precision (its model
-    left as it is); → the models, the precisions set here (not `given`)."""
+    (analytic) model's only error is the noise: Π = 1/σ²; so is a model whose precision varies with the pose, which
+    perception sees at its sensor's precision (aif/precisions.py), here the simulated sensor's. A learned model's
+    constant precision covers its own error, the noise adds to it: Π = 1/(1/Π_model + σ²) (`NoisySensor`). A modality
+    in `given` keeps its given precision (its model left as it is); → the models, the precisions set here (not
+    `given`)."""
     fixed, seen = {}, []
     for m in models:
         s = sigma.get(m.modality, 0.0)
-        exact = getattr(m, "kind", None) == "analytic" or m.modality in given
+        exact = getattr(m, "kind", None) == "analytic" or getattr(m, "precision_varies", False) or m.modality in given
         if s > 0 and exact and m.modality not in given:
             fixed[m.modality] = 1.0 / s ** 2
         seen.append(NoisySensor(m, s) if s > 0 and not exact else m)

@@ -39,7 +39,6 @@ from bodyschema.aif.action import ActionConfig, VelocityController
 from bodyschema.aif.aic import AICConfig, AICController
 from bodyschema.aif.goal_inference import goal_precision
 from bodyschema.aif.perception_config import FlowSettings, PerceptionConfig
-from bodyschema.datagen import modalities
 from bodyschema.datagen.reach import arm_reach
 from bodyschema.datagen.robot_record import check_robot_ref
 from bodyschema.datagen.samplers import uniform
@@ -267,22 +266,6 @@ def aif_goal(config: ReachingRunConfig, models, episodes: Episodes) -> tuple[dic
     return {"joints": imagined.q.clone()}, {"joints": pi}
 
 
-def with_sensor_precisions(config: ReachingRunConfig, models) -> ReachingRunConfig:
-    """config with the sensor's precision (datagen/modalities.py: σ = 1 mm, 1 px, 1°) for every model whose own
-    precision varies with the pose (a GP's 1/predictive variance), unless --perception.precisions names it.
-    Why: −½ ln|Π(μ)| and ½εᵀΠ(μ)ε reward poses where the GP is sure or unsure rather than poses that match the
-    reading; on a UR5 (5 joints, ee_xyz from a 6000-point GP) goal inference with the GP's own Π imagined goals
-    53–371 mm off the target, with the sensor's 0.0 mm (10 of 10, 8 starts)."""
-    given = dict(config.perception.precisions)
-    added = {m.modality: modalities.get(m.modality).precision for m in models
-             if getattr(m, "precision_varies", False) and m.modality not in given
-             and m.modality in modalities.MODALITIES and modalities.get(m.modality).precision is not None}
-    if not added:
-        return config
-    return replace(config, perception=replace(config.perception,
-                                              precisions=config.perception.precisions + tuple(added.items())))
-
-
 def baseline_policy(config: ReachingConfig, robot, episodes: Episodes):
     if robot.actuation == "position":
         return ServoPolicy(servo_targets(robot, episodes.q_target))        # the target pose + gravity feed-forward
@@ -294,7 +277,6 @@ def run_reaching(config: ReachingConfig = ReachingConfig(), models=None) -> dict
     """AIF (and the PD baseline) on config.trials episodes; writes tables and plots to a new run folder under
     config.out and logs one MLflow run."""
     models = resolve_models(config.models, config.default_models, config.tracking_uri, models)
-    config = with_sensor_precisions(config, models)
     robot, models, modality, episodes, results, walls = simulate(config, models)
     return reaching_report.write_all(config, new_run(config), robot, models, modality, episodes, results, walls)
 

@@ -26,7 +26,6 @@ from bodyschema.evaluation.reaching.benchmark import (
     ReachingRunConfig,
     builtin_sensors,
     simulate,
-    with_sensor_precisions,
 )
 from bodyschema.evaluation.reaching.robot_defaults import reaching_defaults
 from bodyschema.evaluation.robustness.units import noise_label
@@ -59,7 +58,6 @@ class LoopRobustnessConfig(ReachingRunConfig):
 def run_loop_robustness(config: LoopRobustnessConfig = LoopRobustnessConfig(), models=None) -> dict[str, Path]:
     base = config.reaching()
     models = resolve_models(base.models, base.default_models, base.tracking_uri, models)
-    base = with_sensor_precisions(base, models)
     from bodyschema.datagen.robot import Robot
     robot = Robot.load(base.robot, actuators=reaching_defaults(base.robot).actuators)
     names = [m.modality for m in models] + builtin_sensors(robot)

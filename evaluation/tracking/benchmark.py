@@ -56,8 +56,8 @@ class TrackingConfig(TrialsConfig):
         ("ee_xyz", 0.001), ("ee_pixel", 1.0), ("image", 0.02), ("joints", math.radians(1.0)))
     hold_s: tuple[float, float] = (0.2, 1.0)         # s each babbling target is held: datagen's (the demo's) pace
     precisions: tuple[tuple[str, float], ...] = ()   # fixed Π per modality instead of the noise rule, e.g. ee_xyz 1e6;
-    # 0 ignores that modality (as in every benchmark: a dead sensor), so a condition must keep one with Π > 0
-    # for a GP (the demo's): its own variance (~1e-9 m²) is negligible beside the noise and costs more than its mean
+    # 0 ignores that modality (as in every benchmark: a dead sensor), so a condition must keep one with Π > 0;
+    # unnamed, a GP (Π varying with the pose) is seen at the noise's 1/σ², as an exact model (aif/precisions.py)
     tracker: TrackerConfig = TrackerConfig()         # budget, motion order, lost-track threshold and restarts
     calibration_frames: int = 200      # poses from the model box whose F at the truth sets the lost-track threshold
     lost_mm: float = 20.0              # a frame is off track when the belief's hand is this far from the truth
@@ -117,8 +117,8 @@ def conditions(config: TrackingConfig, models: Sequence) -> list[tuple[str, list
 def sensed(models: Sequence, noise: dict[str, float], clock: Clock, fixed: dict[str, float] | None = None
            ) -> tuple[list, dict[str, float]]:
     """The models as the noisy sensors see them, timed, and precision overrides: `fixed` where given; else an exact
-    model's only error is the noise (Π = 1/σ²), a learned model's precision adds σ² to its own variance
-    (core/sensing.through_noise)."""
+    model's only error is the noise (Π = 1/σ²), and so is a model whose precision varies with the pose (perception's
+    rule, aif/precisions.py); a learned constant precision adds σ² to its own variance (core/sensing.through_noise)."""
     given = dict(fixed or {})
     seen, precisions = through_noise(models, noise, given)
     return [Timed(m, clock) for m in seen], {**given, **precisions}
