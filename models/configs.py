@@ -57,6 +57,21 @@ class GPRConfig(ModelConfig):
 
 
 @dataclass(frozen=True)
+class SVGPConfig(ModelConfig):
+    kind: ClassVar[str] = "svgp"
+    num_inducing: int = 1000  # inducing points per output: O(M²) memory, O(N·M²) time for the closed-form q(u)
+    inducing_init: Literal["kmeans", "random"] = "kmeans"  # inducing points start at k-means centres or a random subset
+    hyper_points: int = 500  # starting kernel hyper-parameters: the exact marginal likelihood on this many samples
+    elbo_epochs: int = 0  # minibatch ELBO passes over the data (0: none; the starting kernel and inducing points)
+    batch_size: int = 1024  # samples per minibatch step
+    lr: float = 0.01  # Adam step on the kernel hyper-parameters and inducing locations
+    natural_gradient: bool = True  # q(u) by natural-gradient steps; false: by Adam with the rest
+    ngd_lr: float = 0.1  # natural-gradient step on q(u)
+    collapse: bool = True  # the final q(u) is the optimal one on all samples, in closed form (Titsias 2009)
+    noise_floor: float = 3e-8  # noise variance floor on standardized targets: sets the error on noise-free data
+
+
+@dataclass(frozen=True)
 class SklearnGPRConfig(ModelConfig):
     kind: ClassVar[str] = "sklearn-gpr"
     hyper_points: int = 500  # the log marginal likelihood is fitted on this many samples

@@ -26,6 +26,7 @@ from bodyschema.models.configs import (
     MultimodalConfig,
     PixelConfig,
     SklearnGPRConfig,
+    SVGPConfig,
 )
 
 
@@ -48,6 +49,8 @@ class Kind:
 KINDS: dict[str, Kind] = {k.name: k for k in (
     Kind("gpr", "bodyschema.models.gpr", "GPRModel", "GPRModel", GPRConfig,
          summary="Exact Gaussian process (gpytorch): closed-form Jacobian and predictive precision."),
+    Kind("svgp", "bodyschema.models.svgp", "SVGPModel", "SVGPModel", SVGPConfig,
+         summary="Sparse variational GP (gpytorch, inducing points): any number of poses, closed-form Jacobian."),
     Kind("sklearn-gpr", "bodyschema.models.sklearn_gpr", "SklearnGPRModel", "SklearnGPRModel", SklearnGPRConfig,
          summary="scikit-learn's Gaussian process: the baseline of gpr."),
     Kind("mdn", "bodyschema.models.mdn", "MDNModel", "MDNModel", MDNConfig,

@@ -26,6 +26,7 @@ from bodyschema.models.mdn import MDNModel
 from bodyschema.models.multimodal import MultimodalMember, MultimodalModel
 from bodyschema.models.pixel import PixelDecoder
 from bodyschema.models.sklearn_gpr import SklearnGPRModel
+from bodyschema.models.svgp import SVGPModel
 from tests.threads import one_thread
 from tests.toy_models import ToyPlanarArm
 
@@ -64,6 +65,8 @@ CASES = {
                 lambda m: m.fit(toy_q(40), toy_xyz(toy_q(40)), progress=False), {"max_points": 30}, _predict),
     "sklearn-gpr": Case(lambda: SklearnGPRModel(BODY, "ee_xyz", (3,), hyper_points=20, max_points=40, max_iter=2),
                         lambda m: m.fit(toy_q(40), toy_xyz(toy_q(40)), progress=False), {"max_iter": 3}, _predict),
+    "svgp": Case(lambda: SVGPModel(BODY, "ee_xyz", (3,), num_inducing=10, hyper_points=20),
+                 lambda m: m.fit(toy_q(40), toy_xyz(toy_q(40)), progress=False), {"num_inducing": 12}, _predict),
     "mdn": Case(lambda: MDNModel(BODY, "ee_xyz", (3,), hidden=(8,), n_components=2, epochs=1),
                 lambda m: m.fit(toy_q(64), toy_xyz(toy_q(64)), progress=False), {"epochs": 2}, _predict),
     "pixel": Case(lambda: PixelDecoder(BODY, "image", IMAGE, channels=(4,), fc_hidden=8, epochs=1),
