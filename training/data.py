@@ -10,6 +10,7 @@ samples are nearly equal, so a random split would leak), else a seeded random sh
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -59,6 +60,13 @@ class Dataset:
 
     def is_image(self, modality: str) -> bool:
         return self.train.xs[modality].dtype == np.uint8
+
+
+def validation_digest(data: Dataset) -> str:
+    """sha256 of the store's digest and its held-out row indices: the validation data a val_rmse was measured on.
+    Two versions' scores compare (the champion rule) only when this agrees."""
+    rows = np.ascontiguousarray(data.val.rows, dtype="<i8")
+    return hashlib.sha256(data.sha256.encode() + b"\0" + rows.tobytes()).hexdigest()
 
 
 def as_float(x: np.ndarray | torch.Tensor) -> torch.Tensor:

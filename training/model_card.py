@@ -55,3 +55,20 @@ def describe_registration(client, name: str, version: str, tags: dict[str, str],
     summary = client.get_logged_model(model_id).tags.get(NOTE) or fallback_summary(tags)
     client.update_model_version(name, version, description=version_description(summary, tags))
     client.update_registered_model(name, description=registered_description(name, version, summary, tags))
+
+
+def card_markdown(model, name: str | None, tags: dict[str, str], metrics: dict[str, float], params: dict) -> str:
+    """`model_card.md`, a training run's artifact: what the model is (`model_summary`), the data it was trained and
+    scored on (path, digests, split), its held-out scores and its hyper-parameters."""
+    lines = [f"# {name or model.kind + ' model (not registered)'}", "", model_summary(model), "",
+             "## Data", "", f"- dataset: `{tags.get('dataset', '?')}`",
+             f"- dataset sha256: `{tags.get('dataset_sha256', '?')}`",
+             f"- validation data sha256 (store digest + held-out rows): `{tags.get('val_sha256', '?')}`",
+             f"- robot MJCF sha256: `{tags.get('mjcf_sha256') or '?'}`",
+             f"- rows: {params.get('n_train', '?')} train, {params.get('n_val', '?')} validation, split by "
+             f"{params.get('split_by', '?')}", "", "## Held-out scores", ""]
+    lines += [f"- {k}: {v:.6g}" for k, v in sorted(metrics.items())]
+    lines += ["", "## Hyper-parameters", ""] + [f"- {k}: {v}" for k, v in sorted(params.items())
+                                                 if k.startswith("hyper.")]
+    lines += ["", f"Weights sha256: `{tags.get(DIGEST_TAG, '?')}` (checked before every load from the registry)."]
+    return "\n".join(lines) + "\n"

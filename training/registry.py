@@ -3,7 +3,11 @@
 Tracking defaults to an embedded sqlite file, `sqlite:///<cwd>/mlflow.db` (no server); `MLFLOW_TRACKING_URI`
 is honoured (a `mlflow server` on 127.0.0.1, say). Models register as `bodyschema-{robot}-{modality}-{kind}`;
 the `champion` alias moves only when a new version's validation metric (`val_rmse`, lower is better) beats
-the current champion's, or when a user `promote`s a version by hand.
+the current champion's *on the same validation data* (tag `val_sha256`: the store's digest and its held-out rows;
+a version registered before that tag is compared by its `dataset_sha256`), or when a user `promote`s a version by
+hand. A version scored on another store (an imported one beside a simulated one) never moves `champion` by itself.
+Experiments carry a description and `mlflow.experimentKind` = `custom_model_development`, which opens MLflow's UI
+in its classic ML mode (not the GenAI one).
 
 Consumers call `load("models:/<name>@champion")` (or `models:/<name>/<version>`) and get the SensoryModel
 itself. Trust boundary: the artifacts are downloaded, their sha256 is compared with the digest recorded on the
@@ -40,7 +44,7 @@ from bodyschema.models.scaling import BodySpec
 from bodyschema.training.digest import DIGEST_TAG, verify_directory, version_digest
 from bodyschema.training.locks import exclusive
 from bodyschema.training.mlmodel_file import artifact_dir as _artifact_dir
-from bodyschema.training.model_card import describe_registration
+from bodyschema.training.model_card import NOTE, describe_registration
 from bodyschema.training.tracking_store import (  # noqa: F401 — TrackingUnreachable: importers name it here
     TrackingUnreachable,
     check_database_driver,
@@ -52,6 +56,9 @@ from bodyschema.training.tracking_store import (  # noqa: F401 — TrackingUnrea
 
 CHAMPION = "champion"
 METRIC = "val_rmse"          # decides the champion; lower is better
+VAL_TAG = "val_sha256"       # the validation data METRIC was measured on (`data.validation_digest`)
+DATASET_TAG = "dataset"      # the store a version was trained on (its path); its digest: `dataset_sha256`
+KIND_TAG, CLASSIC_ML = "mlflow.experimentKind", "custom_model_development"   # MLflow UI: classic ML, not GenAI
 PREFIX = "bodyschema-"
 _URI = re.compile(r"^models:/(?P<name>[^/@]+)(?:@(?P<alias>[^/]+)|/(?P<version>\d+))$")
 # Schemes MLflow can track to ("mysql+pymysql" counts as "mysql"); anything else is a typo, refused up front.
@@ -124,14 +131,35 @@ def registry_lock(uri: str | None = None) -> Path:
     return Path(tempfile.gettempdir()) / f"bodyschema-registry-{hashlib.sha256(uri.encode()).hexdigest()[:16]}.lock"
 
 
-def ensure_experiment(name: str) -> str:
-    """The experiment id; a new experiment keeps its artifacts in <cwd>/mlartifacts unless tracking is remote."""
+def ensure_experiment(name: str, description: str | None = None) -> str:
+    """The experiment id; a new experiment keeps its artifacts in <cwd>/mlartifacts unless tracking is remote.
+    It carries a description (`description`, else `experiment_description(name)`) and the tag that opens MLflow's
+    UI in its classic ML mode; an existing experiment gets whichever of the two it lacks (a description edited in
+    the UI is kept)."""
+    tags = {KIND_TAG: CLASSIC_ML, NOTE: description or experiment_description(name)}
     experiment = mlflow.get_experiment_by_name(name)
-    if experiment is not None:
-        return experiment.experiment_id
-    remote = mlflow.get_tracking_uri().startswith(("http://", "https://", "databricks"))
-    location = None if remote else (Path.cwd() / "mlartifacts").as_uri()   # remote: the server decides
-    return mlflow.create_experiment(name, artifact_location=location)
+    if experiment is None:
+        remote = mlflow.get_tracking_uri().startswith(("http://", "https://", "databricks"))
+        location = None if remote else (Path.cwd() / "mlartifacts").as_uri()   # remote: the server decides
+        try:
+            return mlflow.create_experiment(name, artifact_location=location, tags=tags)
+        except MlflowException:            # another process created it in between: tag it below, as any other
+            experiment = mlflow.get_experiment_by_name(name)
+            if experiment is None:
+                raise
+    for key, value in tags.items():
+        if key not in experiment.tags:
+            mlflow.MlflowClient().set_experiment_tag(experiment.experiment_id, key, value)
+    return experiment.experiment_id
+
+
+def experiment_description(name: str) -> str:
+    """What an experiment holds, for one created without a description of its own."""
+    if name == "bodyschema":
+        return ("bodyschema: one run per `bodyschema train` (the dataset as input, params, val_rmse, loss curves, the "
+                "model card and the dataset summary as artifacts, the logged model registered as "
+                "`bodyschema-<robot>-<modality>-<kind>`), and evaluation runs told to log here.")
+    return f"bodyschema runs logged to `{name}`."
 
 
 def registered_name(robot: str, modality: str, kind: str) -> str:
@@ -163,7 +191,7 @@ def register_version(client: MlflowClient, name: str, model_uri: str, tags: dict
         else:
             version = _register_quietly(model_uri, name, tags)
         describe_registration(client, name, version, tags, model_uri.removeprefix("models:/"))
-        return version, _champion_if_better(client, name, version, metric)
+        return version, _champion_if_better(client, name, version, metric, tags)
 
 
 def _register_quietly(model_uri: str, name: str, tags: dict[str, str]) -> str:
@@ -181,10 +209,18 @@ def update_champion(client: MlflowClient, name: str, version: str, metric: float
     """Move `champion` to `version` when its metric beats the current champion's (or there is none): a
     compare-and-set under the registry lock, so of two runs finishing together the better one ends champion."""
     with exclusive(registry_lock()):
-        return _champion_if_better(client, name, version, metric)
+        return _champion_if_better(client, name, version, metric, client.get_model_version(name, version).tags)
 
 
-def _champion_if_better(client: MlflowClient, name: str, version: str, metric: float) -> bool:
+def same_validation_data(a: dict[str, str], b: dict[str, str]) -> bool:
+    """Two versions' val_rmse compare only when measured on the same validation data: the same `val_sha256`; a
+    version registered before that tag counts by its `dataset_sha256` (same store, same split settings assumed)."""
+    if VAL_TAG in a and VAL_TAG in b:
+        return a[VAL_TAG] == b[VAL_TAG]
+    return bool(a.get("dataset_sha256")) and a.get("dataset_sha256") == b.get("dataset_sha256")
+
+
+def _champion_if_better(client: MlflowClient, name: str, version: str, metric: float, tags: dict[str, str]) -> bool:
     # Caller holds the registry lock: the read and the write below are one step for every bodyschema process.
     try:
         current = client.get_model_version_by_alias(name, CHAMPION)
@@ -193,6 +229,12 @@ def _champion_if_better(client: MlflowClient, name: str, version: str, metric: f
     if current is not None:
         if str(current.version) == str(version):
             return True
+        if not same_validation_data(current.tags, tags):
+            _log.info("%s: @champion stays v%s, scored on other validation data (dataset %s…, v%s's %s…): the "
+                      "scores do not compare. Move it by hand with `bodyschema registry promote %s %s`.", name,
+                      current.version, str(current.tags.get("dataset_sha256", "?"))[:12], version,
+                      str(tags.get("dataset_sha256", "?"))[:12], name, version)
+            return False
         best = float(current.tags.get(METRIC, "inf"))
         if not metric < best:
             return False
@@ -228,14 +270,18 @@ class ModelRow:
     val_rmse: float | None
     run_id: str
     created: int             # ms since epoch
+    dataset: str = "?"       # the store it was trained on (its folder name; "?" for a version registered without)
+    dataset_sha256: str = "?"
 
     def __str__(self) -> str:
         metric = "-" if self.val_rmse is None else f"{self.val_rmse:.4g}"
-        return f"{self.name}  v{self.version}  {METRIC}={metric}  {' '.join('@' + a for a in self.aliases)}"
+        return (f"{self.name}  v{self.version}  {METRIC}={metric}  dataset={self.dataset} "
+                f"sha256={self.dataset_sha256[:16]}  {' '.join('@' + a for a in self.aliases)}").rstrip()
 
 
 def list_models(*, tracking: str | None = None) -> list[ModelRow]:
-    """Every version of every bodyschema model, by name then version (`bodyschema registry list`)."""
+    """Every version of every bodyschema model, by name then version, with the dataset it was trained on and that
+    dataset's digest (`bodyschema registry list`)."""
     client = use_tracking(tracking)
     rows, aliases = [], {}
     for version in client.search_model_versions(f"name LIKE '{PREFIX}%'"):
@@ -247,7 +293,8 @@ def list_models(*, tracking: str | None = None) -> list[ModelRow]:
         rows.append(ModelRow(version.name, str(version.version),
                              tuple(aliases[version.name].get(str(version.version), ())),
                              float(metric) if metric is not None else None, version.run_id,
-                             int(version.creation_timestamp or 0)))
+                             int(version.creation_timestamp or 0), Path(version.tags.get(DATASET_TAG, "?")).name,
+                             version.tags.get("dataset_sha256", "?")))
     return sorted(rows, key=lambda r: (r.name, int(r.version)))
 
 

@@ -97,7 +97,7 @@ def register_best(client, rows: list[TrialRow], kind: str, modality: str) -> Reg
     name = registered_name(m["robot"], modality, kind)
     tags = {DIGEST_TAG: m["digest"], METRIC: repr(best.val_rmse), "robot": m["robot"], "modality": modality,
             "kind": kind, "joint_names": m["joint_names"], "dataset_sha256": m["dataset_sha256"],
-            "mjcf_sha256": m["mjcf_sha256"]}
+            "mjcf_sha256": m["mjcf_sha256"], **{k: m[k] for k in ("val_sha256", "dataset") if k in m}}
     version, champion = register_version(client, name, m["model_uri"], tags, best.val_rmse)
     client.set_tag(best.child_run_id, "bodyschema.champion", name if champion else "none")
     mlflow.set_tags({"best_child_run_id": best.child_run_id, "registered": f"{name}/{version}",

@@ -22,7 +22,7 @@ import torch
 
 from bodyschema.training import runs
 from bodyschema.training.config import TrainConfig, build_model
-from bodyschema.training.data import as_float, load_dataset
+from bodyschema.training.data import as_float, load_dataset, validation_digest
 from bodyschema.training.digest import DIGEST_TAG
 from bodyschema.training.pyfunc_loader import log_sensory_model
 from bodyschema.training.registry import METRIC, use_tracking
@@ -103,7 +103,8 @@ def run_trial(hyper: dict[str, Any], context: TrialContext) -> None:
         mlflow.set_tag(DIGEST_TAG, digest)
     # After the child run has ended: a stop that Tune sends on this last report must not leave it RUNNING.
     tune.report({**base, **last, **scores, "model_uri": info.model_uri, "digest": digest,
-                 "dataset_sha256": data.sha256, "robot": data.body.robot,
+                 "dataset_sha256": data.sha256, "val_sha256": validation_digest(data),
+                 "dataset": str(Path(data.path).resolve()), "robot": data.body.robot,
                  "joint_names": ",".join(data.body.joint_names), "mjcf_sha256": str(data.attrs.get("mjcf_sha256", "")),
                  FINAL: scores[METRIC]})
 

@@ -38,12 +38,15 @@ from bodyschema.datagen import modalities
 from bodyschema.errors import must_be
 from bodyschema.training import guards, plots, runs
 from bodyschema.training.config import NON_IDENTITY_FIELDS, TrainConfig, build_model
-from bodyschema.training.data import Dataset, Split, as_float, load_dataset
+from bodyschema.training.data import Dataset, Split, as_float, load_dataset, validation_digest
 from bodyschema.training.digest import DIGEST_TAG
+from bodyschema.training.model_card import card_markdown
 from bodyschema.training.pyfunc_loader import log_sensory_model
 from bodyschema.training.registry import (
     CHAMPION,
+    DATASET_TAG,
     METRIC,
+    VAL_TAG,
     ensure_experiment,
     register_version,
     registered_name,
@@ -98,8 +101,9 @@ class TrainResult:
         if self.reused:
             lines[0] += ": finished before with this config; reusing its registered versions"
         for r in self.registered:
-            lines.append(f"registered models:/{r.name}/{r.version}" + ("  → now @champion" if r.champion else
-                                                                        "  (champion unchanged: not better)"))
+            lines.append(f"registered models:/{r.name}/{r.version}" + (
+                "  → now @champion" if r.champion else
+                "  (champion unchanged: not better, or the champion was scored on other validation data)"))
         scores = {k: v for k, v in self.metrics.items() if "val_" in k and not k.startswith("fit_")}
         lines.append("held-out: " + ", ".join(f"{k}={v:.4g}" for k, v in sorted(scores.items())))
         lines += [f"plot: {p}" for p in self.plots.values()]
@@ -155,7 +159,7 @@ def _train_owned(config: TrainConfig, client, data: Dataset, model, members: dic
     start = dict(run_id=resume_id) if resume_id else dict(experiment_id=experiment_id, run_name=run_dir.name)
     with mlflow.start_run(**start, tags=runs.owner_tags(identity)) as run:   # an exception inside ends it FAILED
         (run_dir / "mlflow_run_id").write_text(run.info.run_id)
-        _log_inputs(config, data, run_dir.name)
+        params = _log_inputs(config, data, run_dir.name)
 
         def on_epoch(epoch: int, metrics: dict[str, float]) -> None:
             history.add(epoch, metrics)
@@ -201,16 +205,17 @@ def _train_owned(config: TrainConfig, client, data: Dataset, model, members: dic
             model_dirs[m] = run_dir / ("model" if not multi else f"model-{m}")
             shutil.rmtree(model_dirs[m], ignore_errors=True)    # stale files would change the digest
             member.save(model_dirs[m])
-        with log.timed(_log, "metrics and plots logged"):
+        with log.timed(_log, "metrics, plots, loss curves and dataset summary logged"):
             mlflow.log_metrics(metrics)
             for path in made.values():
                 mlflow.log_artifact(str(path), artifact_path="plots")
+            _log_run_files(data, history, run_dir)
 
         registered = []                                  # registration last: a failure above registers nothing
         for m, member in members.items():
             prefix = f"{m}/" if multi else ""
             with log.timed(_log, f"{m}: model logged" + (" and registered" if config.register else "")):
-                entry = _log_and_register(client, member, model_dirs[m], config, data, metrics[prefix + METRIC],
+                entry = _log_and_register(client, member, model_dirs[m], config, data, metrics, prefix, params,
                                           multi)
             if entry is not None:
                 registered.append(entry)
@@ -259,18 +264,22 @@ def _score_encoder(encoder, data: Dataset, modality: str, seed: int, out: Path, 
                                                            names=data.body.joint_names)}
 
 
-def _log_and_register(client, member, model_dir: Path, config: TrainConfig, data: Dataset, val_rmse: float,
-                      multi: bool) -> Registered | None:
-    """Log one member as a pyfunc; register it (unless config.register is False) and maybe make it champion."""
-    m = member.modality
+def _log_and_register(client, member, model_dir: Path, config: TrainConfig, data: Dataset, metrics: dict[str, float],
+                      prefix: str, params: dict, multi: bool) -> Registered | None:
+    """Log one member as a pyfunc and its model card (`model_card[-<modality>].md`); register it (unless
+    config.register is False) and maybe make it champion."""
+    m, val_rmse = member.modality, metrics[prefix + METRIC]
     name = registered_name(data.body.robot, m, config.kind) if config.register else None
     info, digest = log_sensory_model(model_dir, member, name=f"model-{m}" if multi else "model")
     mlflow.set_tag(DIGEST_TAG + (f".{m}" if multi else ""), digest)
-    if name is None:
-        return None
     tags = {DIGEST_TAG: digest, METRIC: repr(val_rmse), "robot": data.body.robot, "modality": m,
             "kind": config.kind, "joint_names": ",".join(data.body.joint_names),
-            "dataset_sha256": data.sha256, "mjcf_sha256": str(data.attrs.get("mjcf_sha256", ""))}
+            "dataset_sha256": data.sha256, "mjcf_sha256": str(data.attrs.get("mjcf_sha256", "")),
+            VAL_TAG: validation_digest(data), DATASET_TAG: str(Path(data.path).resolve())}
+    scores = {k[len(prefix):]: v for k, v in metrics.items() if k.startswith(prefix) and "/" not in k[len(prefix):]}
+    mlflow.log_text(card_markdown(member, name, tags, scores, params), f"model_card{'-' + m if multi else ''}.md")
+    if name is None:
+        return None
     version, champion = register_version(client, name, info.model_uri, tags, val_rmse)   # one guarded step
     _log.debug("registered %s v%s (%s=%.4g): %s", name, version, METRIC, val_rmse,
                "now @champion" if champion else "champion unchanged")
@@ -316,8 +325,23 @@ def _subset(split: Split, n: int, seed: int) -> Split:
     return split.take(np.sort(np.random.default_rng(seed).choice(len(split), n, replace=False)))
 
 
-def _log_inputs(config: TrainConfig, data: Dataset, run_name: str) -> None:
-    """Params (the run identity), tags (robot, MJCF, versions), and the dataset as an MLflow input."""
+def _log_run_files(data: Dataset, history: "_History", run_dir: Path) -> None:
+    """The dataset summary (`dataset_summary.txt`, as `bodyschema show` prints it) and the loss curves' numbers
+    (`loss_curves.csv`: one row per epoch, beside plots/loss_curves.png) as artifacts of the run."""
+    from bodyschema.datagen.validate import summarize_store
+
+    mlflow.log_text(summarize_store(data.path, check=False) + "\n", "dataset_summary.txt")
+    if history.epochs:
+        keys = sorted({k for row in history.epochs.values() for k in row})
+        rows = [",".join(["epoch", *keys])]
+        for epoch in sorted(history.epochs):
+            row = history.epochs[epoch]
+            rows.append(",".join([str(epoch), *(repr(row[k]) if k in row else "" for k in keys)]))
+        mlflow.log_text("\n".join(rows) + "\n", "loss_curves.csv")
+
+
+def _log_inputs(config: TrainConfig, data: Dataset, run_name: str) -> dict:
+    """Params (the run identity), tags (robot, MJCF, versions), and the dataset as an MLflow input. → the params"""
     identity = config.identity(data.sha256)
     params = {k: v for k, v in identity.items() if k not in ("hyper", "dataset_sha256")}
     params.update({f"hyper.{k}": v for k, v in identity["hyper"].items()})
@@ -341,6 +365,7 @@ def _log_inputs(config: TrainConfig, data: Dataset, run_name: str) -> None:
     dataset = MetaDataset(source, name=Path(data.path).name, digest=data.sha256[:32])
     mlflow.log_input(dataset, context="training", tags={"robot": tags["robot"], "mjcf_sha256": tags["mjcf_sha256"],
                                                          "modality": config.modality})
+    return params
 
 
 class _History:

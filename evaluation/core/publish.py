@@ -7,7 +7,7 @@ from collections.abc import Mapping, MutableMapping, Sequence
 from pathlib import Path
 
 from bodyschema.evaluation.core.mlflow_log import log_benchmark
-from bodyschema.evaluation.core.runs import MODELS_CSV, mark_latest, record_robot
+from bodyschema.evaluation.core.runs import MODELS_CSV, benchmark_started, mark_latest, record_robot
 from bodyschema.evaluation.core.specs import provenance_rows
 from bodyschema.evaluation.core.tables import write_csv
 
@@ -19,7 +19,8 @@ def publish(config, folder: Path, name: str, metrics: Mapping[str, float], paths
     None."""
     if models:
         paths["models_csv"] = write_csv(provenance_rows(models), folder / MODELS_CSV)
-    run_id = log_benchmark(config, name, metrics, paths.values(), models, tags) if config.mlflow else None
+    run_id = (log_benchmark(config, name, metrics, paths.values(), models, tags, started=benchmark_started(folder))
+              if config.mlflow else None)
     if models:
         record_robot(folder, models[0].body.robot)
     mark_latest(folder)

@@ -16,6 +16,9 @@ counts as complete.
 
 from __future__ import annotations
 
+import calendar
+import contextlib
+import functools
 import hashlib
 import json
 import os
@@ -23,6 +26,8 @@ import re
 import shutil
 import socket
 import time
+from collections.abc import Callable
+from contextvars import ContextVar
 from dataclasses import asdict, is_dataclass
 from pathlib import Path
 
@@ -33,6 +38,44 @@ COMPLETE = "complete"                 # run.json's key: false until the run's la
 MODELS_CSV = "models.csv"             # the models a run used (spec, name, version, source run, digest)
 RUN_NAME = re.compile(r"^\d{8}T\d{6}\.\d{3}Z-[0-9a-f]{8}(-\d+)?$")
 PLAIN_NAME = re.compile(r"^[\w.-]+$")  # a shipped robot's name, usable as is in a link name
+
+
+_STARTED: ContextVar[float | None] = ContextVar("bodyschema_benchmark_started", default=None)
+
+
+@contextlib.contextmanager
+def benchmark_clock():
+    """Time a benchmark run from here: its MLflow run starts at this moment (`benchmark_started`). The registry's
+    runners (`evaluation.registry`, what `bodyschema evaluate` calls) run under it."""
+    token = _STARTED.set(time.time())
+    try:
+        yield
+    finally:
+        _STARTED.reset(token)
+
+
+@functools.cache
+def clocked(runner: Callable) -> Callable:
+    """`runner` under `benchmark_clock` (one wrapper per runner: `clocked(f) is clocked(f)`)."""
+    @functools.wraps(runner)
+    def run(*args, **kwargs):
+        with benchmark_clock():
+            return runner(*args, **kwargs)
+    return run
+
+
+def benchmark_started(folder: Path | None = None) -> float:
+    """When the benchmark being published began, s since the epoch: the innermost `benchmark_clock`'s start; outside
+    one (a runner called directly from Python), the creation of its run folder (the UTC time in its name), else
+    now."""
+    started = _STARTED.get()
+    if started is not None:
+        return started
+    match = RUN_NAME.match(Path(folder).name) if folder is not None else None
+    if match is None:
+        return time.time()
+    stamp = Path(folder).name
+    return calendar.timegm(time.strptime(stamp[:15], "%Y%m%dT%H%M%S")) + int(stamp[16:19]) / 1000
 
 
 def config_hash(config) -> str:
