@@ -12,6 +12,8 @@
     bodyschema report
     bodyschema demo
     bodyschema reproduce --only levels   (the README's tables from its own commands, beside its figures)
+    bodyschema evaluate levels --config levels.toml --trials 50   (any command: TOML/YAML/run.json, flags override)
+    bodyschema --version
     bodyschema --debug ...    (or BODYSCHEMA_DEBUG=1): show the traceback behind an error message
     bodyschema --quiet ... | --verbose ...   (before or after the subcommand): warnings only, no progress bars |
                               debug lines (configs resolved, steps timed) and MLflow's own logging (bodyschema/log.py)
@@ -46,7 +48,7 @@ from typing import Annotated, Union
 
 import tyro
 
-from bodyschema import log, threads
+from bodyschema import config_file, log, threads
 from bodyschema.datagen.config import DatagenConfig
 from bodyschema.datagen.importers.config import ImportConfig
 from bodyschema.datagen.robot_commands import RUNNERS as ROBOT_RUNNERS, RobotCameraArgs, RobotInitArgs, RobotShowArgs
@@ -406,12 +408,22 @@ def parse_command(argv: list[str]):
     check_train_flags(argv)
     check_renamed_flags(argv)
     check_sweep_flags(argv)
+    argv, file = config_file.split_flag(argv)
+    words = _command_words(argv)
     with _config_errors_as_ours():
-        return tyro.cli(commands(_command_words(argv)), prog="bodyschema", args=argv, description=DESCRIPTION)
+        if file is None:
+            return tyro.cli(commands(words), prog="bodyschema", args=argv, description=DESCRIPTION)
+        command = " ".join(["bodyschema", *words])                  # --config FILE: the file's values are defaults
+        config_type = config_file.command_type(commands(words), words)
+        default = config_file.load_config(file, config_type, command)
+        return tyro.cli(config_type, prog=command, args=argv[len(words):], default=default)
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["--version"]:
+        print(f"bodyschema {package_version()}")
+        return 0
     debug = "--debug" in argv or os.environ.get("BODYSCHEMA_DEBUG", "") not in ("", "0")
     global _create_store
     _create_store = "--create" in argv
@@ -441,6 +453,15 @@ def main(argv: list[str] | None = None) -> int:
         return _bug(command, error)
 
 
+def package_version() -> str:
+    """The installed distribution's version (`bodyschema --version`)."""
+    import importlib.metadata
+    try:
+        return importlib.metadata.version("bodyschema")
+    except importlib.metadata.PackageNotFoundError:
+        return "unknown (not installed)"
+
+
 RESUMING = ("datagen", "train", "sweep", "reproduce")   # they keep finished shards / checkpoints / steps
 ATOMIC = ("export", "import", "show")       # they write beside OUT and rename: an interrupted one left nothing
 
@@ -462,7 +483,8 @@ DESCRIPTION = ("A robot learns its body by motor babbling and perceives it by ac
                "--verbose: debug lines (configs resolved, steps timed) and MLflow's own logging; --create: a command "
                "that talks to MLflow may create a local tracking store and its folder; --threads N (or "
                "BODYSCHEMA_THREADS): torch's threads, by default measured, 1 on a busy machine (each before or after "
-               "the subcommand).")
+               "the subcommand). `<command> --config FILE`: its fields from a TOML/YAML file or a run.json, flags "
+               "override the file; --version: the package's version.")
 # tyro names a nested subcommand's inner dataclass `__tyro-dummy-inner__` (and its flags `__tyro_dummy_inner__.x`);
 # a value error raised while it builds the config can carry that name, which means nothing to a user.
 TYRO_DUMMY = re.compile(r"_{1,2}tyro[-_]dummy[-_]inner_{1,2}[.\-_]?")

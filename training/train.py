@@ -205,7 +205,7 @@ def _train_owned(config: TrainConfig, client, data: Dataset, model, members: dic
             model_dirs[m] = run_dir / ("model" if not multi else f"model-{m}")
             shutil.rmtree(model_dirs[m], ignore_errors=True)    # stale files would change the digest
             member.save(model_dirs[m])
-        with log.timed(_log, "metrics, plots, loss curves and dataset summary logged"):
+        with log.timed(_log, "metrics and plots logged"):   # and the loss curves, dataset summary
             mlflow.log_metrics(metrics)
             for path in made.values():
                 mlflow.log_artifact(str(path), artifact_path="plots")
