@@ -127,3 +127,14 @@ def test_the_training_run_holds_its_card_dataset_summary_and_loss_curves(evaluat
     assert str(kin_store) in summary and "ee_xyz" in summary
     rows = open(client.download_artifacts(run_id, "loss_curves.csv")).read().splitlines()
     assert rows[0].startswith("epoch,") and len(rows) == 1 + 3                  # a header and the 3 epochs
+
+
+def test_the_frames_a_benchmark_scored_are_an_evaluation_input(workdir, kin_store):
+    from bodyschema.evaluation.core.mlflow_log import TARGETS_TAG, dataset_inputs
+    from bodyschema.training.registry import use_tracking
+    digest = load_dataset(kin_store, "ee_xyz").sha256
+    (given,) = dataset_inputs(use_tracking(), {}, {f"{TARGETS_TAG}.path": str(kin_store),
+                                                    f"{TARGETS_TAG}.sha256": digest})
+    assert (given.dataset.name, given.dataset.digest) == (kin_store.name, digest[:32])
+    assert {t.key: t.value for t in given.tags} == {"mlflow.data.context": "evaluation", "sha256": digest}
+    assert str(kin_store) in given.dataset.source
