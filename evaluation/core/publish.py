@@ -19,8 +19,8 @@ def publish(config, folder: Path, name: str, metrics: Mapping[str, float], paths
     None."""
     if models:
         paths["models_csv"] = write_csv(provenance_rows(models), folder / MODELS_CSV)
-    run_id = (log_benchmark(config, name, metrics, paths.values(), models, tags, started=benchmark_started(folder))
-              if config.mlflow else None)
+    started = benchmark_started(folder)                  # read (and its mark cleared) whether logged or not
+    run_id = log_benchmark(config, name, metrics, paths.values(), models, tags, started) if config.mlflow else None
     if models:
         record_robot(folder, models[0].body.robot)
     mark_latest(folder)

@@ -41,6 +41,8 @@ def resolve_models(specs: Sequence[str], when_empty: Sequence[str], tracking_uri
     Each model carries `provenance` (PROVENANCE_KEYS → str): what its spec resolved to. A model resolved before
     (a sweep passes its resolved models to each case) keeps its provenance; a bare object is named by
     `object_provenance`."""
+    from bodyschema.evaluation.core.runs import note_start
+    note_start()                              # a benchmark starts here: its MLflow run's start time (runs.py)
     if models is not None:
         for m in models:
             if not getattr(m, "provenance", None):

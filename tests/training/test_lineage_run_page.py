@@ -138,3 +138,16 @@ def test_the_frames_a_benchmark_scored_are_an_evaluation_input(workdir, kin_stor
     assert (given.dataset.name, given.dataset.digest) == (kin_store.name, digest[:32])
     assert {t.key: t.value for t in given.tags} == {"mlflow.data.context": "evaluation", "sha256": digest}
     assert str(kin_store) in given.dataset.source
+
+
+def test_a_runner_called_directly_is_timed_from_its_model_resolution(workdir):
+    from bodyschema.evaluation.levels import run_levels
+    config = LevelsConfig(models=("analytic:planar2:ee_xyz",), levels=(1, 2), trials=3, runs=1, multistart=0,
+                          plots=False, progress=False, out=workdir / "results" / "levels")
+    t0 = time.time()
+    summary = run_levels(config)                                     # as the demo calls it: no registry clock
+    t1 = time.time()
+    info = MlflowClient().get_run(summary.run_id).info
+    start, end = info.start_time / 1000, info.end_time / 1000
+    assert t0 - 0.01 <= start < end <= t1 + 0.01
+    assert end - start >= 0.9 * (t1 - t0) - 0.05, (end - start, t1 - t0)
