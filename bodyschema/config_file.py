@@ -134,11 +134,16 @@ def build(config_type, data: dict, where: str, base=None):
             values[name] = build(_strip(hints[name]), {}, f"{where}: {name}")       # a required config: defaults
     if base is not None:
         return dataclasses.replace(base, **values)
-    try:
-        return config_type(**values)
-    except TypeError as error:                                   # a required field missing from the file
-        raise ValueError(must_be(where, f"every required field of {origin.__name__}", f"{sorted(values)}",
-                                 str(error))) from error
+    missing = [n for n, f in fields.items() if n not in values and _required(f)]
+    if not missing:
+        return config_type(**values)                             # its own checks (`__post_init__`) run on the file
+    # Required fields left to the command line: tyro asks for them (tyro.MISSING), then builds and checks the config.
+    import tyro
+    partial = origin.__new__(origin)
+    for name, field in fields.items():
+        object.__setattr__(partial, name, values[name] if name in values else
+                           tyro.MISSING if name in missing else _current(None, field))
+    return partial
 
 
 def _required(field: dataclasses.Field) -> bool:

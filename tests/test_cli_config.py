@@ -90,3 +90,35 @@ def test_version_prints_the_package_version(capsys):
 def test_the_readme_documents_config_version_and_completion():
     text = README.read_text()
     assert "--config" in text and "bodyschema --version" in text and "--tyro-write-completion" in text
+
+
+def _leaves(node, words=()):
+    from bodyschema import config_file
+    members = config_file._members(node)
+    if not members:
+        yield words
+    for member in members:
+        yield from _leaves(config_file._inner(member), (*words, config_file._name(member)))
+
+
+def test_every_command_takes_a_config_file(tmp_path, capsys):
+    from bodyschema.cli import commands
+    empty = tmp_path / "empty.json"
+    empty.write_text("{}")
+    leaves = list(_leaves(commands(None)))
+    assert ("evaluate", "adaptation", "jupiter") in leaves and ("registry", "promote") in leaves and len(leaves) > 20
+    for words in leaves:
+        with pytest.raises(SystemExit) as done:
+            parse_command([*words, "--config", str(empty), "--help"])
+        assert done.value.code == 0, words
+    capsys.readouterr()
+
+
+def test_required_fields_may_come_from_flags(tmp_path):
+    empty = tmp_path / "empty.json"
+    empty.write_text("{}")
+    assert parse_command(["train", "gpr", "--config", str(empty), "--data", "q.zarr"]).data == Path("q.zarr")
+    promote = parse_command(["registry", "promote", "--config", str(empty), "NAME", "3"])
+    assert (promote.name, promote.version) == ("NAME", 3)
+    with pytest.raises(SystemExit):
+        parse_command(["train", "gpr", "--config", str(empty)])             # tyro: --data is required
