@@ -115,7 +115,7 @@ class SVGPModel(BaseSensoryModel):
     def __init__(self, body, modality: str, output_shape: tuple[int, ...], *,
                  num_inducing: int = 1000,    # inducing points per output: O(M²) memory, O(N·M²) for the closed form
                  inducing_init: Literal["kmeans", "random"] = "kmeans",   # where the inducing points start
-                 hyper_points: int = 500,     # starting hyper-parameters: the exact MLL on this many samples (as gpr)
+                 hyper_points: int = 2000,    # starting kernel: the exact MLL on this many samples (Jaco: see README)
                  elbo_epochs: int = 0,        # minibatch ELBO passes (0: the starting kernel and points; see bench)
                  batch_size: int = 1024,      # samples per minibatch step
                  lr: float = 0.01,            # Adam step on the hyper-parameters and inducing locations
