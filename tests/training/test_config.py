@@ -9,7 +9,7 @@ from bodyschema.training.config import TrainConfig, build_model, train_commands
 
 def test_a_config_that_is_not_a_kinds_names_the_available_ones():
     with pytest.raises(ValueError, match=r"dict is not the config of a trainable model kind\. Use one of "
-                                         r"\['GPRConfig', 'SklearnGPRConfig', 'MDNConfig'"):
+                                         r"\['GPRConfig', 'SVGPConfig', 'SklearnGPRConfig', 'MDNConfig'"):
         TrainConfig(model={"epochs": 3}, data="d.zarr")
 
 
@@ -64,7 +64,7 @@ def test_the_factory_passes_every_hyper_parameter_to_the_constructor(tiny_kind):
 
 def test_one_train_subcommand_per_trainable_kind():
     names = [name for name, _, _ in train_commands()]
-    assert names == ["gpr", "sklearn-gpr", "mdn", "pixel", "multimodal", "encoder"]
+    assert names == ["gpr", "svgp", "sklearn-gpr", "mdn", "pixel", "multimodal", "encoder"]
     assert all(description for _, _, description in train_commands())
 
 
