@@ -86,6 +86,25 @@ def restore_state(model, state: dict[str, torch.Tensor], keys: tuple[str, ...]) 
         setattr(model, f"{key}_", state[key].to(torch.float64))
 
 
+class SavedGPState:
+    """Save/load of a GP kind's fitted `<key>_` tensors, the class's STATE_KEYS (mixed in before BaseSensoryModel)."""
+
+    STATE_KEYS: tuple[str, ...] = ()
+
+    def _state(self):
+        return {key: getattr(self, f"{key}_") for key in self.STATE_KEYS}
+
+    @classmethod
+    def _from_saved(cls, body, modality, output_shape, config, state):
+        model = cls(body, modality, output_shape, **config)
+        restore_state(model, state, cls.STATE_KEYS)
+        model._restored()
+        return model
+
+    def _restored(self) -> None:
+        """After the saved tensors are set (a kind that caches a solve from them redoes it here)."""
+
+
 def check_gp_hyper(hyper_points, max_points, noise_floor) -> None:
     """The hyper-parameters both GP kinds share: subset sizes ≥ 2 and a positive noise floor."""
     for name, value in (("hyper_points", hyper_points), ("max_points", max_points)):

@@ -72,9 +72,10 @@ def _filled(value, shape) -> torch.Tensor:
 
 
 @register_kind
-class GPRModel(BaseSensoryModel):
+class GPRModel(_gp_data.SavedGPState, BaseSensoryModel):
     """Exact GP sensory model, kind "gpr". `__init__` stores hyper-parameters only; `fit` learns."""
 
+    STATE_KEYS = STATE_KEYS
     kind = "gpr"
     precision_varies = True      # 1 / (predictive variance + noise) at z
     exports_onnx = True          # its posterior mean is a few matmuls and one exp (models/onnx_export.py)
@@ -198,12 +199,3 @@ class GPRModel(BaseSensoryModel):
     def _config(self):
         return {"hyper_points": self.hyper_points, "max_points": self.max_points, "adam_steps": self.adam_steps,
                 "lbfgs_steps": self.lbfgs_steps, "lr": self.lr, "noise_floor": self.noise_floor}
-
-    def _state(self):
-        return {key: getattr(self, f"{key}_") for key in STATE_KEYS}
-
-    @classmethod
-    def _from_saved(cls, body, modality, output_shape, config, state):
-        model = cls(body, modality, output_shape, **config)
-        _gp_data.restore_state(model, state, STATE_KEYS)
-        return model

@@ -46,9 +46,10 @@ def make_kernel(latent_dim: int, noise_floor: float, lengthscale=0.5, outputscal
 
 
 @register_kind
-class SklearnGPRModel(BaseSensoryModel):
+class SklearnGPRModel(_gp_data.SavedGPState, BaseSensoryModel):
     """scikit-learn GP sensory model, kind "sklearn-gpr". `__init__` stores hyper-parameters only."""
 
+    STATE_KEYS = STATE_KEYS
     kind = "sklearn-gpr"
     precision_varies = True      # 1 / predictive std² at z
     onnx_hint = "scikit-learn computes its mean in numpy: train kind 'gpr' for an exportable GP"
@@ -173,12 +174,5 @@ class SklearnGPRModel(BaseSensoryModel):
         return {"hyper_points": self.hyper_points, "max_points": self.max_points, "max_iter": self.max_iter,
                 "noise_floor": self.noise_floor}
 
-    def _state(self):
-        return {key: getattr(self, f"{key}_") for key in STATE_KEYS}
-
-    @classmethod
-    def _from_saved(cls, body, modality, output_shape, config, state):
-        model = cls(body, modality, output_shape, **config)
-        _gp_data.restore_state(model, state, STATE_KEYS)
-        model._condition()
-        return model
+    def _restored(self) -> None:
+        self._condition()

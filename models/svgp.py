@@ -102,9 +102,10 @@ class BatchSVGP(gpytorch.models.ApproximateGP):
 
 
 @register_kind
-class SVGPModel(BaseSensoryModel):
+class SVGPModel(_gp_data.SavedGPState, BaseSensoryModel):
     """Sparse variational GP sensory model, kind "svgp". `__init__` stores hyper-parameters only; `fit` learns."""
 
+    STATE_KEYS = STATE_KEYS
     kind = "svgp"
     precision_varies = True      # 1 / (predictive variance + noise) at z
     exports_onnx = True          # its posterior mean is k(q, U)·α: a few matmuls and one exp, as gpr's
@@ -288,14 +289,6 @@ class SVGPModel(BaseSensoryModel):
                 "lr": self.lr, "natural_gradient": self.natural_gradient, "ngd_lr": self.ngd_lr,
                 "collapse": self.collapse, "noise_floor": self.noise_floor}
 
-    def _state(self):
-        return {key: getattr(self, f"{key}_") for key in STATE_KEYS}
-
-    @classmethod
-    def _from_saved(cls, body, modality, output_shape, config, state):
-        model = cls(body, modality, output_shape, **config)
-        _gp_data.restore_state(model, state, STATE_KEYS)
-        return model
 
 
 # ---- fitting helpers ------------------------------------------------------------------------------------
@@ -366,4 +359,3 @@ def _is_int(value, low: int) -> bool:
 
 def _is_positive(value) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value) and value > 0
-

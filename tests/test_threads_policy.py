@@ -3,14 +3,12 @@ bench/busy.py measures), the override, a user's own setting, the CLI flag and th
 
 from __future__ import annotations
 
-import logging
-import os
-
 import pytest
 import torch
 
-from bodyschema import cli, log, threads
+from bodyschema import cli, threads
 from bodyschema.threads import ENV, Choice, choose, pinned
+from tests.test_cli_logging import restore_logging_and_env  # noqa: F401 — autouse: configure()'s env and level undone
 
 
 def loaded(n: int) -> dict:
@@ -22,15 +20,6 @@ def idle(n: int) -> dict:
     return {1: 0.004, n: 0.002, "won": 2, "rounds": 2}
 
 
-@pytest.fixture(autouse=True)
-def restore_logging_and_env():
-    """The CLI's configure() sets environment defaults and the logger's level (as tests/test_cli_logging.py)."""
-    env = dict(os.environ)
-    yield
-    os.environ.clear()
-    os.environ.update(env)
-    logging.getLogger(log.LOGGER).setLevel(logging.NOTSET)
-    log._verbosity = None
 
 
 @pytest.fixture
