@@ -147,8 +147,11 @@ def train(module: nn.Module, loss_fn: Callable[..., torch.Tensor], data: tuple[t
           desc: str = "fit", device: str | torch.device = "cpu") -> dict[str, float]:
     """Minimise `loss_fn(module, *batch)` (a mean over the batch); leaves the best weights in `module`.
 
-    The score is the validation loss when `val` is given, else the train loss. `checkpoint` is rewritten
-    atomically after every epoch (before `on_epoch`), and resumed from when it exists at the start.
+    The score is the validation loss when `val` is given, else the train loss. `settings.epochs` is a cap: the
+    loop stops once the score has not improved for `settings.patience` epochs, restores the best epoch's weights
+    and says so in one INFO line (which epoch, of how many, and whether the cap or the patience ended it).
+    `checkpoint` is rewritten atomically after every epoch (before `on_epoch`), and resumed from when it exists
+    at the start.
     The module and the data live on `device` while training; the module is back on the CPU on return
     (models are saved and shipped on CPU; `NetModel.to` moves them for inference). The shuffling stays on
     the CPU generator, so a seed gives the same minibatches on every device.
@@ -165,6 +168,7 @@ def train(module: nn.Module, loss_fn: Callable[..., torch.Tensor], data: tuple[t
     if checkpoint is not None and Path(checkpoint).is_file():
         state = _resume(Path(checkpoint), module, opt, gen, fingerprint, device)
     first, began = state["epoch"] + 1, time.perf_counter()
+    score_name = "validation" if val is not None else "train"
     bar = tqdm(total=settings.epochs, initial=first, desc=desc, disable=not progress, leave=False)
     for epoch in range(state["epoch"] + 1, settings.epochs):
         if state["bad"] >= settings.patience:
@@ -199,9 +203,16 @@ def train(module: nn.Module, loss_fn: Callable[..., torch.Tensor], data: tuple[t
     bar.close()
     _log.debug("%s: epochs %d–%d on %d rows (%s) in %.2f s; best epoch %d", desc, first, state["epoch"], n, device,
                time.perf_counter() - began, state["best_epoch"])
+    stopped = state["epoch"] + 1 < settings.epochs   # early: `patience` epochs without a better score
+    _log.info("%s: %s; kept epoch %d's weights (%s loss %.4g)", desc,
+              f"stopped after {state['epoch'] + 1} of at most {settings.epochs} epochs, the {score_name} loss "
+              f"not better for {settings.patience}" if stopped else
+              f"ran all {settings.epochs} epochs (the cap), the last better {score_name} loss "
+              f"{state['bad']} before the end", state["best_epoch"] + 1, score_name, state["best"])
     module.load_state_dict(state["best_weights"])
     module.eval().to("cpu")
-    return {"best_loss": state["best"], "best_epoch": state["best_epoch"], "epochs_run": state["epoch"] + 1}
+    return {"best_loss": state["best"], "best_epoch": state["best_epoch"], "epochs_run": state["epoch"] + 1,
+            "stopped_early": stopped}
 
 
 @torch.no_grad()
