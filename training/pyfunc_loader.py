@@ -19,7 +19,9 @@ reads the MLmodel file as data only and never imports what it names.
 
 pyfunc `predict(z)`: z (B, Dz) rad (numpy, list or DataFrame; the signature's Dz double columns, so MLflow hands
 `predict` float64) → g(z) (B, *output_shape) float64; `params={"output": "jacobian"}` → ∂g/∂z
-(B, prod(output_shape), Dz) per rad; "precision" → the diagonal Π_x (B, *output_shape). An image encoder (kind
+(B, prod(output_shape), Dz) per rad; "precision" → the diagonal Π_x (B, *output_shape). A joint angle outside the
+range the model was fitted on (the body's q_low..q_high, the store's joint ranges) is refused with the house error
+naming the joint and its range; `params={"extrapolate": True}` predicts there anyway. An image encoder (kind
 "encoder", the inverse map) predicts z (B, Dz) rad from images (B, H, W[, C]) uint8, and has no Jacobian output.
 `mlflow models serve -m models:/<name>@champion --env-manager local` serves it (POST /invocations
 `{"inputs": [[z1, ..., zDz], ...]}`) from an environment with bodyschema installed (`pip_requirements`).
@@ -77,8 +79,9 @@ def signature(model) -> ModelSignature:
     """The pyfunc's schema. A decoder takes z as Dz double columns, one per joint in rad (MLflow upcasts float32,
     ints, lists and DataFrames to float64 before `predict`: a tensor spec would refuse all but one dtype) and gives
     `predict`'s (B, *output_shape) float64; an encoder takes (B, H, W[, C]) uint8 images and gives z (B, Dz) rad.
-    `params={"output": ...}` picks the Jacobian or the precision instead (OUTPUTS)."""
-    params = ParamSchema([ParamSpec("output", "string", "predict")])
+    `params={"output": ...}` picks the Jacobian or the precision instead (OUTPUTS); `{"extrapolate": True}` lets a
+    decoder predict outside its joint ranges (a model logged before that param refuses there: MLflow drops it)."""
+    params = ParamSchema([ParamSpec("output", "string", "predict"), ParamSpec("extrapolate", "boolean", False)])
     if model.encodes:
         inputs = Schema([TensorSpec(np.dtype(np.uint8), (-1, *model.input_shape))])
         return ModelSignature(inputs, Schema([TensorSpec(np.dtype(np.float32), (-1, model.latent_dim))]), params)
@@ -197,6 +200,8 @@ class SensoryPyfunc:
             images = model_input.to_numpy() if hasattr(model_input, "to_numpy") else np.asarray(model_input)
             return self.model.encode(images).numpy()
         z = _as_tensor(model_input)                                          # (B, Dz) rad
+        if not (params or {}).get("extrapolate", False):
+            check_within_range(self.model.body, z)
         with torch.no_grad():
             return getattr(self.model, output)(z).numpy()     # (B, *out) | (B, prod(out), Dz) | (B, *out)
 
@@ -208,3 +213,26 @@ def _as_tensor(model_input) -> torch.Tensor:
         raise TypeError(must_be("z", "an array of joint angles in rad (float32 or float64)", str(values.dtype)))
     dtype = np.float32 if values.dtype == np.float32 else np.float64
     return torch.from_numpy(np.array(values, dtype=dtype))      # a copy: a DataFrame's array may be read-only
+
+
+RANGE_TOLERANCE_RAD = 1e-6     # a pose read back at its joint's limit (float32 rounding) is inside
+
+
+def check_within_range(body, z: torch.Tensor) -> None:
+    """The house error for the first joint whose angle in `z` (B, Dz) rad lies outside the range the model was
+    fitted on (`body.q_low`..`body.q_high`): a model there extrapolates silently (a GP falls back to its mean, a
+    network to anything), so it is refused unless the caller asks (`extrapolate`). NaN counts as outside."""
+    if z.ndim != 2 or z.shape[1] != len(body.joint_names):
+        raise ValueError(must_be("z", f"of shape (B, {len(body.joint_names)}): one column per joint "
+                                      f"{list(body.joint_names)}, in rad", tuple(z.shape)))
+    low = torch.tensor(body.q_low, dtype=z.dtype) - RANGE_TOLERANCE_RAD      # (Dz,)
+    high = torch.tensor(body.q_high, dtype=z.dtype) + RANGE_TOLERANCE_RAD
+    inside = (z >= low) & (z <= high)                                       # (B, Dz)
+    if bool(inside.all()):
+        return
+    row, col = (int(i) for i in (~inside).nonzero()[0])
+    name = body.joint_names[col]
+    raise ValueError(must_be(f"z[{row}, {col}] (joint {name})",
+                             f"within its range [{body.q_low[col]:.4g}, {body.q_high[col]:.4g}] rad (the range the "
+                             "model was fitted on)", f"{float(z[row, col]):.4g} rad",
+                             'Pass params={"extrapolate": true} to predict outside it anyway (an extrapolation).'))

@@ -195,13 +195,13 @@ def register_version(client: MlflowClient, name: str, model_uri: str, tags: dict
 
 
 def _register_quietly(model_uri: str, name: str, tags: dict[str, str]) -> str:
-    """`mlflow.register_model`, whose own prints on stderr ("Created version '1' of model ...") become INFO lines
-    of our logger: shown by default, silent with --quiet like every other INFO line. → the new version"""
+    """`mlflow.register_model`, whose own prints on stderr ("Created version '1' of model ...") become DEBUG lines
+    of our logger, shown with --verbose only: `train` prints the version it registered itself. → the new version"""
     printed = io.StringIO()
     with contextlib.redirect_stderr(printed):            # MLflow's eprint writes to the current sys.stderr
         version = mlflow.register_model(model_uri, name, tags=tags, await_registration_for=60).version
     for line in filter(str.strip, printed.getvalue().splitlines()):
-        _log.info(line)
+        _log.debug(line)
     return str(version)
 
 

@@ -13,6 +13,7 @@ MLflow quiet).
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.metadata
 import inspect
 import json
@@ -77,6 +78,8 @@ class TrainResult:
     model_dirs: dict[str, Path] = field(default_factory=dict)   # modality -> saved model (meta.json + state.pt)
     run_dir: Path | None = None      # checkpoint, history, plots of this config
     reused: bool = False             # True: this config had finished and registered already; nothing was redone
+    # The unit of each score, by its key's prefix ("" or "<modality>/"): the model's output unit, deg for an encoder
+    units: dict[str, str] = field(default_factory=dict)
 
     # Single-modality shortcuts (None when nothing, or several models, were registered).
     @property
@@ -105,9 +108,14 @@ class TrainResult:
                 "  → now @champion" if r.champion else
                 "  (champion unchanged: not better, or the champion was scored on other validation data)"))
         scores = {k: v for k, v in self.metrics.items() if "val_" in k and not k.startswith("fit_")}
-        lines.append("held-out: " + ", ".join(f"{k}={v:.4g}" for k, v in sorted(scores.items())))
+        lines.append("held-out: " + ", ".join(f"{k}={v:.4g}{self._unit(k)}" for k, v in sorted(scores.items())))
         lines += [f"plot: {p}" for p in self.plots.values()]
         return "\n".join(lines)
+
+    def _unit(self, key: str) -> str:
+        """" <unit>" of the score `key` ("val_rmse" or "<modality>/val_rmse"), or "" where none is known."""
+        unit = self.units.get(key[:key.rfind("/") + 1], "")
+        return f" {unit}" if unit else ""
 
 
 def train(config: TrainConfig) -> TrainResult:
@@ -148,10 +156,12 @@ def _train_owned(config: TrainConfig, client, data: Dataset, model, members: dic
     (run_dir / "config.json").write_text(json.dumps(config.identity(data.sha256), indent=2, default=str))
     experiment_id = ensure_experiment(config.experiment)
     identity = config.config_hash(data.sha256)
+    units = {(f"{m}/" if multi else ""): "deg" if member.encodes else modalities.unit(m, "output units")
+             for m, member in members.items()}
     done = runs.finished_run(client, run_dir, identity, experiment_id, tuple(members), config.register)
     if done is not None:                            # re-run of a finished command: no second version
         _log.debug("run %s finished before with this config: reused", done[0].info.run_id)
-        return _reused(client, *done, run_dir, multi)
+        return dataclasses.replace(_reused(client, *done, run_dir, multi), units=units)
     runs.reap_dead_runs(client, experiment_id)      # RUNNING runs whose process died (kill -9) become KILLED
     resume_id = runs.resumable_run(client, run_dir)
     history = _History(run_dir / "history.jsonl")
@@ -220,7 +230,8 @@ def _train_owned(config: TrainConfig, client, data: Dataset, model, members: dic
             if entry is not None:
                 registered.append(entry)
         mlflow.set_tag("bodyschema.champion", ",".join(r.name for r in registered if r.champion) or "none")
-    return TrainResult(run.info.run_id, tuple(registered), {**history.last(), **metrics}, made, model_dirs, run_dir)
+    return TrainResult(run.info.run_id, tuple(registered), {**history.last(), **metrics}, made, model_dirs, run_dir,
+                       units=units)
 
 
 def _score_and_plot(member, data: Dataset, modality: str, seed: int, out: Path, prefix: str,

@@ -84,7 +84,7 @@ def test_the_pyfunc_has_a_signature_and_resolvable_requirements(evaluated):
     signature = mlflow.models.get_model_info(SPEC).signature
     assert len(signature.inputs.inputs) == 2 and {c.type.name for c in signature.inputs.inputs} == {"double"}
     assert signature.outputs.inputs[0].shape == (-1, 3)
-    assert [p.name for p in signature.params.params] == ["output"]
+    assert [p.name for p in signature.params.params] == ["output", "extrapolate"]
     local = Path(mlflow.artifacts.download_artifacts(version.source))
     requirements = (local / "requirements.txt").read_text().split()
     assert requirements and not [r for r in requirements if r.lower().startswith("bodyschema")]
