@@ -232,7 +232,7 @@ def run(config) -> int:
         from bodyschema.datagen.validate import summarize_store
 
         _debug_datagen(config)
-        print(summarize_store(generate(config, progress=log.progress_bars())))   # no progress flag of its own
+        print(summarize_store(generate(config, progress=config.progress)))   # on unless --no-progress / --quiet
     elif isinstance(config, ValidateArgs):
         from bodyschema.datagen.validate import validate_store
 

@@ -17,13 +17,14 @@ from typing import Any, Literal
 
 from bodyschema.datagen.robot_record import REQUIRED_WORKSPACES, check_robot_ref, robot_label
 from bodyschema.errors import must_be
+from bodyschema.log import Progress
 
 SAMPLERS = ("uniform", "gaussian", "babble")
 BACKENDS = ("loky", "ray")
 KINEMATIC_SAMPLERS = ("uniform", "gaussian")
 WORKSPACES = REQUIRED_WORKSPACES  # the joint boxes every robot record names
 IMAGE_SIDE_RANGE = (8, 1024)  # px; below 8 nothing is visible, above 1024 one sample is > 3 MB
-EXECUTION_FIELDS = ("workers", "backend", "out", "overwrite")  # how, not what: excluded from identity()
+EXECUTION_FIELDS = ("workers", "backend", "out", "overwrite", "progress")  # how, not what: excluded from identity()
 MAX_GRAVITY = 100.0  # m/s^2, ~10 g (Jupiter: 24.8); far beyond, the babbling simulation diverges (1e30: NaN-like)
 WORKERS_PER_CPU = 4  # more processes than this per core only add start-up and memory, never speed
 BABBLE_FLAGS = ("hold_s", "record_hz", "episode_s")  # shape babbling only: set with another sampler, a mistake
@@ -53,6 +54,7 @@ class DatagenConfig:
     hold_s: tuple[float, float] = (0.2, 1.0)  # babble: each random target is held U(min, max) s, a human-like pace
     record_hz: float = 20.0  # babble: recording rate (Hz), ~ a camera frame rate
     episode_s: float = 10.0  # babble: episode length (s); each starts at rest from a random pose
+    progress: Progress = False  # show a bar over the shards (--quiet hides it too), as every other command
 
     def __post_init__(self) -> None:
         def fix(name: str, value: Any) -> None:

@@ -197,7 +197,8 @@ def train(module: nn.Module, loss_fn: Callable[..., torch.Tensor], data: tuple[t
         if checkpoint is not None:
             _save_checkpoint(Path(checkpoint), state, module, opt, gen, fingerprint)
         bar.update(1)
-        bar.set_postfix({k: f"{v:.4g}" for k, v in metrics.items() if k.endswith("loss")})
+        # refresh=False: the next draw shows it; a forced draw each epoch ignored a log file's 30 s (bodyschema.log)
+        bar.set_postfix({k: f"{v:.4g}" for k, v in metrics.items() if k.endswith("loss")}, refresh=False)
         if on_epoch is not None:
             on_epoch(epoch, dict(metrics))
     bar.close()
