@@ -30,3 +30,9 @@ def test_robot_models_ship_as_package_data():
     robots = resources.files("bodyschema.datagen") / "robots"
     names = {p.name for p in robots.iterdir()}
     assert {"planar2.xml", "nao_arm.xml", "panda.xml"} <= names
+
+
+def test_the_package_is_marked_typed():
+    """PEP 561: `py.typed` in the top package (every subpackage installs under it), shipped as package data."""
+    assert (resources.files("bodyschema") / "py.typed").is_file()
+    assert "py.typed" in _pyproject()["package-data"]["bodyschema"]
