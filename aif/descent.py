@@ -155,8 +155,14 @@ def levenberg_marquardt(objective: Objective, mu0: torch.Tensor, low, high, *, m
 
 
 def adam(objective: Objective, mu0: torch.Tensor, low, high, *, max_steps: int, tol: float, lr: float,
-         patience: int, max_step: float | None, record: bool) -> DescentResult:
-    """Batched Adam on F from mu0 (B, Dz) rad: step lr rad per joint, halved on a plateau of `patience` steps."""
+         patience: int, max_step: float | None, record: bool, check_every: int = 1) -> DescentResult:
+    """Batched Adam on F from mu0 (B, Dz) rad: step lr rad per joint, halved on a plateau of `patience` steps.
+
+    The batch is compacted to the trials still running only every `check_every` steps (1 when recording): between
+    two compactions a trial that stopped stays in the batch, masked (`on`), its state frozen exactly where it
+    stopped, so the results are those of compacting every step. Every update is a masked `where` on the active rows,
+    never a boolean index, so the loop reads nothing back from the tensors but at a compaction (a host
+    synchronisation on a GPU)."""
     b, dz = mu0.shape
     mu, t, steps, converged, diverged, rec, active = _start(objective, mu0, low, high, False, record)
     free, grad, errors = t.free.clone(), t.grad.clone(), dict(t.errors)
@@ -168,44 +174,53 @@ def adam(objective: Objective, mu0: torch.Tensor, low, high, *, max_steps: int, 
     since = torch.zeros(b, dtype=torch.long)             # steps without a new best F
     evaluations = b
     b1, b2 = ADAM_BETAS
-    for _ in range(max_steps):
-        if active.numel() == 0:
-            break
+    every = 1 if record else max(1, int(check_every))
+    for i in range(max_steps):
+        if i % every == 0:                                                   # compaction: the one read-back
+            active = active[~converged[active]]
+            if active.numel() == 0:
+                break
+        on = ~converged[active]                                              # (b_a,) still stepping
         rec.add(active, best_mu[active], best_free[active], {k: v[active] for k, v in best_errors.items()})
         g = grad[active]
-        age[active] += 1
-        a = age[active, None]
-        m1[active] = b1 * m1[active] + (1 - b1) * g
-        m2[active] = b2 * m2[active] + (1 - b2) * g * g
-        m_hat, v_hat = m1[active] / (1 - b1 ** a), m2[active] / (1 - b2 ** a)
+        a = age[active] + on
+        age[active] = a
+        m1_a = torch.where(on[:, None], b1 * m1[active] + (1 - b1) * g, m1[active])
+        m2_a = torch.where(on[:, None], b2 * m2[active] + (1 - b2) * g * g, m2[active])
+        m_hat, v_hat = m1_a / (1 - b1 ** a[:, None]), m2_a / (1 - b2 ** a[:, None])
         root = v_hat.sqrt()
         eps = 1e-12 * root.amax(-1, keepdim=True) + 1e-300                     # scale-free: Π may be 1e6 or 1
-        step = _bound(-rate[active, None] * m_hat / (root + eps), max_step)
-        new = _clamp(mu[active] + step, low, high)
+        rate_a = rate[active]
+        step = _bound(-rate_a[:, None] * m_hat / (root + eps), max_step)
+        step = torch.where(on[:, None], step, 0.0)                          # a stopped trial is evaluated in place
+        mu_a, best_mu_a, best_free_a = mu[active], best_mu[active], best_free[active]
+        new = _clamp(mu_a + step, low, high)
         trial = objective(active, new, True, False)
         evaluations += active.numel()
-        steps[active] += 1
+        steps[active] += on
         finite = torch.isfinite(trial.free)
-        mu[active] = torch.where(finite[:, None], new, best_mu[active])
-        free[active] = torch.where(finite, trial.free, best_free[active])
-        grad[active] = torch.where(finite[:, None], trial.grad, grad[active])
+        mu_a = torch.where(on[:, None], torch.where(finite[:, None], new, best_mu_a), mu_a)
+        free[active] = torch.where(on, torch.where(finite, trial.free, best_free_a), free[active])
+        grad_a = torch.where((on & finite)[:, None], trial.grad, g)
         energy = sum(trial.errors.values())                                  # E: the scale of F's float noise
-        better = finite & (trial.free < best_free[active])
-        gained = better & (trial.free < best_free[active] - F_NOISE * energy)   # progress beyond float noise
-        acc = active[better]
-        best_mu[acc], best_free[acc], best_grad[acc] = new[better], trial.free[better], trial.grad[better]
+        better = on & finite & (trial.free < best_free_a)
+        gained = better & (trial.free < best_free_a - F_NOISE * energy)      # progress beyond float noise
+        best_mu_a = torch.where(better[:, None], new, best_mu_a)
+        best_grad_a = torch.where(better[:, None], trial.grad, best_grad[active])
+        best_mu[active], best_free[active] = best_mu_a, torch.where(better, trial.free, best_free_a)
+        best_grad[active] = best_grad_a
         for k, v in trial.errors.items():
-            best_errors[k][acc] = v[better]
-        since[active] = torch.where(gained, 0, since[active] + 1)
-        plateau = active[(since[active] >= patience) | ~finite]
-        if plateau.numel():                                                      # halve the step, restart at best
-            rate[plateau] *= 0.5
-            since[plateau] = 0
-            mu[plateau], grad[plateau], age[plateau] = best_mu[plateau], best_grad[plateau], 0
-            m1[plateau], m2[plateau] = 0.0, 0.0
-        done = rate[active] < tol
-        converged[active[done]] = True
-        active = active[~done]
+            best_errors[k][active] = torch.where(better, v, best_errors[k][active])
+        since_a = torch.where(on, torch.where(gained, 0, since[active] + 1), since[active])
+        plateau = on & ((since_a >= patience) | ~finite)                    # halve the step, restart at best
+        rate_a = torch.where(plateau, rate_a * 0.5, rate_a)
+        rate[active], since[active] = rate_a, torch.where(plateau, 0, since_a)
+        mu[active] = torch.where(plateau[:, None], best_mu_a, mu_a)
+        grad[active] = torch.where(plateau[:, None], best_grad_a, grad_a)
+        age[active] = torch.where(plateau, 0.0, a)
+        m1[active] = torch.where(plateau[:, None], 0.0, m1_a)
+        m2[active] = torch.where(plateau[:, None], 0.0, m2_a)
+        converged[active] = converged[active] | (on & (rate_a < tol))
     return DescentResult(best_mu, best_free, steps, converged, diverged, evaluations, rec.rows)
 
 
@@ -216,10 +231,10 @@ def _rows(terms: Terms, ok: torch.Tensor) -> Terms:
 
 def adam_then_lm(objective: Objective, mu0: torch.Tensor, low, high, *, max_steps: int, tol: float, lr: float,
                  patience: int, handover: float, max_step: float | None, record: bool,
-                 trial_derivatives: bool = False) -> DescentResult:
+                 trial_derivatives: bool = False, check_every: int = 1) -> DescentResult:
     """Adam until its step is below `handover` rad, then Levenberg–Marquardt (λ₀ = 0.1) from its best belief."""
     first = adam(objective, mu0, low, high, max_steps=max_steps, tol=handover, lr=lr, patience=patience,
-                 max_step=max_step, record=record)
+                 max_step=max_step, record=record, check_every=check_every)
     second = levenberg_marquardt(objective, first.mu, low, high, max_steps=max_steps, tol=tol, damping=0.1,
                                  max_step=max_step, record=record, trial_derivatives=trial_derivatives)
     trajectory = None

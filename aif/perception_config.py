@@ -79,11 +79,15 @@ class AdamSettings:
     lr: float = 0.02               # adam: initial step per joint, rad
     patience: int = 5              # adam: steps without a new best F before the step halves
     handover: float = 1e-2         # adam+lm: Adam's step (rad) below which LM takes over (one halving of lr)
+    check_every: int = 4           # steps between two compactions of the batch to the trials still running (stopped
+                                   # ones stay masked in between, results unchanged): fewer read-backs per step
 
     def __post_init__(self):
         _positive(self, "lr", "handover")
         if self.patience < 1:
             raise ValueError(must_be("patience", "at least 1", self.patience))
+        if self.check_every < 1:
+            raise ValueError(must_be("check_every", "at least 1", self.check_every))
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,61 @@
+"""Adam's batch compacted every `check_every` steps (aif/descent.py): a trial that stopped stays masked in between,
+so every K gives the rows of compacting every step: the same steps, the same convergence, the same beliefs (exactly
+for a model whose rows do not depend on the batch; within 1e-6 rad for a float32 network, whose float results may)."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from bodyschema.aif import descent
+from bodyschema.aif.perception import Perception, PerceptionConfig
+from bodyschema.aif.perception_config import AdamSettings
+from tests.aif.toys import ToyBlobImage, perturb, planar_poses
+from tests.toy_models import ToyPlanarArm
+
+
+def _infer(model, method: str, k: int, n: int = 40):
+    q = planar_poses(n, seed=3)
+    obs = {model.modality: model.predict(q)}
+    config = PerceptionConfig(method=method, record=False, adam=AdamSettings(check_every=k))
+    return Perception([model], config).infer(obs, perturb(q, seed=4, max_rad=0.4))
+
+
+@pytest.mark.parametrize("method", ["adam", "adam+lm"])
+@pytest.mark.parametrize("make", [ToyPlanarArm, ToyBlobImage], ids=["kinematics", "blob-image"])
+@pytest.mark.parametrize("k", [2, 4, 7])
+def test_compacting_every_k_steps_gives_the_rows_of_every_step(make, method, k):
+    one, every_k = _infer(make(), method, 1), _infer(make(), method, k)
+    assert torch.equal(one.steps, every_k.steps)
+    assert torch.equal(one.converged, every_k.converged)
+    assert torch.equal(one.mu, every_k.mu)
+    assert torch.equal(one.F, every_k.F)
+    assert one.steps.min() < one.steps.max()                              # trials stopped at different steps
+
+
+def test_trials_stop_at_different_steps_and_the_stopped_ones_are_still_evaluated_until_a_compaction():
+    """The evaluations count the masked trials carried to the next compaction: more than compacting every step,
+    at most K − 1 more per trial."""
+    model, k = ToyPlanarArm(), 4
+    one, every_k = _infer(model, "adam", 1), _infer(model, "adam", k)
+    assert one.evaluations <= every_k.evaluations <= one.evaluations + (k - 1) * len(one.steps)
+
+
+def test_recording_compacts_every_step_so_the_trajectory_is_unchanged():
+    model = ToyPlanarArm()
+    q = planar_poses(6, seed=3)
+    obs = {"ee_xyz": model.predict(q)}
+    runs = [Perception([model], PerceptionConfig(method="adam", record=True, adam=AdamSettings(check_every=k)))
+            .infer(obs, perturb(q, seed=4)) for k in (1, 5)]
+    for name in runs[0].trajectory:
+        assert torch.equal(runs[0].trajectory[name].nan_to_num(-9), runs[1].trajectory[name].nan_to_num(-9)), name
+
+
+def test_check_every_must_be_positive():
+    with pytest.raises(ValueError, match="check_every"):
+        AdamSettings(check_every=0)
+
+
+def test_the_default_compacts_every_few_steps():
+    assert 1 < AdamSettings().check_every <= 8
+    assert descent.adam.__kwdefaults__["check_every"] == 1                # the function itself: every step
