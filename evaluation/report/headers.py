@@ -25,6 +25,9 @@ NAMES = {
     "t_half_s": "time to half drift (s)",
     "settle_s": "settling time (s)",
     "wall_s": "wall time (s)",
+    "success": "success (fraction)",           # the share of trials that succeeded, 0–1 (a mean of booleans)
+    "goal_success": "goal success (fraction)",
+    "converged": "converged (fraction)",
     "run_id": "source run",
     "sha256": "weights SHA-256",
     "sigma": "σ",

@@ -16,14 +16,18 @@ from urllib.parse import unquote
 
 from bodyschema.evaluation.report.confined import resolved
 
-# A table never runs past the page's right edge: header words and text cells wrap first (the headers are words,
-# headers.py; a number stays on one line: 2.48e-05 is not broken at its '-'), and a table still wider than the text
-# scrolls sideways inside its section (display:block + overflow-x, as GitHub shows tables), its cells never cut.
+# A table never runs past the page's right edge: header words and text cells wrap first, a long unbroken word too
+# (a 64-hex sha256, a models:/ spec, a run id: overflow-wrap:anywhere, else the models table ran 40rem past the
+# 60rem column); a number stays on one line (2.48e-05 is not broken at its '-'). A table still wider than the text
+# (many number columns) scrolls sideways inside its own box (TABLE_BOX, wrapped around every table), never cut.
+TABLE_BOX = "table-scroll"
 STYLE = ("body{font-family:system-ui,sans-serif;max-width:60rem;margin:2rem auto;padding:0 1rem;line-height:1.45}"
-         "table{border-collapse:collapse;margin:1rem 0;display:block;max-width:100%;overflow-x:auto;font-size:.9em}"
-         "th,td{border:1px solid #ccc;padding:.2rem .45rem}th{background:#f3f3f3;vertical-align:bottom}"
-         "td.number{white-space:nowrap}img{max-width:100%}pre{background:#f6f6f6;padding:.6rem;overflow-x:auto}"
-         "code{background:#f6f6f6}")
+         f".{TABLE_BOX}{{max-width:100%;overflow-x:auto;margin:1rem 0}}"
+         "table{border-collapse:collapse;font-size:.9em}"
+         "th,td{border:1px solid #ccc;padding:.2rem .45rem;overflow-wrap:anywhere}"
+         "th{background:#f3f3f3;vertical-align:bottom}"
+         "td.number{white-space:nowrap;overflow-wrap:normal}img{max-width:100%}"
+         "pre{background:#f6f6f6;padding:.6rem;overflow-x:auto}code{background:#f6f6f6}")
 NUMBER_CELL = re.compile(r"^[-+−]?(\d[\d.,]*(e[-+]?\d+)?( ?%)?|nan|inf|–)( ± \S+)?$", re.I)   # 1.86 ± 0.45, nan
 LINK = re.compile(r"(!?)\[([^\]]*)\]\(([^)\s]+)\)")    # page.py rewrites summary.md links with it
 
@@ -45,6 +49,10 @@ def _parser():
     md.add_render_rule("heading_open", _heading_open)
     md.add_render_rule("image", _image)
     md.add_render_rule("td_open", _td_open)
+    md.add_render_rule("table_open", lambda self, tokens, idx, options, env:
+                       f'<div class="{TABLE_BOX}">\n' + self.renderToken(tokens, idx, options, env))
+    md.add_render_rule("table_close", lambda self, tokens, idx, options, env:
+                       self.renderToken(tokens, idx, options, env) + "</div>\n")
     return md
 
 

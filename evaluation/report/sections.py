@@ -8,12 +8,14 @@ never a section: it is listed as skipped, and naming it with `--runs` is the hou
 
 from __future__ import annotations
 
+import csv
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from bodyschema.errors import must_be
 from bodyschema.evaluation.core.runs import (
+    MODELS_CSV,
     is_benchmark_folder,
     is_complete,
     is_run_folder,
@@ -39,13 +41,14 @@ class Section:
     summary: str                       # the summary.md text
     robot: str | None = None           # the robot the run names (its label), None: none
     benchmark: str | None = None       # the registry key (pipeline.benchmark_of), None: not a registered benchmark
+    models: str | None = None          # the models, where the robot has runs of several (`levels · nao_arm · …gpr`)
     plots: list[Path] = field(default_factory=list)
     tables: list[Path] = field(default_factory=list)
 
     @property
     def name(self) -> str:
         """The section's heading: its folder, and its robot (`reaching · panda`)."""
-        return " · ".join(filter(None, (self.folder_name, self.robot)))
+        return " · ".join(filter(None, (self.folder_name, self.robot, self.models)))
 
 
 def find_sections(results: Path, stale_after_s: float = 3600.0, runs=()
@@ -77,6 +80,7 @@ def find_sections(results: Path, stale_after_s: float = 3600.0, runs=()
         name = bench_folder.relative_to(results).as_posix()
         record = read_run_record(folder)                         # {} for a plain folder or a run older than it
         sections.append(Section(name, folder, summary_path, text, run_robot(folder), benchmark_of(record, name)))
+    _name_models(sections)
     owned = [s.folder for s in sections]
     skipped += [(top, "outputs but no summary.md") for top in _unreported(results, owned)]
     for section in sections:
@@ -96,14 +100,62 @@ def _folders(results: Path, depth: int = 1, runs=()):
     benchmark)."""
     for child in sorted(p for p in results.iterdir() if p.is_dir() and not p.name.startswith((".", "_"))):
         if is_benchmark_folder(child):
-            chosen = latest_runs(child)
-            for run in (r for r in runs if r.parent == child.resolve()):      # a named run replaces its robot's latest
-                chosen[run_robot(run)] = child / run.name
-            yield from (chosen[robot] for robot in sorted(chosen, key=lambda r: r or ""))
+            chosen = latest_per_model(child)
+            for run in (r for r in runs if r.parent == child.resolve()):      # a named run replaces its own latest
+                chosen[(run_robot(run), models_of(run))] = child / run.name
+            yield from (chosen[key] for key in sorted(chosen, key=lambda k: (k[0] or "", k[1])))
         else:
             yield child
             if depth < MAX_DEPTH:
                 yield from _folders(child, depth + 1, runs)
+
+
+def latest_per_model(root: Path) -> dict[tuple[str | None, tuple[str, ...]], Path]:
+    """The latest run of each robot *and models* under `root`: (robot label, model specs) → run folder. Each robot's
+    `latest`/`latest-<robot>` run counts for its models; a newer run with other models no longer hides an older one
+    (a pixel levels run replaced the GPR one on the same robot): for those, the newest complete run by its name (the
+    UTC start). A run without run.json (older than it) counts only through the links, as before."""
+    chosen = {(robot, models_of(run)): run for robot, run in latest_runs(root).items()}
+    robots = {robot for robot, _ in chosen}
+    for run in sorted((r for r in root.iterdir() if is_run_folder(r) and is_complete(r)), reverse=True):
+        robot = run_robot(run)
+        if robot in robots and read_run_record(run):
+            chosen.setdefault((robot, models_of(run)), run)
+    return chosen
+
+
+def _name_models(sections: list[Section]) -> None:
+    """Sections of one benchmark and robot with other models: each heading names its models (registered names, else
+    the specs), so both stay apart; a robot's only section keeps its heading (`levels · nao_arm`)."""
+    groups: dict[tuple, list[Section]] = {}
+    for section in sections:
+        groups.setdefault((section.folder_name, section.robot), []).append(section)
+    for group in (g for g in groups.values() if len(g) > 1):
+        for section in group:
+            names = [row.get("name") or row.get("spec") or "" for row in _models_rows(section.folder)]
+            section.models = " + ".join(filter(None, names)) or " + ".join(models_of(section.folder)) or "no models"
+
+
+def _models_rows(run: Path) -> list[dict]:
+    path = run / MODELS_CSV
+    if not (path.is_file() and is_inside(path, run)):
+        return []
+    try:
+        with open(path, newline="", encoding="utf-8") as f:
+            return list(csv.DictReader(f))
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return []
+
+
+def models_of(run: Path) -> tuple[str, ...]:
+    """The model specs a run used: models.csv's `spec` column (defaults included), else its run.json's `models`
+    field as given; () for a benchmark that records none."""
+    specs = tuple(row.get("spec") or "" for row in _models_rows(run))
+    if any(specs):
+        return specs
+    given = read_run_record(run).get("fields", {})
+    models = given.get("models") if isinstance(given, dict) else None
+    return tuple(map(str, models)) if isinstance(models, (list, tuple)) else ()
 
 
 def _incomplete(results: Path, depth: int = 1) -> list[Path]:

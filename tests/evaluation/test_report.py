@@ -362,9 +362,9 @@ def test_a_wide_table_wraps_or_scrolls_inside_its_section(results):
     page = write_report(ReportConfig(results=results))["html"].read_text()
     rules = css_rules(page)
     assert rules == css_rules(f"<style>{STYLE}</style>")
-    table = dict(d.split(":", 1) for d in rules["table"].split(";"))
-    assert table["display"] == "block" and table["max-width"] == "100%" and table["overflow-x"] == "auto", \
-        "a table wider than the text scrolls inside it instead of running past the page's edge"
+    box = dict(d.split(":", 1) for d in rules[".table-scroll"].split(";"))
+    assert box["max-width"] == "100%" and box["overflow-x"] == "auto", \
+        "a table wider than the text scrolls inside its box instead of running past the page's edge"
     assert "nowrap" not in rules["th,td"] + rules.get("th", ""), "header words and text cells may wrap"
     assert "white-space:nowrap" in rules["td.number"], "a number is never broken at its '-'"
     assert '<td class="number">2.201e-05</td>' in markdown_to_html("| a | b |\n|---|---|\n| x y | 2.201e-05 |\n")
