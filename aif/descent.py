@@ -158,70 +158,88 @@ def adam(objective: Objective, mu0: torch.Tensor, low, high, *, max_steps: int, 
          patience: int, max_step: float | None, record: bool, check_every: int = 1) -> DescentResult:
     """Batched Adam on F from mu0 (B, Dz) rad: step lr rad per joint, halved on a plateau of `patience` steps.
 
-    The batch is compacted to the trials still running only every `check_every` steps (1 when recording): between
-    two compactions a trial that stopped stays in the batch, masked (`on`), its state frozen exactly where it
-    stopped, so the results are those of compacting every step. Every update is a masked `where` on the active rows,
-    never a boolean index, so the loop reads nothing back from the tensors but at a compaction (a host
-    synchronisation on a GPU)."""
+    The running trials' state lives in tensors of the running rows only (no gather/scatter of (B, …) tensors per
+    step); the batch is compacted when a trial stops. Whether one did is read back (a host synchronisation on a GPU)
+    every `check_every` steps (1 when recording): in between, a trial that stopped stays in the batch frozen where
+    it stopped (masked), so its result is that of every step's check, but the rows still running are evaluated in a
+    larger batch, which a float32 network may round differently (README, levels)."""
     b, dz = mu0.shape
-    mu, t, steps, converged, diverged, rec, active = _start(objective, mu0, low, high, False, record)
-    free, grad, errors = t.free.clone(), t.grad.clone(), dict(t.errors)
+    mu_full, t, steps, converged, diverged, rec, active = _start(objective, mu0, low, high, False, record)
+    best_mu_full, best_free_full = mu_full.clone(), t.free.clone()
+    mu, free, grad = mu_full[active], t.free[active], t.grad[active]        # (b_a, Dz), (b_a,), (b_a, Dz)
     best_mu, best_free, best_grad = mu.clone(), free.clone(), grad.clone()
-    best_errors = {k: v.clone() for k, v in errors.items()}
+    best_errors = {k: v[active] for k, v in t.errors.items()}
     m1, m2 = torch.zeros_like(mu), torch.zeros_like(mu)
-    age = torch.zeros(b, dtype=torch.float64)            # steps since the moments were reset
-    rate = torch.full((b,), float(lr), dtype=torch.float64)
-    since = torch.zeros(b, dtype=torch.long)             # steps without a new best F
+    age = torch.zeros(len(active), dtype=torch.float64)  # steps since the moments were reset
+    rate = torch.full((len(active),), float(lr), dtype=torch.float64)
+    since = torch.zeros(len(active), dtype=torch.long)   # steps without a new best F
+    taken = torch.zeros(len(active), dtype=torch.long)   # updates performed
+    stopped = torch.zeros(len(active), dtype=torch.bool)
     evaluations = b
     b1, b2 = ADAM_BETAS
     every = 1 if record else max(1, int(check_every))
+    held = _held if every > 1 else _all                                     # every step's check: nothing is masked
     for i in range(max_steps):
-        if i % every == 0:                                                   # compaction: the one read-back
-            active = active[~converged[active]]
-            if active.numel() == 0:
-                break
-        on = ~converged[active]                                              # (b_a,) still stepping
-        rec.add(active, best_mu[active], best_free[active], {k: v[active] for k, v in best_errors.items()})
-        g = grad[active]
-        a = age[active] + on
-        age[active] = a
-        m1_a = torch.where(on[:, None], b1 * m1[active] + (1 - b1) * g, m1[active])
-        m2_a = torch.where(on[:, None], b2 * m2[active] + (1 - b2) * g * g, m2[active])
-        m_hat, v_hat = m1_a / (1 - b1 ** a[:, None]), m2_a / (1 - b2 ** a[:, None])
+        if len(active) == 0:
+            break
+        rec.add(active, best_mu, best_free, best_errors)
+        on = ~stopped                                                         # (b_a,) still stepping
+        age = age + on
+        m1 = held(on[:, None], b1 * m1 + (1 - b1) * grad, m1)
+        m2 = held(on[:, None], b2 * m2 + (1 - b2) * grad * grad, m2)
+        m_hat, v_hat = m1 / (1 - b1 ** age[:, None]), m2 / (1 - b2 ** age[:, None])
         root = v_hat.sqrt()
         eps = 1e-12 * root.amax(-1, keepdim=True) + 1e-300                     # scale-free: Π may be 1e6 or 1
-        rate_a = rate[active]
-        step = _bound(-rate_a[:, None] * m_hat / (root + eps), max_step)
-        step = torch.where(on[:, None], step, 0.0)                          # a stopped trial is evaluated in place
-        mu_a, best_mu_a, best_free_a = mu[active], best_mu[active], best_free[active]
-        new = _clamp(mu_a + step, low, high)
+        step = _bound(-rate[:, None] * m_hat / (root + eps), max_step)
+        step = held(on[:, None], step, 0.0)                                  # a stopped trial is evaluated in place
+        new = _clamp(mu + step, low, high)
         trial = objective(active, new, True, False)
-        evaluations += active.numel()
-        steps[active] += on
+        evaluations += len(active)
+        taken += on
         finite = torch.isfinite(trial.free)
-        mu_a = torch.where(on[:, None], torch.where(finite[:, None], new, best_mu_a), mu_a)
-        free[active] = torch.where(on, torch.where(finite, trial.free, best_free_a), free[active])
-        grad_a = torch.where((on & finite)[:, None], trial.grad, g)
+        live = held(on, finite, False)
+        mu = held(on[:, None], torch.where(finite[:, None], new, best_mu), mu)
+        free = held(on, torch.where(finite, trial.free, best_free), free)
+        grad = torch.where(live[:, None], trial.grad, grad)
         energy = sum(trial.errors.values())                                  # E: the scale of F's float noise
-        better = on & finite & (trial.free < best_free_a)
-        gained = better & (trial.free < best_free_a - F_NOISE * energy)      # progress beyond float noise
-        best_mu_a = torch.where(better[:, None], new, best_mu_a)
-        best_grad_a = torch.where(better[:, None], trial.grad, best_grad[active])
-        best_mu[active], best_free[active] = best_mu_a, torch.where(better, trial.free, best_free_a)
-        best_grad[active] = best_grad_a
-        for k, v in trial.errors.items():
-            best_errors[k][active] = torch.where(better, v, best_errors[k][active])
-        since_a = torch.where(on, torch.where(gained, 0, since[active] + 1), since[active])
-        plateau = on & ((since_a >= patience) | ~finite)                    # halve the step, restart at best
-        rate_a = torch.where(plateau, rate_a * 0.5, rate_a)
-        rate[active], since[active] = rate_a, torch.where(plateau, 0, since_a)
-        mu[active] = torch.where(plateau[:, None], best_mu_a, mu_a)
-        grad[active] = torch.where(plateau[:, None], best_grad_a, grad_a)
-        age[active] = torch.where(plateau, 0.0, a)
-        m1[active] = torch.where(plateau[:, None], 0.0, m1_a)
-        m2[active] = torch.where(plateau[:, None], 0.0, m2_a)
-        converged[active] = converged[active] | (on & (rate_a < tol))
-    return DescentResult(best_mu, best_free, steps, converged, diverged, evaluations, rec.rows)
+        better = live & (trial.free < best_free)
+        gained = better & (trial.free < best_free - F_NOISE * energy)        # progress beyond float noise
+        best_mu = torch.where(better[:, None], new, best_mu)
+        best_free = torch.where(better, trial.free, best_free)
+        best_grad = torch.where(better[:, None], trial.grad, best_grad)
+        best_errors = {k: torch.where(better, v, best_errors[k]) for k, v in trial.errors.items()}
+        since = held(on, torch.where(gained, 0, since + 1), since)
+        plateau = held(on, (since >= patience) | ~finite, False)                       # halve the step, restart at best
+        rate = torch.where(plateau, rate * 0.5, rate)
+        since = torch.where(plateau, 0, since)
+        mu = torch.where(plateau[:, None], best_mu, mu)
+        grad = torch.where(plateau[:, None], best_grad, grad)
+        age = torch.where(plateau, 0.0, age)
+        m1 = torch.where(plateau[:, None], 0.0, m1)
+        m2 = torch.where(plateau[:, None], 0.0, m2)
+        stopped = stopped | (rate < tol)
+        if (i + 1) % every == 0 and bool(stopped.any()):                    # the one read-back: compact the batch
+            done, keep = stopped.nonzero().squeeze(-1), (~stopped).nonzero().squeeze(-1)
+            rows = active[done]
+            best_mu_full[rows], best_free_full[rows], steps[rows] = best_mu[done], best_free[done], taken[done]
+            converged[rows] = True
+            active, mu, free, grad, best_mu, best_free, best_grad, m1, m2, age, rate, since, taken, stopped = (
+                x[keep] for x in (active, mu, free, grad, best_mu, best_free, best_grad, m1, m2, age, rate, since,
+                                  taken, stopped))
+            best_errors = {k: v[keep] for k, v in best_errors.items()}
+    converged[active] = stopped                                              # the rows left at the last step
+    best_mu_full[active], best_free_full[active], steps[active] = best_mu, best_free, taken
+    return DescentResult(best_mu_full, best_free_full, steps, converged, diverged, evaluations, rec.rows)
+
+
+def _held(on: torch.Tensor, value, frozen):
+    """value where the trial still steps, else frozen (a stopped trial waiting for the next compaction)."""
+    return torch.where(on, value, frozen)
+
+
+def _all(on: torch.Tensor, value, frozen):
+    """value: with every step's check no stopped trial is left in the batch."""
+    return value
 
 
 def _rows(terms: Terms, ok: torch.Tensor) -> Terms:
