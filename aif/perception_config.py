@@ -81,8 +81,9 @@ class AdamSettings:
     handover: float = 1e-2         # adam+lm: Adam's step (rad) below which LM takes over (one halving of lr)
     check_every: int = 1           # adam: steps between two reads of whether a trial stopped (a host sync on a GPU);
                                    # > 1: stopped trials stay in the batch, masked, a float32 network may round the
-                                   # others' rows differently (measured K=4, 16×16 decoder: ≤ 4.9e-5 rad on 3 of 500
-                                   # trials, 3.4e-3 rad at 50 trials): 1, exact, unless a read-back costs (GPU)
+                                   # others' rows differently, which the descent can amplify (measured K=4, 16×16
+                                   # decoder: ≤ 4.9e-5 rad at 500 trials, up to 9.7e-3 rad at 50): 1, exact, unless a
+                                   # read-back costs (a GPU)
 
     def __post_init__(self):
         _positive(self, "lr", "handover")
