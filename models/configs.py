@@ -104,7 +104,7 @@ class PixelConfig(ModelConfig):
     precision: float | None = None  # fixed Π_x per pixel; None: 1/σ² of the validation residuals
     epochs: int = 100  # at most this many passes over the training set
     batch_size: int = 64  # images per gradient step
-    lr: float = 2e-3  # Adam learning rate
+    lr: float | None = None  # Adam learning rate; None: the preset's (lean 2e-3, pixel_aif 5e-4)
     patience: int = 10  # stop after this many epochs without a better validation loss
     weight_decay: float = 0.0  # Adam's L2 penalty
 

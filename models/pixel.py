@@ -8,7 +8,8 @@ finite-difference checks and gradient descent), channels_last for oneDNN, and th
 centre crop of the last stage (any H, W; C = 1 or more). The precision is one fixed number per pixel: a
 hyper-parameter, or 1/σ² with σ² the mean squared residual on the validation set (train set without one).
 
-Two named capacities (`size`): "lean" (FC 64, channels 32/16/8) and "pixel_aif", the size of Pixel-AIF's
+Two named capacities (`size`), each with its Adam step: "lean" (FC 64, channels 32/16/8, lr 2e-3) and
+"pixel_aif" (lr 5e-4: at 2e-3 it can collapse to a black image, see SIZES), the size of Pixel-AIF's
 NAO decoder (FC 4→512→1120 = 16×7×10 at 56×80, transposed convolutions 16→64→16→C, each but the last
 followed by a 3×3 convolution of the same width, which Pixel-AIF adds against checkerboard artifacts).
 Unlike Pixel-AIF it keeps ELU for ReLU and has no dropout: the AIF update differentiates g, and a seed must
@@ -32,9 +33,12 @@ from bodyschema.models.scaling import BodySpec
 ONEDNN_MIN_BATCH = 4   # latents per inference call from which oneDNN's convolutions pay: below, its per-call setup
 # outweighs these small layers (one camera's frame; bench/conv_backend.py, 1 thread: at B = 1 predict 0.70×, the
 # Jacobian 0.83×, forward + VJP 0.85× the time with it; from B = 4 the VJP, from B = 32 every call, is slower without)
-SIZES = {   # name → capacity; an explicit fc_hidden / channels / refine overrides the preset's value
-    "lean": {"fc_hidden": 64, "channels": (32, 16, 8), "refine": False},      # 56×80: 7×10×32 → … → 56×80
-    "pixel_aif": {"fc_hidden": 512, "channels": (16, 64, 16), "refine": True},  # 56×80: 7×10×16 = 1120 → …
+SIZES = {   # name → capacity and its Adam step; an explicit fc_hidden / channels / refine / lr overrides the preset's
+    "lean": {"fc_hidden": 64, "channels": (32, 16, 8), "refine": False, "lr": 2e-3},       # 56×80: 7×10×32 → …
+    # lr 5e-4: at lean's 2e-3 its first epoch's steps blow up the unnormalised conv stack (ELU outputs' mean 4, 8, 12
+    # after the refines) and the last layer lands at -40 on every pixel: a black image, σ' ≈ e⁻⁴⁰, no gradient back
+    # (nao_arm 64×64, 600 images: held-out MSE frozen at 0.0317 from epoch 2, pose variation 0; bench/decoder_rule.py)
+    "pixel_aif": {"fc_hidden": 512, "channels": (16, 64, 16), "refine": True, "lr": 5e-4},  # 56×80: 7×10×16 = 1120
 }
 
 
@@ -147,7 +151,7 @@ class PixelDecoder(NetModel, BaseSensoryModel):
                  channels: tuple[int, ...] | None = None,   # one ×2 upsampling per entry; None: the preset's
                  refine: bool | None = None,                # 3×3 conv after each upsampling; None: the preset's
                  precision: float | None = None,            # None: 1/σ² from the validation residuals
-                 epochs: int = 100, batch_size: int = 64, lr: float = 2e-3, patience: int = 10,
+                 epochs: int = 100, batch_size: int = 64, lr: float | None = None, patience: int = 10,
                  weight_decay: float = 0.0):
         super().__init__(body, modality, output_shape)
         image_layout(self.output_shape)
@@ -163,6 +167,7 @@ class PixelDecoder(NetModel, BaseSensoryModel):
             raise ValueError(must_be("precision", "> 0 or None (fitted)", precision))
         self.size, self.fc_hidden, self.channels, self.fixed_precision = size, fc_hidden, tuple(channels), precision
         self.refine = bool(preset["refine"] if refine is None else refine)
+        lr = preset["lr"] if lr is None else lr                  # None: the preset's
         self.settings = TrainSettings(epochs, batch_size, lr, patience, weight_decay)
         self.precision_: float | None = None
         self.fit_info_: dict = {}
