@@ -37,7 +37,8 @@ SIZES = {   # name → capacity and its Adam step; an explicit fc_hidden / chann
     "lean": {"fc_hidden": 64, "channels": (32, 16, 8), "refine": False, "lr": 2e-3},       # 56×80: 7×10×32 → …
     # lr 5e-4: at lean's 2e-3 its first epoch's steps blow up the unnormalised conv stack (ELU outputs' mean 4, 8, 12
     # after the refines) and the last layer lands at -40 on every pixel: a black image, σ' ≈ e⁻⁴⁰, no gradient back
-    # (nao_arm 64×64, 600 images: held-out MSE frozen at 0.0317 from epoch 2, pose variation 0; bench/decoder_rule.py)
+    # (nao_arm 64×64, 600 images: held-out MSE frozen at 0.0317 from epoch 2, pose variation 0; bench/decoder_rule.py;
+    # at 56×80 too): not the image size, the step size
     "pixel_aif": {"fc_hidden": 512, "channels": (16, 64, 16), "refine": True, "lr": 5e-4},  # 56×80: 7×10×16 = 1120
 }
 
