@@ -10,7 +10,7 @@ fast and pulls in neither torch nor MuJoCo):
     belief   = bodyschema.Perception([model]).infer({"ee_xyz": x}, mu0)   # numpy or torch in, tensors out
     champion = bodyschema.load_registered("models:/bodyschema-nao_arm-ee_xyz-gpr@champion")
 
-Model kinds: GPRModel, SklearnGPRModel, MDNModel, PixelDecoder, MultimodalModel, ImageEncoder, AnalyticModel
+Model kinds: GPRModel, SVGPModel, SklearnGPRModel, MDNModel, PixelDecoder, MultimodalModel, ImageEncoder, AnalyticModel
 (`load_model(dir)` reads any saved one). Datasets: generate / DatagenConfig, load_dataset, validate_store,
 show_store, export_dataset. Models out: export_onnx. Perception: Perception, PerceptionConfig, infer_multistart;
 of a stream, frame by frame: Tracker, TrackerConfig.
@@ -36,7 +36,8 @@ _EXPORTS = {   # public name → module defining it (imported on first access)
     "load_dataset": "bodyschema.training.data", "Dataset": "bodyschema.training.data",
     "BodySpec": "bodyschema.models.scaling", "SensoryModel": "bodyschema.models.contract",
     "load_model": "bodyschema.models.contract",
-    "GPRModel": "bodyschema.models.gpr", "SklearnGPRModel": "bodyschema.models.sklearn_gpr",
+    "GPRModel": "bodyschema.models.gpr", "SVGPModel": "bodyschema.models.svgp",
+    "SklearnGPRModel": "bodyschema.models.sklearn_gpr",
     "MDNModel": "bodyschema.models.mdn", "PixelDecoder": "bodyschema.models.pixel",
     "MultimodalModel": "bodyschema.models.multimodal", "ImageEncoder": "bodyschema.models.encoder",
     "AnalyticModel": "bodyschema.models.analytic", "export_onnx": "bodyschema.models.onnx_export",

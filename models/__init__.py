@@ -10,7 +10,8 @@ from bodyschema.lazy import lazy_exports
 
 # Every name is lazy, the contract's too: `bodyschema.models.configs` and `kinds` (the CLI's `train` flags) must
 # import without torch, and importing them runs this file first.
-_KIND_CLASSES = {"GPRModel": "gpr", "SklearnGPRModel": "sklearn_gpr", "MDNModel": "mdn", "PixelDecoder": "pixel",
+_KIND_CLASSES = {"GPRModel": "gpr", "SVGPModel": "svgp", "SklearnGPRModel": "sklearn_gpr", "MDNModel": "mdn",
+                 "PixelDecoder": "pixel",
                  "MultimodalModel": "multimodal", "MultimodalMember": "multimodal", "ImageEncoder": "encoder",
                  "AnalyticModel": "analytic", "export_onnx": "onnx_export", "BaseSensoryModel": "contract",
                  "SensoryModel": "contract", "load_model": "contract", "register_kind": "contract",
