@@ -16,15 +16,18 @@ from urllib.parse import unquote
 
 from bodyschema.evaluation.report.confined import resolved
 
-# A table never runs past the page's right edge: header words and text cells wrap first, a long unbroken word too
-# (a 64-hex sha256, a models:/ spec, a run id: overflow-wrap:anywhere, else the models table ran 40rem past the
-# 60rem column); a number stays on one line (2.48e-05 is not broken at its '-'). A table still wider than the text
-# (many number columns) scrolls sideways inside its own box (TABLE_BOX, wrapped around every table), never cut.
+# A table never runs past the page's right edge: header words and text cells wrap at spaces first; a cell with a long
+# unbroken word (a 64-hex sha256, a models:/ spec, a run id: class LONG_CELL) may break it anywhere, else the models
+# table ran 40rem past the 60rem column. Other words stay whole (overflow-wrap:anywhere on every cell let the layout
+# shrink a column to one letter: "floo|r", "epoc|hs"), and a number stays on one line (2.48e-05 is not broken at its
+# '-'). A table still wider than the text scrolls sideways inside its own box (TABLE_BOX, around every table).
 TABLE_BOX = "table-scroll"
+LONG_CELL, LONG_WORD = "long", 24      # characters: a sha256 (64), a run id (36); no header word or number is as long
 STYLE = ("body{font-family:system-ui,sans-serif;max-width:60rem;margin:2rem auto;padding:0 1rem;line-height:1.45}"
          f".{TABLE_BOX}{{max-width:100%;overflow-x:auto;margin:1rem 0}}"
          "table{border-collapse:collapse;font-size:.9em}"
-         "th,td{border:1px solid #ccc;padding:.2rem .45rem;overflow-wrap:anywhere}"
+         "th,td{border:1px solid #ccc;padding:.2rem .45rem;overflow-wrap:break-word}"
+         f"td.{LONG_CELL}{{overflow-wrap:anywhere}}"
          "th{background:#f3f3f3;vertical-align:bottom}"
          "td.number{white-space:nowrap;overflow-wrap:normal}img{max-width:100%}"
          "pre{background:#f6f6f6;padding:.6rem;overflow-x:auto}code{background:#f6f6f6}")
@@ -57,9 +60,13 @@ def _parser():
 
 
 def _td_open(self, tokens, idx, options, env) -> str:
-    """A cell holding a number gets class="number": it never wraps (STYLE)."""
-    if NUMBER_CELL.match(tokens[idx + 1].content.strip()):
+    """A cell holding a number gets class="number": it never wraps; one holding a long word class LONG_CELL: that
+    word may break anywhere (STYLE)."""
+    content = tokens[idx + 1].content.strip()
+    if NUMBER_CELL.match(content):
         tokens[idx].attrJoin("class", "number")
+    elif any(len(word) >= LONG_WORD for word in content.split()):
+        tokens[idx].attrJoin("class", LONG_CELL)
     return self.renderToken(tokens, idx, options, env)
 
 

@@ -96,7 +96,10 @@ def test_the_latest_run_of_each_model_is_reported_and_every_table_fits_the_page(
         tag, cls = table["parent"]
         assert tag == "div" and rules[f".{cls}"]["overflow-x"] == "auto" and rules[f".{cls}"]["max-width"] == "100%", \
             f"a table wider than the page's column scrolls inside its box: {table}"
-    assert rules["th,td"]["overflow-wrap"] == "anywhere", "a 64-hex digest or a models:/ spec wraps in its cell"
+    assert rules["td.long"]["overflow-wrap"] == "anywhere", "a 64-hex digest or a models:/ spec wraps in its cell"
+    assert rules["th,td"]["overflow-wrap"] == "break-word", "a short word is never split to narrow its column"
+    digests = re.findall(r'<td class="([^"]*)">[0-9a-f]{64}</td>', page)
+    assert digests and set(digests) == {"long"}, "the weights' sha256 cells may break anywhere"
     assert rules["td.number"]["white-space"] == "nowrap", "a number never breaks"
     level_headers = next(t["headers"] for t in parser.tables if "level" in t["headers"])
     assert {"success (fraction)", "converged (fraction)"} <= set(level_headers), level_headers
