@@ -4,6 +4,7 @@ and specs wrap), a later run with other models hides no run of the same benchmar
 
 import csv
 import re
+import time
 from dataclasses import dataclass
 from html.parser import HTMLParser
 from pathlib import Path
@@ -28,6 +29,7 @@ class LevelsLike:
 
 def levels_run(out: Path, spec: str, err: float, seed: int) -> Path:
     """A finished run with one model: summary.md (a table with success and converged), models.csv, latest moved."""
+    time.sleep(0.002)        # run ids order by their millisecond: two runs in one millisecond have no "later" one
     folder = new_run(LevelsLike(out, "nao_arm", (spec,), seed))
     (folder / "summary.md").write_text(f"Levels with {spec}.\n\n| level | mean_err_deg | success | converged |\n"
                                        f"|---|---|---|---|\n| 1 | {err} | 0.9 | 1.0 |\n")
