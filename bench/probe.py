@@ -36,6 +36,7 @@ sys.path.insert(0, str(REPO))
 
 import probe_library  # noqa: E402 — beside this file
 import probe_races  # noqa: E402
+from probe_tally import last_line, print_tally  # noqa: E402
 
 from tests.test_cli_fuzz import TYRO_PHRASES, VALIDATE_ANSWERS, build_world, snapshot  # noqa: E402 — after the repo root is on sys.path
 
@@ -108,10 +109,9 @@ def main() -> None:
                 print(f"[{total}] {outcome:<17} {module.__name__.split('.')[-1]}: {case_id}", file=sys.stderr,
                       flush=True)
                 if outcome != "clear error":
-                    tail = "" if done is None else (done.stderr.strip().splitlines() or [""])[-1][:200]
+                    tail = "" if done is None else last_line(done.stderr)
                     odd.append(f"- {case_id} ({outcome}): `{command}` {env or ''} → {tail}")
-    print(f"bad inputs {total}: " + " / ".join(f"{name} {tally[name]}" for name in OUTCOMES))
-    print("\n".join(odd))
+    print_tally("bad inputs", tally, OUTCOMES, odd)
     only = ["--only", args.only] if args.only else []
     if args.library:
         probe_library.main(only)

@@ -20,10 +20,13 @@ import tempfile
 from collections import Counter
 from pathlib import Path
 
+from probe_tally import last_line, print_tally
+
 OUTCOMES = ("clear error", "traceback", "silently accepted")
+GENERIC = '"bodyschema/Reach-v0", robot="{W}/rec.toml"'
 MAKE = "import gymnasium, bodyschema.envs; gymnasium.make({args}).reset(seed=0)"
 
-# (id, gymnasium.make arguments, the record's [sections] appended to planar2's own record, None: no record)
+# (id, gymnasium.make arguments, the keys and [tables] that replace planar2's own in its record, None: no record)
 CASES = [
     ("env-id-robot-mismatch", '"bodyschema/Reach-nao_arm-v0", robot="panda"', None),
     ("env-robot-unknown", '"bodyschema/Reach-v0", robot="mars"', None),
@@ -31,7 +34,7 @@ CASES = [
     ("env-record-joints-number", '"bodyschema/Reach-v0", robot="{W}/rec.toml"', "joints = 5\n"),
     ("env-record-joints-string", '"bodyschema/Reach-v0", robot="{W}/rec.toml"', 'joints = "j1"\n'),
     ("env-record-workspace-flat", '"bodyschema/Reach-v0", robot="{W}/rec.toml"',
-     "[workspaces]\nfull = [1.0, 2.0]\n"),
+     "[workspaces]\nfull = [1.0, 2.0]\ncamera = [[-2.5, 2.5], [-2.5, 2.5]]\n"),
     ("env-record-duration-negative", '"bodyschema/Reach-v0", robot="{W}/rec.toml"',
      "[reaching]\nduration_s = -1.0\n"),
     ("env-record-mesh-dir-number", '"bodyschema/Reach-v0", robot="{W}/rec.toml"', "mesh_dir = 5\n"),
@@ -40,26 +43,18 @@ CASES = [
 
 
 def record(world: Path, edit: str) -> None:
-    """planar2's record with its model copied beside it, and `edit` replacing the table (or key) it names."""
+    """planar2's record under a name of its own (a copy may not take the shipped name), its model copied beside it,
+    and `edit` replacing the table (or key) it names."""
     import tomllib
     from importlib.resources import files
 
+    from bodyschema.datagen.robot_record import dumps_toml
+
     robots = files("bodyschema.datagen") / "robots"
     (world / "planar2.xml").write_text((robots / "planar2.xml").read_text())
-    base = tomllib.loads((robots / "planar2.toml").read_text())
-    edited = tomllib.loads(edit)
-    for key, value in edited.items():
-        base[key] = value if not isinstance(value, dict) else {**base.get(key, {}), **value}
-    (world / "rec.toml").write_text(to_toml(base))
-
-
-def to_toml(table: dict, prefix: str = "") -> str:
-    """The few TOML shapes a robot record uses (scalars, lists, nested tables): the standard library only reads."""
-    import json
-
-    plain = [f"{k} = {json.dumps(v)}" for k, v in table.items() if not isinstance(v, dict)]
-    nested = [f"\n[{prefix}{k}]\n" + to_toml(v, f"{prefix}{k}.") for k, v in table.items() if isinstance(v, dict)]
-    return "\n".join(plain) + "\n" + "".join(nested)
+    base = {**tomllib.loads((robots / "planar2.toml").read_text()), "name": "rec"}
+    base.update(tomllib.loads(edit))
+    (world / "rec.toml").write_text(dumps_toml(base))
 
 
 def classify(done: subprocess.CompletedProcess | None) -> str:
@@ -67,7 +62,7 @@ def classify(done: subprocess.CompletedProcess | None) -> str:
         return "traceback"
     if done.returncode == 0:
         return "silently accepted"
-    last = (done.stderr.strip().splitlines() or [""])[-1]
+    last = last_line(done.stderr, width=10_000)
     return "clear error" if " must be " in last else "traceback"
 
 
@@ -89,16 +84,19 @@ def main(argv: list[str] | None = None) -> Counter:
     args = parser.parse_args(argv)
     tally, odd = Counter(), []
     with tempfile.TemporaryDirectory() as scratch:
+        control = run_case(Path(scratch), GENERIC, "")
+        if control is None or control.returncode != 0:       # else every case would fail for that one reason
+            raise SystemExit("the unedited record must build an environment. Got: "
+                             f"{'a hang' if control is None else last_line(control.stderr)}")
         for case_id, arguments, edit in (c for c in CASES if args.only in c[0]):
             done = run_case(Path(scratch), arguments, edit)
             outcome = classify(done)
             tally[outcome] += 1
             print(f"[library] {outcome:<17} {case_id}", file=sys.stderr, flush=True)
             if outcome != "clear error":
-                tail = "hang" if done is None else (done.stderr.strip().splitlines() or [""])[-1][:200]
+                tail = "hang" if done is None else last_line(done.stderr)
                 odd.append(f"- {case_id} ({outcome}): gymnasium.make({arguments}) {edit or ''!r} → {tail}")
-    print(f"library calls {sum(tally.values())}: " + " / ".join(f"{name} {tally[name]}" for name in OUTCOMES))
-    print("\n".join(odd))
+    print_tally("library calls", tally, OUTCOMES, odd)
     return tally
 
 

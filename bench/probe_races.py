@@ -29,6 +29,8 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from probe_tally import last_line, print_tally  # noqa: E402 — beside this file
+
 OUTCOMES = ("safe", "lost", "invalid", "unclear")
 SMALL = "--robot planar2 --n 48 --no-images --quiet"
 IMPORT = "--angles deg --robot planar2 --quiet"
@@ -160,10 +162,9 @@ def main(argv: list[str] | None = None) -> Counter:
                 total += 1
                 print(f"[race {total}] {outcome:<8} {race.name} (+{offset:g} s)", file=sys.stderr, flush=True)
                 if outcome != "safe":
-                    tails = [(e.strip().splitlines() or [""])[-1][:160] for e in errors]
+                    tails = [last_line(e, width=160) for e in errors]
                     odd.append(f"- {race.name} (+{offset:g} s, {outcome}): {tails}")
-    print(f"concurrency {total}: " + " / ".join(f"{name} {tally[name]}" for name in OUTCOMES))
-    print("\n".join(odd))
+    print_tally("concurrency", tally, OUTCOMES, odd)
     return tally
 
 
