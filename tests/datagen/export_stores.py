@@ -1,5 +1,6 @@
 """Small stores for the export tests: a babbling one (episodes, time, servo targets, RGB images, several shards), a
-uniform one (independent poses, no images), and a babbling one as datagen wrote it before it recorded targets."""
+uniform one (independent poses, no images), a babbling one as datagen wrote it before it recorded targets, and a
+babbling one's LeRobot export as another tool would have written it."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ from pathlib import Path
 import zarr
 
 from bodyschema.datagen.config import DatagenConfig
+from bodyschema.datagen.export import export_dataset
 from bodyschema.datagen.generate import generate
 from bodyschema.datagen.integrity import shard_digest
 from bodyschema.datagen.store import mark_shard_done
@@ -18,6 +20,15 @@ def babble_store(folder: Path) -> Path:
     """planar2, 150 samples in 4 episodes of 2 s at 20 Hz, 64-row shards, 24×32 RGB images."""
     return generate(DatagenConfig(robot="planar2", n=150, sampler="babble", episode_s=2.0, shard_size=64,
                                   image_size=(24, 32), rgb=True, out=folder / "babble.zarr"))
+
+
+def foreign_lerobot(folder: Path, name: str = "lerobot") -> tuple[Path, Path]:
+    """(babble_store, its LeRobot export at folder/name) with meta/bodyschema.json removed: no units, body or attrs,
+    a dataset as another tool wrote it."""
+    store = babble_store(folder)
+    out = export_dataset(store, folder / name, "lerobot")
+    (out / "meta" / "bodyschema.json").unlink()
+    return store, out
 
 
 def uniform_store(folder: Path) -> Path:

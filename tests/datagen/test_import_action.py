@@ -26,12 +26,9 @@ LOGGER = "bodyschema.datagen.importers.run"
 @pytest.fixture(scope="module")
 def exports(tmp_path_factory):
     """A babbling store (targets recorded) and its LeRobot export without meta/bodyschema.json (a foreign dataset)."""
-    from tests.datagen.export_stores import babble_store
+    from tests.datagen.export_stores import foreign_lerobot
 
-    folder = tmp_path_factory.mktemp("action")
-    store = babble_store(folder)
-    foreign = export_dataset(store, folder / "foreign", "lerobot")
-    (foreign / "meta" / "bodyschema.json").unlink()
+    store, foreign = foreign_lerobot(tmp_path_factory.mktemp("action"), "foreign")
     return zarr.open_group(str(store), mode="r"), foreign
 
 

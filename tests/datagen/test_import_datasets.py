@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 import zarr
 
-from bodyschema.datagen.export import export_dataset
 from bodyschema.datagen.importers.config import ImportConfig
 from bodyschema.datagen.importers.run import import_recording
 from bodyschema.datagen.validate import validate_store
@@ -48,13 +47,9 @@ def test_hdf5_demo_unknown_key_names_the_keys_there_are(tmp_path):
 @pytest.fixture(scope="module")
 def foreign_lerobot(tmp_path_factory):
     """This project's LeRobot export of a babbling store, stripped of meta/bodyschema.json (units, body, attrs)."""
-    from tests.datagen.export_stores import babble_store
+    from tests.datagen.export_stores import foreign_lerobot
 
-    folder = tmp_path_factory.mktemp("lerobot")
-    store = babble_store(folder)
-    out = export_dataset(store, folder / "lerobot", "lerobot")
-    (out / "meta" / "bodyschema.json").unlink()
-    return store, out
+    return foreign_lerobot(tmp_path_factory.mktemp("lerobot"))
 
 
 def test_a_foreign_lerobot_dataset_needs_units_and_a_body(foreign_lerobot, tmp_path):

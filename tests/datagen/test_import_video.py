@@ -13,7 +13,6 @@ import numpy as np
 import pytest
 import zarr
 
-from bodyschema.datagen.export import export_dataset
 from bodyschema.datagen.importers.config import ImportConfig
 from bodyschema.datagen.importers.run import import_recording
 
@@ -31,12 +30,10 @@ CODE_ROWS = 6
 @pytest.fixture(scope="module")
 def lerobot_with_images(tmp_path_factory):
     """This project's LeRobot export of a babbling store (4 episodes, RGB), stripped of meta/bodyschema.json."""
-    from tests.datagen.export_stores import babble_store
+    from tests.datagen.export_stores import foreign_lerobot
 
     folder = tmp_path_factory.mktemp("video")
-    store = babble_store(folder)
-    out = export_dataset(store, folder / "lerobot", "lerobot")
-    (out / "meta" / "bodyschema.json").unlink()
+    store, out = foreign_lerobot(folder)
     images = zarr.open_group(str(store), mode="r")["image"][:]             # (N, H, W, 3) RGB uint8
     return with_frame_number(images), out
 
