@@ -1,0 +1,162 @@
+"""Benchmark: issue 33's table, one arm per row, every step the command a user types, on the defaults.
+
+    MUJOCO_GL=egl .venv/bin/python bench/foreign_arms.py [--arms ur5 so_arm ...] [--n 3000] [--epochs 40]
+        [--trials 50] [--work bench_out/foreign] [--quick]
+
+Per arm, in a folder of its own (its own MLflow store): `robot init` (a file: the visuals it can load, nothing
+edited by hand) and `robot camera`, then `datagen` (uniform poses, the record's image size), `train gpr` (ee_xyz)
+and the GPR levels (level 1), `train pixel` and `train encoder` and the pixel levels 1–3 with and without the
+encoder (its floor row: perception started at the truth, per joint), `evaluate reaching` with the GPR and the joints
+(AIF against the PD baseline). Prints one markdown row per arm and the wall minutes of each step (2 CPU cores:
+the recipe's CPU time) and writes them to <work>/table.md. Arms: the three shipped ones and arms of packages in
+the test extra the project did not write (example-robot-data, dm_control), `--visual` chosen as a new user would
+(mesh where MuJoCo loads them, else collision; TALOS without its meshes: primitives).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import importlib.metadata
+import re
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ERD = "cmeel.prefix/share/example-robot-data/robots"
+FILES = {   # name → (distribution, file inside it, robot init's --visual)
+    "ur5": ("example-robot-data", f"{ERD}/ur_description/urdf/ur5_robot.urdf", "collision"),
+    "panda_urdf": ("example-robot-data", f"{ERD}/panda_description/urdf/panda.urdf", "collision"),
+    "talos_bare": ("example-robot-data", f"{ERD}/talos_data/robots/talos_full_v2.urdf", "primitives"),
+    "jaco": ("dm_control", "dm_control/third_party/kinova/jaco_arm.xml", "mesh"),
+    "so_arm": ("example-robot-data", f"{ERD}/so_arm_description/urdf/so101.urdf", "collision"),
+    "z1": ("example-robot-data", f"{ERD}/z1_description/urdf/z1.urdf", "collision"),
+}
+SHIPPED = ("nao_arm", "panda", "planar2")
+
+
+def bodyschema(args: list[str], log: Path) -> tuple[str, float]:
+    """Runs one command as a user would; its output goes to log; stops the arm on failure."""
+    start = time.monotonic()
+    done = subprocess.run([sys.executable, "-m", "bodyschema.cli", *args], capture_output=True, text=True)
+    seconds = time.monotonic() - start
+    with log.open("a") as out:
+        out.write(f"$ bodyschema {' '.join(args)}  # {seconds:.1f} s, exit {done.returncode}\n{done.stdout}{done.stderr}\n")
+    if done.returncode != 0:
+        raise RuntimeError(f"`bodyschema {' '.join(args[:3])}` exit {done.returncode}: {done.stderr.strip()[-400:]}")
+    return done.stdout + done.stderr, seconds
+
+
+def registered(output: str) -> str:
+    """The `models:/<name>/<version>` a train command registered."""
+    found = re.findall(r"models:/[\w.\-]+/\d+", output)
+    if not found:
+        raise RuntimeError(f"train printed no registered model: {output[-400:]}")
+    return found[-1]
+
+
+def robot_of(name: str, folder: Path, log: Path, minutes: dict[str, float]) -> str:
+    """The --robot argument: a shipped name, or the record `robot init` + `robot camera` write for a file."""
+    if name in SHIPPED:
+        return name
+    dist, relative, visual = FILES[name]
+    model = Path(importlib.metadata.distribution(dist).locate_file(relative))
+    if name == "talos_bare":                     # the URDF alone: none of its meshes on disk
+        shutil.copy(model, folder / "model.urdf")
+        model = folder / "model.urdf"
+    record = folder / f"{name}.toml"
+    _, init_s = bodyschema(["robot", "init", str(model), "--visual", visual, "--out", str(record)], log)
+    _, camera_s = bodyschema(["robot", "camera", str(record)], log)
+    minutes["init+camera"] = (init_s + camera_s) / 60
+    return str(record)
+
+
+def levels_rows(run: Path) -> dict[str, dict[str, str]]:
+    with (run / "latest" / "summary.csv").open() as f:
+        return {row["level"]: row for row in csv.DictReader(f)}
+
+
+def floor_text(rows: dict[str, dict[str, str]]) -> str:
+    floor = rows.get("floor", {})
+    return ", ".join(f"{float(v):.1f}" for k, v in floor.items() if k.startswith("joint_err_deg/") and v)
+
+
+def measure(name: str, work: Path, o: argparse.Namespace) -> dict[str, str]:
+    folder = work / name
+    shutil.rmtree(folder, ignore_errors=True)
+    folder.mkdir(parents=True)
+    log = folder / "commands.log"
+    common = ["--tracking-uri", f"sqlite:///{folder}/mlflow.db"]
+    minutes: dict[str, float] = {}
+    robot = robot_of(name, folder, log, minutes)
+    data = folder / "data.zarr"
+    _, s = bodyschema(["datagen", "--robot", robot, "--n", str(o.n), "--out", str(data), "--no-progress"], log)
+    minutes["datagen"], ms_per_image = s / 60, 1000 * s / o.n
+    train = [*common, "--run-root", str(folder / "runs"), "--no-progress", "--data", str(data)]
+    out, s = bodyschema(["train", "gpr", *train, "--modality", "ee_xyz"], log)
+    gpr, minutes["train gpr"] = registered(out), s / 60
+    bench = [*common, "--no-progress", "--no-plots", "--trials", str(o.trials), "--runs", "1"]
+    _, s = bodyschema(["evaluate", "levels", *bench, "--model", gpr, "--levels", "1", "--multistart", "0",
+                       "--no-floor", "--out", str(folder / "levels_gpr")], log)
+    minutes["levels gpr"] = s / 60
+    gpr_l1 = levels_rows(folder / "levels_gpr")["1"]["joint_err_deg"]
+    out, s = bodyschema(["train", "pixel", *train, "--epochs", str(o.epochs)], log)
+    pixel, minutes["train pixel"] = registered(out), s / 60
+    out, s = bodyschema(["train", "encoder", *train, "--epochs", str(o.epochs)], log)
+    encoder, minutes["train encoder"] = registered(out), s / 60
+    _, s = bodyschema(["evaluate", "levels", *bench, "--model", pixel, "--encoder", encoder, "--multistart", "0",
+                       "--out", str(folder / "levels_pixel")], log)
+    minutes["levels pixel"] = s / 60
+    px = levels_rows(folder / "levels_pixel")
+    reach = [*common, "--no-progress", "--trials", str(o.reach_trials)]
+    joints = f"analytic:{robot}:joints"
+    _, s = bodyschema(["evaluate", "reaching", *reach, "--robot", robot, "--model", gpr, "--model", joints,
+                       "--out", str(folder / "reaching")], log)
+    minutes["reaching"] = s / 60
+    with (folder / "reaching" / "latest" / "summary.csv").open() as f:
+        success = {row["controller"]: 100 * float(row["success"]) for row in csv.DictReader(f)}
+    level = {k: f"{float(px[k]['joint_err_deg']):.2f}" for k in px if k != "floor"}
+    return {"arm": name, "GPR L1 (°)": f"{float(gpr_l1):.2f}", "pixel floor per joint (°)": floor_text(px),
+            "pixel L1 / L2 / L3 (°)": " / ".join(level.get(k, "–") for k in ("1", "2", "3")),
+            "+ encoder": " / ".join(level.get(k, "–") for k in ("1+enc", "2+enc", "3+enc")),
+            "reaching AIF / PD (%)": f"{success.get('aif', float('nan')):.0f} / {success.get('pd', float('nan')):.0f}",
+            "datagen ms/image": f"{ms_per_image:.1f}", "recipe minutes": f"{sum(minutes.values()):.1f}",
+            "steps": ", ".join(f"{k} {v:.1f}" for k, v in minutes.items())}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--arms", nargs="+", default=[*FILES, *SHIPPED])
+    parser.add_argument("--n", type=int, default=3000)
+    parser.add_argument("--epochs", type=int, default=40)
+    parser.add_argument("--trials", type=int, default=50)
+    parser.add_argument("--reach-trials", type=int, default=20)
+    parser.add_argument("--work", type=Path, default=Path("bench_out/foreign"))
+    parser.add_argument("--quick", action="store_true", help="tiny sizes: checks the script, not the arms")
+    o = parser.parse_args()
+    if o.quick:
+        o.n, o.epochs, o.trials, o.reach_trials = 200, 1, 3, 2
+    o.work.mkdir(parents=True, exist_ok=True)
+    table = o.work / "table.md"
+    header = None
+    for name in o.arms:
+        try:
+            row = measure(name, o.work.resolve(), o)
+        except RuntimeError as e:
+            row = {"arm": name, "GPR L1 (°)": f"failed: {e}"}
+        if header is None:
+            header = list(row) if len(row) > 2 else None
+            if header:
+                line = "| " + " | ".join(header) + " |\n|" + "---|" * len(header) + "\n"
+                table.write_text(line)
+                print(line, end="")
+        line = "| " + " | ".join(row.get(k, "") for k in (header or row)) + " |\n"
+        with table.open("a") as f:
+            f.write(line)
+        print(line, end="", flush=True)
+
+
+if __name__ == "__main__":
+    main()
