@@ -279,9 +279,8 @@ def _checked(config: DatagenConfig, path: Path) -> tuple[dict, dict]:
     robot = Robot.load(config.robot, image_size=config.image_size, rgb=config.rgb, gravity=config.gravity)
     try:
         ranges = sampling_ranges(config, robot)
-        has_touch = robot.touch(ranges.mean(axis=1)[None]) is not None
         image_shape = (*robot.image_size, 3) if robot.channels == 3 else tuple(robot.image_size)
-        feats = features(robot.dq, image_shape if config.images else None, has_touch, not config.kinematic)
+        feats = features(robot.dq, image_shape if config.images else None, robot.sensors, not config.kinematic)
         check_resources(config, feats, chunk_len(config), path)  # O(1): before any per-shard list or any write
         attrs = _attrs(config, robot, ranges, n_shards(config, chunk_len(config)), feats)
         if not config.kinematic:

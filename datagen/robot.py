@@ -282,6 +282,11 @@ class Robot:
                 cv2.cvtColor(renderer.render(out=rgb_buf), cv2.COLOR_RGB2GRAY, dst=image_i)
         return images
 
+    @property
+    def sensors(self) -> tuple[str, ...]:
+        """The sensor modalities (rows of datagen/modalities.py) `observe` reads for this robot."""
+        return ("touch",) if self._touch_adr is not None else ()
+
     def touch(self, q) -> np.ndarray | None:
         """(N, Dq) rad → (N, 1) fingertip touch (N) with the arm held at q at rest; None without a sensor."""
         if self._touch_adr is None:

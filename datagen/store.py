@@ -21,6 +21,7 @@ import datetime as dt
 import importlib.metadata
 import json
 import platform
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -28,7 +29,7 @@ import numpy as np
 import zarr
 from zarr.codecs import ZstdCodec
 
-from bodyschema.datagen.modalities import store_feature
+from bodyschema.datagen import modalities
 from bodyschema.errors import must_be
 
 SCHEMA_VERSION = 2  # 2: shard_done holds a per-shard checksum (1: a bare 0/1 flag); attrs reach_m, base_m
@@ -53,10 +54,13 @@ class StoreWriteError(OSError):
                            "(finished shards are kept, the store is not marked complete)."))
 
 
-def features(dq: int, image_shape: tuple[int, ...] | None, touch: bool, babble: bool) -> dict[str, dict[str, Any]]:
-    """The data arrays of a store as {name: {dtype, shape (per sample), unit, names}} (as LeRobot's features)."""
-    names = ["q", "ee_xyz", "ee_pixel", "jacobian"] + ["image"] * (image_shape is not None) + ["touch"] * touch
-    f: dict[str, dict[str, Any]] = {n: store_feature(n, dq, image_shape) for n in names}   # datagen/modalities.py
+def features(dq: int, image_shape: tuple[int, ...] | None, sensors: Iterable[str],
+             babble: bool) -> dict[str, dict[str, Any]]:
+    """The data arrays of a store as {name: {dtype, shape (per sample), unit, names}} (as LeRobot's features):
+    the modality table's rows it holds (images when `image_shape` is given, the robot's `sensors`), then
+    babbling's own arrays."""
+    rows = modalities.stored(image_shape is not None, sensors)
+    f: dict[str, dict[str, Any]] = {m.store_array: modalities.store_feature(m.name, dq, image_shape) for m in rows}
     if babble:
         f["qvel"] = {"dtype": "float32", "shape": [dq], "unit": "rad/s", "names": ["joint"]}
         f["episode"] = {"dtype": "int32", "shape": [], "unit": "index", "names": []}

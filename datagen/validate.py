@@ -129,7 +129,7 @@ def _expected_features(attrs: dict) -> dict[str, dict]:
     image = None
     if attrs.get("images") and "image_size" in attrs:
         image = (*attrs["image_size"], 3) if attrs.get("channels") == 3 else tuple(attrs["image_size"])
-    expected = features(dq, image, False, attrs.get("sampler") == "babble")
+    expected = features(dq, image, (), attrs.get("sampler") == "babble")
     expected.pop("target", None)  # older babble stores lack it; one that has it lists it in attrs features
     return expected
 

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from bodyschema.datagen import modalities
 from bodyschema.datagen.integrity import shard_digest
 from bodyschema.datagen.outputs import write_atomically
 from bodyschema.datagen.store import (
@@ -31,13 +32,14 @@ KIND = "bodyschema-import"                    # the outputs.py marker: --overwri
 
 def store_features(arrays: dict[str, np.ndarray]) -> dict[str, dict[str, Any]]:
     """The schema's features of the arrays present (store.features, restricted to them)."""
-    image = arrays.get("image")
-    full = features(arrays["q"].shape[1], None if image is None else image.shape[1:], "touch" in arrays, True)
+    cameras = modalities.images_in(arrays)
+    image_shape = arrays[cameras[0]].shape[1:] if cameras else None
+    full = features(arrays["q"].shape[1], image_shape, arrays, True)    # the sensors: those of the arrays
     return {name: spec for name, spec in full.items() if name in arrays}
 
 
 def chunk_rows(arrays: dict[str, np.ndarray]) -> int:
-    return ROWS_WITH_IMAGES if "image" in arrays else ROWS_WITHOUT
+    return ROWS_WITH_IMAGES if modalities.images_in(arrays) else ROWS_WITHOUT
 
 
 def write_store(out: Path, arrays: dict[str, np.ndarray], attrs: dict[str, Any], overwrite: bool,

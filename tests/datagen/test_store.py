@@ -17,20 +17,38 @@ from bodyschema.datagen.store import (
 
 
 def test_features_follow_the_schema():
-    f = features(4, (56, 80), touch=True, babble=True)
+    f = features(4, (56, 80), sensors=("touch",), babble=True)
     assert f["q"]["shape"] == [4] and f["jacobian"]["shape"] == [3, 4] and f["image"]["shape"] == [56, 80]
     assert {f[k]["dtype"] for k in ("q", "ee_xyz", "ee_pixel", "jacobian", "touch", "qvel", "t")} == {"float32"}
     assert f["image"]["dtype"] == "uint8" and f["episode"]["dtype"] == "int32"
     assert f["q"]["unit"] == "rad" and f["ee_xyz"]["unit"] == "m" and f["ee_pixel"]["unit"] == "px"
     assert f["target"] == {"dtype": "float32", "shape": [4], "unit": "rad", "names": ["joint"]}   # babbling commands
-    kinematic = features(2, None, touch=False, babble=False)
+    kinematic = features(2, None, sensors=(), babble=False)
     assert set(kinematic) == {"q", "ee_xyz", "ee_pixel", "jacobian"}
-    assert features(2, (8, 8, 3), False, False)["image"]["names"] == ["row", "col", "channel"]
+    assert features(2, (8, 8, 3), (), False)["image"]["names"] == ["row", "col", "channel"]
+
+
+def test_features_pin_the_store_format_key_order_included():
+    """The shipped format, as a literal: features come from the modality table, and its order is the store's."""
+    f = features(4, (56, 80), sensors=("touch",), babble=True)
+
+    def vec(shape, unit, names):
+        return {"dtype": "float32", "shape": shape, "unit": unit, "names": names}
+
+    assert list(f.items()) == list({
+        "q": vec([4], "rad", ["joint"]), "ee_xyz": vec([3], "m", ["x", "y", "z"]),
+        "ee_pixel": vec([2], "px", ["u", "v"]),
+        "jacobian": vec([3, 4], "m/rad", ["xyz", "joint"]),
+        "image": {"dtype": "uint8", "shape": [56, 80], "unit": "intensity", "names": ["row", "col"]},
+        "touch": vec([1], "N", ["contact"]), "qvel": vec([4], "rad/s", ["joint"]),
+        "episode": {"dtype": "int32", "shape": [], "unit": "index", "names": []}, "t": vec([], "s", []),
+        "target": vec([4], "rad", ["joint"])}.items())
+    assert list(features(2, None, (), False)) == ["q", "ee_xyz", "ee_pixel", "jacobian"]
 
 
 @pytest.fixture
 def store(tmp_path):
-    feats = features(2, (8, 8), touch=False, babble=False)
+    feats = features(2, (8, 8), sensors=(), babble=False)
     root = create_store(tmp_path / "s.zarr", feats, n=10, chunk_len=4, n_shards=3, attrs={"robot": "planar2"})
     return tmp_path / "s.zarr", root
 
