@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
+from bodyschema.datagen.modalities import is_image
 from bodyschema.models.contract import FUSED_CALLS
 from bodyschema.models.scaling import IMAGE_SCALE
 
@@ -26,7 +27,7 @@ def sense(robot, modality: str, q: np.ndarray, xyz: np.ndarray | None = None,
     camera tracks (default: the ee by forward kinematics). image_dtype float32 halves long image streams."""
     if modality == "joints":
         return np.asarray(q, dtype=np.float64)
-    if modality == "image":
+    if is_image(modality):
         return _image(robot, q, marker_offsets, image_dtype)
     xyz = robot.fk(q, check=False) if xyz is None else xyz                # (N, 3) m; q may pass the limits
     return _project(robot, xyz) if modality == "ee_pixel" else np.asarray(xyz, dtype=np.float64)
@@ -84,7 +85,7 @@ class Sensors:
             sigma = self.noise.get(name, 0.0)
             if sigma > 0:
                 x = out[name].numpy() + sigma * self.rng.standard_normal(tuple(out[name].shape))
-                out[name] = torch.from_numpy(np.clip(x, 0.0, 1.0) if name == "image" else x)
+                out[name] = torch.from_numpy(np.clip(x, 0.0, 1.0) if is_image(name) else x)
             if name in self.frozen:
                 self._held[name] = out[name]
         return {name: self._held.get(name, out.get(name)) for name in self.modalities}
@@ -101,7 +102,7 @@ def through_noise(models: Sequence, sigma: Mapping[str, float], given: Mapping[s
     fixed, seen = {}, []
     for m in models:
         s = sigma.get(m.modality, 0.0)
-        exact = getattr(m, "kind", None) == "analytic" or getattr(m, "precision_varies", False) or m.modality in given
+        exact = getattr(m, "exact", False) or getattr(m, "precision_varies", False) or m.modality in given
         if s > 0 and exact and m.modality not in given:
             fixed[m.modality] = 1.0 / s ** 2
         seen.append(NoisySensor(m, s) if s > 0 and not exact else m)

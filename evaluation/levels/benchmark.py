@@ -30,6 +30,7 @@ import torch
 from bodyschema.aif.multistart import infer_multistart, lowest_free_energy
 from bodyschema.aif.perception import Perception
 from bodyschema.aif.perception_config import METHODS, FlowSettings, PerceptionConfig
+from bodyschema.datagen.modalities import is_image
 from bodyschema.datagen.samplers import uniform
 from bodyschema.errors import must_be
 from bodyschema.evaluation.core.config import TrialsConfig
@@ -160,7 +161,7 @@ def _encoder_start(shared: dict, encoder, robot, targets) -> np.ndarray:
     if "guess" not in shared:
         start = time.perf_counter()
         low, high = robot.sampling_ranges.T
-        shared["guess"] = np.clip(encoder.encode(targets.observations["image"]).double().numpy(), low, high)
+        shared["guess"] = np.clip(encoder.encode(targets.observations[encoder.modality]).double().numpy(), low, high)
         shared["guess_s"] = time.perf_counter() - start
     return shared["guess"]
 
@@ -236,7 +237,7 @@ def measure_run(config: LevelsConfig, models: Sequence, encoder, run: int, robot
         robot, recorded = _setting(config, models)
     perception = Perception(models, replace(levels_update(config), record=config.perception.record and run == 0))
     noise_rng = eval_rng(config.seed, run, "noise")
-    has_image = any(m.modality == "image" for m in models) or encoder is not None
+    has_image = any(is_image(m.modality) for m in models) or encoder is not None
     targets = make_targets(robot, config.trials, eval_rng(config.seed, run, "targets"), has_image,
                            dict(config.noise), noise_rng) if recorded is None else \
         recorded.run(run, config.trials, dict(config.noise), noise_rng)
@@ -255,7 +256,7 @@ def measure_run(config: LevelsConfig, models: Sequence, encoder, run: int, robot
         if result.trajectory is not None and not ms:                       # ms: refinement only
             curves[row["level"]] = result.trajectory["F"].numpy()          # (T, N)
         if recorded is not None and not ms and not enc and config.plain_steps and \
-                any(m.modality == "image" for m in models):              # the reference row, same frames and μ0
+                any(is_image(m.modality) for m in models):               # the reference row, same frames and μ0
             plain, trial, _ = evaluate_level(PlainPixelAIF(models, level, config.plain_steps), robot, targets,
                                              level, eval_rng(config.seed, run, "beliefs", level), config.success_deg)
             rows.append({"run": run, **plain, "level": f"{level} {PLAIN_LABEL}"})

@@ -16,6 +16,7 @@ import torch
 
 from bodyschema.aif.perception import Perception
 from bodyschema.aif.perception_config import FlowSettings, PerceptionConfig
+from bodyschema.datagen.modalities import IMAGE, is_image
 
 PLAIN = PerceptionConfig(method="flow", flow=FlowSettings(integrator="euler", dt=0.1, k_z=1.0, step_control="none"),
                          max_steps=5000, tol=0.0, max_step=None, record=True)
@@ -28,22 +29,22 @@ MSE_SWITCH = 0.01                      # level 3: the image MSE below which Σ_v
 def pixel_aif_plain(level: int) -> PerceptionConfig:
     """Pixel-AIF's own update at `level`: Euler Δt 0.1 on F with its visual precision 1/Σ_v."""
     sigma_v = 2e3 if level == 3 else 2e4
-    return replace(PLAIN, precisions=(("image", 1.0 / sigma_v),), record=False,
+    return replace(PLAIN, precisions=((IMAGE, 1.0 / sigma_v),), record=False,
                    flow=replace(PLAIN.flow, divergence_ratio=None))
 
 
 def plain_infer(models, obs, mu0, level: int, steps: int = PLAIN_STEPS, chunk: int = CHUNK):
     """The plain protocol for `steps` Euler steps from mu0 (B, Dz); steps and divergence summed over the chunks."""
-    image = next(m for m in models if m.modality == "image")
+    image = next(m for m in models if is_image(m.modality))
     mu, evaluations, taken, diverged = mu0.clone(), 0, torch.zeros(len(mu0), dtype=torch.long), None
-    pi = torch.full((len(mu0),), dict(pixel_aif_plain(level).precisions)["image"], dtype=torch.float64)
+    pi = torch.full((len(mu0),), dict(pixel_aif_plain(level).precisions)[IMAGE], dtype=torch.float64)
     for start in range(0, steps, chunk):
         if level == 3:
             with torch.no_grad():
-                mse = (image.predict(mu.float()).double() - obs["image"]).pow(2).flatten(1).mean(dim=1)
-            pi = torch.where(mse <= MSE_SWITCH, dict(pixel_aif_plain(2).precisions)["image"], pi)
+                mse = (image.predict(mu.float()).double() - obs[image.modality]).pow(2).flatten(1).mean(dim=1)
+            pi = torch.where(mse <= MSE_SWITCH, dict(pixel_aif_plain(2).precisions)[IMAGE], pi)
         cfg = replace(pixel_aif_plain(level), max_steps=min(chunk, steps - start), precisions=())
-        res = Perception(models, cfg, {"image": pi.view(-1, *[1] * len(image.output_shape))
+        res = Perception(models, cfg, {image.modality: pi.view(-1, *[1] * len(image.output_shape))
                                        .expand(-1, *image.output_shape)}).infer(obs, mu)
         mu, evaluations, taken = res.mu, evaluations + res.evaluations, taken + res.steps
         diverged = res.diverged if diverged is None else diverged | res.diverged

@@ -17,12 +17,13 @@ from typing import Any
 
 import numpy as np
 
+from bodyschema.datagen.modalities import IMAGE, images_in, is_image
 from bodyschema.errors import must_be
 from bodyschema.evaluation.core.specs import check_models_match, trained_workspace
 from bodyschema.evaluation.levels.targets import Targets, add_noise
 from bodyschema.models.scaling import IMAGE_SCALE
 
-SENSED = ("ee_xyz", "ee_pixel", "image")     # modalities read from the store; "joints" is q itself
+SENSED = ("ee_xyz", "ee_pixel")     # vector modalities read from the store, besides every camera's; "joints" is q
 
 
 @dataclass
@@ -64,7 +65,8 @@ class RecordedTargets:
                                      "See `bodyschema validate`:\n - " + "\n - ".join(store.problems)))
         root = store.root
         self.attrs, self.digest = dict(root.attrs), store_digest(root)
-        wanted = {m.modality for m in models if m.modality in SENSED} | ({"image"} if image else set())
+        wanted = {m.modality for m in models if m.modality in SENSED or is_image(m.modality)}
+        wanted |= {IMAGE} if image else set()                                     # the encoder's
         missing = sorted(wanted - set(root.array_keys()))
         if missing:
             raise ValueError(must_be(f"--targets arrays {missing}", "in the store (the models observe them)",
@@ -77,15 +79,17 @@ class RecordedTargets:
 
     def _body(self, models) -> RecordedBody:
         a = self.attrs
-        image = self.sensed.get("image")
+        cameras = images_in(self.sensed)
+        image = self.sensed[cameras[0]] if cameras else None
         body = RecordedBody(str(a["robot"]), tuple(a["joint_names"]), np.asarray(a["joint_limits"], float),
                             np.asarray(a["joint_limits"], float), None if image is None else tuple(image.shape[1:3]),
                             3 if image is not None and image.ndim == 4 else 1, _robot_of(a))
         check_models_match(models, body)
         for m in models:
-            if m.modality == "image" and tuple(m.output_shape) != tuple(image.shape[1:]):
+            frame = self.sensed[m.modality].shape[1:] if is_image(m.modality) else None
+            if frame is not None and tuple(m.output_shape) != tuple(frame):
                 raise ValueError(must_be("--targets images", f"of the image model's shape {tuple(m.output_shape)}",
-                                         tuple(image.shape[1:]), "Import them with --resize (and --gray)."))
+                                         tuple(frame), "Import them with --resize (and --gray)."))
         body.sampling_ranges = trained_workspace(models, body)
         return body
 
@@ -100,7 +104,7 @@ class RecordedTargets:
         rows = self.eligible[run * trials:(run + 1) * trials]
         obs = {"joints": self.q[rows].copy()}
         for name, values in self.sensed.items():
-            obs[name] = values[rows].astype(np.float64) / (IMAGE_SCALE if name == "image" else 1.0)
+            obs[name] = values[rows].astype(np.float64) / (IMAGE_SCALE if is_image(name) else 1.0)
         return Targets(self.q[rows].copy(), add_noise(obs, noise, noise_rng))
 
     def lineage(self) -> dict[str, Any]:

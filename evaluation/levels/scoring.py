@@ -7,6 +7,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from bodyschema.datagen.modalities import is_image
+
 
 def score(models, robot, targets, label: str, result, evaluations: int, wall: float, success_deg: float):
     """The metrics row of a level's final beliefs and its per-trial arrays (deg, mm)."""
@@ -23,11 +25,11 @@ def score(models, robot, targets, label: str, result, evaluations: int, wall: fl
            "all_joints_2deg": float((err <= 2.0).all(axis=1).mean()),   # Pixel-AIF's criterion: every joint ≤ 2°
            "steps": float(result.steps.double().mean()), "converged": float(result.converged.double().mean()),
            "diverged": int(result.n_diverged), "evaluations_per_trial": evaluations / len(mu), "wall_s": wall}
-    image = next((m for m in models if m.modality == "image"), None)
+    image = next((m for m in models if is_image(m.modality)), None)
     if image is not None:
         with torch.no_grad():
             pred = image.predict(result.mu.to(torch.float32)).double()
-        row["image_mse"] = float((pred - torch.from_numpy(targets.observations["image"])).pow(2).mean())
+        row["image_mse"] = float((pred - torch.from_numpy(targets.observations[image.modality])).pow(2).mean())
     return row, {"mean_err_deg": mean_err, "ee_err_mm": ee_mm}
 
 

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from bodyschema.datagen.modalities import images_in, is_image
 from bodyschema.datagen.samplers import uniform
 from bodyschema.errors import must_be
 from bodyschema.models.scaling import IMAGE_SCALE
@@ -45,8 +46,8 @@ def make_targets(robot, n: int, rng: np.random.Generator, image: bool = False,
     sensed = robot.observe(q, image=image)
     obs = {"ee_xyz": sensed["ee_xyz"].astype(np.float64), "ee_pixel": sensed["ee_pixel"].astype(np.float64),
            "joints": q.copy()}
-    if image:
-        obs["image"] = sensed["image"].astype(np.float64) / IMAGE_SCALE
+    for camera in images_in(sensed):                                      # uint8 → [0, 1]
+        obs[camera] = sensed[camera].astype(np.float64) / IMAGE_SCALE
     return Targets(q, add_noise(obs, noise, noise_rng if noise_rng is not None else rng))
 
 
@@ -60,7 +61,7 @@ def add_noise(obs: dict[str, np.ndarray], noise: Mapping[str, float] | None,
             raise ValueError(must_be(f"noise[{modality!r}]", "a standard deviation ≥ 0", sigma))
         if sigma > 0:
             obs[modality] = obs[modality] + sigma * rng.standard_normal(obs[modality].shape)
-            if modality == "image":
+            if is_image(modality):
                 obs[modality] = np.clip(obs[modality], 0.0, 1.0)
     return obs
 
