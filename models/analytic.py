@@ -38,6 +38,7 @@ class AnalyticModel(BaseSensoryModel):
     the latent scaling is the robot's camera workspace either way)."""
 
     kind = "analytic"
+    exact = True
     onnx_hint = "MuJoCo's forward kinematics has no tensor graph: export the robot's MJCF instead"
 
     def __init__(self, robot: str | Path | BodySpec, modality: str, image_size: tuple[int, int] | None = None,

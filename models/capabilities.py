@@ -7,7 +7,10 @@ overrides the flags that are true of it, next to its code, so a new kind needs n
 - `gp_memory`: an exact GP, refused by `training/guards.py` when its n×n matrices cannot fit in memory;
 - `network`: fitted on minibatches from `_factory()` and `settings.batch_size`, guarded by its size;
 - `has_members`: several SensoryModels over one z in `members` {modality: model}, registered one per modality;
-- `encodes`: the inverse map, images → z (`encode`), scored on joint angles and exported from images.
+- `encodes`: the inverse map, images → z (`encode`), scored on joint angles and exported from images;
+- `sweepable`: one decoder scored by its val_rmse, what `bodyschema sweep` minimises (a kind scored otherwise,
+  e.g. on members or joint angles, is trained by `bodyschema train`);
+- `exact`: the true map (forward kinematics), whose only error is the sensor's noise: Π = 1/σ² under noise σ.
 This module imports nothing heavy: the CLI and the registry may read it before torch is loaded.
 """
 
@@ -37,3 +40,5 @@ class Capabilities:
     network: ClassVar[bool] = False
     has_members: ClassVar[bool] = False
     encodes: ClassVar[bool] = False
+    sweepable: ClassVar[bool] = False
+    exact: ClassVar[bool] = False

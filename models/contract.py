@@ -62,6 +62,7 @@ def register_kind(cls):
 
 
 class BaseSensoryModel(Estimator, Capabilities):
+    sweepable = True       # one decoder, scored by its val_rmse (models/capabilities.py)
     # True when Π depends on z (GPR predictive variance, MDN mixture): F = ½εᵀΠ(z)ε − ½ln|Π(z)| then needs ∂Π/∂z
     precision_varies: ClassVar[bool] = False
 

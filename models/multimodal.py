@@ -54,6 +54,7 @@ class MemberNet(nn.Module):
 class MultimodalMember(NetModel, BaseSensoryModel):
     kind = "multimodal"
     exports_onnx = True
+    sweepable = False      # fitted with the other members, by `bodyschema train multimodal`
 
     def __init__(self, body: BodySpec, modality: str, output_shape: tuple[int, ...], *,
                  decoder: str = "auto",                  # auto: "pixel" for (H, W[, C]) images, else "mlp"

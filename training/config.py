@@ -17,14 +17,12 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import inspect
 import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Generic, TypeVar
 
-import tyro
-
+from bodyschema.cli_marks import Flat
 from bodyschema.datagen.modalities import MODALITIES
 from bodyschema.errors import must_be
 from bodyschema.log import Progress
@@ -41,7 +39,7 @@ class TrainConfig(Generic[M]):
 
     data: Path  # the Zarr store written by `bodyschema datagen`
     # the model kind's hyper-parameters (its constructor's keywords, with its defaults)
-    model: Annotated[M, tyro.conf.OmitArgPrefixes]
+    model: Annotated[M, Flat()]
     modality: str | None = None  # what g predicts; None: image (pixel, encoder), ee_xyz,image (multimodal), else ee_xyz
     seed: int = 0  # split and model init; same seed and data -> same model
     val_fraction: float = 0.2  # held-out share (whole episodes when the store has `episode`)
@@ -69,7 +67,7 @@ class TrainConfig(Generic[M]):
             fix("modality", kind.modality if kind else "ee_xyz")
         elif not isinstance(self.modality, str) or not all(self.modality.split(",")):
             problems.append(must_be("modality", f"a dataset array name such as {list(MODALITIES)}", self.modality))
-        elif "," in self.modality and kind is not None and kind.name != "multimodal":
+        elif "," in self.modality and kind is not None and not kinds.model_class(kind.name).has_members:
             problems.append(must_be("modality", f"one array name for model kind {kind.name!r}", self.modality,
                                     "Several modalities (comma-separated) need `bodyschema train multimodal`."))
         elif len(set(self.modalities)) != len(self.modalities):
@@ -139,10 +137,10 @@ def train_commands() -> list[tuple[str, type, str]]:
 
 def build_model(config: TrainConfig, body, output_shapes: dict[str, tuple[int, ...]]):
     """The untrained model of `config`: `Model(body, modality, output_shape, **hyper)`, or for a kind that trains
-    several modalities at once (multimodal) `Model(body, output_shapes, **hyper)`."""
+    several modalities at once (`has_members`: multimodal) `Model(body, output_shapes, **hyper)`."""
     cls = kinds.model_class(config.kind)
     hyper = config.model.to_kwargs()
-    if "output_shapes" in inspect.signature(cls).parameters:
+    if cls.has_members:
         return cls(body, {m: tuple(s) for m, s in output_shapes.items()}, **hyper)
     if len(output_shapes) != 1:
         raise ValueError(must_be("modality", f"a single modality for model kind {config.kind!r}",

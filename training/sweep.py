@@ -42,7 +42,6 @@ from bodyschema.training.sweep_space import SearchSpace, parse_space
 from bodyschema.training.sweep_trial import EPOCH, SWEEP_TAG, TrialContext, run_trial
 
 PARENT_MARKER = "parent_run_id"      # in the sweep folder: the parent run a re-run continues
-NOT_SWEPT = ("multimodal", "encoder")  # scored otherwise than val_rmse of one decoder: `train` them one by one
 _log = logging.getLogger(__name__)
 
 
@@ -64,9 +63,9 @@ def plan(config: SweepConfig) -> Plan:
         kind = kinds.get(config.kind)
     except ValueError as error:
         raise ValueError(must_be("KIND", f"a trainable model kind: one of {_sweepable()}", config.kind)) from error
-    if kind.name not in _sweepable():
-        raise ValueError(must_be("KIND", f"one of {_sweepable()}", kind.name, "Train the multimodal model and the "
-                                 "encoder with `bodyschema train` (they are scored otherwise)."))
+    if not kinds.model_class(kind.name).sweepable:
+        raise ValueError(must_be("KIND", f"one of {_sweepable()}", kind.name, f"Train {kind.name} with `bodyschema "
+                                 "train` (it is scored otherwise than by one decoder's val_rmse)."))
     cls = kind.config_class
     space = parse_space(cls, kind.name, config.grid, config.space, config.random)
     fixed = {}
@@ -244,4 +243,5 @@ def _absolute(uri: str) -> str:
 
 
 def _sweepable() -> list[str]:
-    return [k.name for k in kinds.trainable() if k.name not in NOT_SWEPT]
+    """The trainable kinds whose class is `sweepable` (models/capabilities.py; imports their modules)."""
+    return [k.name for k in kinds.trainable() if kinds.model_class(k.name).sweepable]

@@ -113,7 +113,7 @@ def _precision(model, z: torch.Tensor, sigma: float) -> torch.Tensor:
     """Π of the observations (N, *out): an exact (analytic) model's only error is the sensor noise, 1/σ²; a learned
     model's own error adds to it, 1/(1/Π_model(z) + σ²). Noise-free and exact: the model's fixed precision."""
     own = model.precision(z).to(torch.float64)
-    if getattr(model, "kind", None) == "analytic" and sigma > 0:
+    if getattr(model, "exact", False) and sigma > 0:
         return torch.full_like(own, 1.0 / sigma ** 2)
     return 1.0 / (1.0 / own + sigma ** 2)
 

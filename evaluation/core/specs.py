@@ -17,8 +17,8 @@ from pathlib import Path
 from typing import Annotated
 
 import numpy as np
-import tyro
 
+from bodyschema.cli_marks import Flag
 from bodyschema.errors import must_be
 
 MODELS_HELP = ('"models:/<name>@<alias>" (registry), a saved model directory, or "analytic:<robot>:<modality>"; '
@@ -31,8 +31,7 @@ _REGISTRY = re.compile(r"^models:/(?P<name>[^/@]+)(?:@(?P<alias>[^/@]+)|/(?P<ver
 def models_field(when_empty: str):
     """The `models` field of a benchmark config: `--model SPEC`, repeated to fuse several models (a flag that takes
     one value each time, so a second --model never silently replaces the first); none given: `when_empty`."""
-    return Annotated[tuple[str, ...], tyro.conf.UseAppendAction,
-                     tyro.conf.arg(aliases=("--model",), help=f"{MODELS_HELP}. None given: {when_empty}")]
+    return Annotated[tuple[str, ...], Flag(append=True, aliases=("--model",), help=f"{MODELS_HELP}. None given: {when_empty}")]
 
 
 def resolve_models(specs: Sequence[str], when_empty: Sequence[str], tracking_uri: str | None = None,
@@ -215,7 +214,7 @@ def resolve_encoder(spec: str | None, robot, tracking_uri: str | None = None):
     if spec is None:
         return None
     encoder = resolve_model(spec, tracking_uri)
-    if getattr(encoder, "kind", None) != "encoder":
+    if not getattr(encoder, "encodes", False):
         raise ValueError(must_be("encoder", "a model of kind 'encoder' (bodyschema train encoder)",
                                  getattr(encoder, "kind", type(encoder).__name__)))
     check_models_match([encoder], robot)
