@@ -36,6 +36,7 @@ class Modality:
     kind: str = "vector"                 # "image": a camera's frames (rendered, uint8, models see x / 255)
     camera: str | None = None            # images: the MuJoCo camera ("": the robot's own, attrs camera_name)
     sensor: bool = False                 # read by a robot sensor: a store holds it only for robots that have one
+    error_unit: str = ""                 # what the benchmarks report an error in it in (deg, mm); "": its unit
 
     def __post_init__(self):
         if self.kind not in KINDS:
@@ -54,6 +55,11 @@ class Modality:
         return self.array or self.name
 
     @property
+    def reported_unit(self) -> str:
+        """The unit the benchmarks report an error in it in."""
+        return self.error_unit or self.unit
+
+    @property
     def model_unit(self) -> str:
         """The unit models predict and sensors read (images in [0, 1], the rest as stored)."""
         return IMAGE_UNIT if self.is_image else self.unit
@@ -61,10 +67,11 @@ class Modality:
 
 # Default precisions: 1 / σ² with σ = 1 mm, 1 px, 1° (the analytic model's fixed Π).
 MODALITIES: dict[str, Modality] = {m.name: m for m in (
-    Modality("joints", "rad", ("Dq",), ("joint",), 1.0 / math.radians(1.0) ** 2, array="q"),
-    Modality("ee_xyz", "m", (3,), ("x", "y", "z"), 1.0 / 1e-3 ** 2),
+    Modality("joints", "rad", ("Dq",), ("joint",), 1.0 / math.radians(1.0) ** 2, array="q", error_unit="deg"),
+    Modality("ee_xyz", "m", (3,), ("x", "y", "z"), 1.0 / 1e-3 ** 2, error_unit="mm"),
     Modality("ee_pixel", "px", (2,), ("u", "v"), 1.0),
-    Modality(IMAGE, "intensity", ("image",), ("row", "col", "channel"), dtype="uint8", kind="image", camera=""),
+    Modality(IMAGE, "intensity", ("image",), ("row", "col", "channel"), dtype="uint8", kind="image", camera="",
+             error_unit="MSE"),
     Modality("touch", "N", (1,), ("contact",), sensor=True),
     Modality("jacobian", "m/rad", (3, "Dq"), ("xyz", "joint")),
 )}

@@ -39,24 +39,27 @@ from bodyschema.aif.action import ActionConfig, VelocityController
 from bodyschema.aif.aic import AICConfig, AICController
 from bodyschema.aif.goal_inference import goal_precision
 from bodyschema.aif.perception_config import FlowSettings, PerceptionConfig
+from bodyschema.control.loop import ImpedancePolicy, ServoPolicy, TorquePolicy, VelocityPolicy, rollout
+from bodyschema.control.pd import PDController
+from bodyschema.control.robot_defaults import reaching_defaults
+from bodyschema.control.sim import control_substeps
+from bodyschema.control.targets import in_view_targets
+from bodyschema.datagen import modalities
+from bodyschema.datagen.modalities import is_image
 from bodyschema.datagen.reach import arm_reach
 from bodyschema.datagen.robot_record import check_robot_ref
 from bodyschema.datagen.samplers import uniform
 from bodyschema.errors import must_be
 from bodyschema.evaluation.core.config import TrialsConfig
-from bodyschema.evaluation.core.pd import PDController
 from bodyschema.evaluation.core.runs import new_run
 from bodyschema.evaluation.core.seeds import REACHING, eval_rng
 from bodyschema.evaluation.core.sensing import Sensors, sense
-from bodyschema.evaluation.core.sim import control_substeps
 from bodyschema.evaluation.core.specs import load_robot, models_field, resolve_encoder, resolve_models, robot_name
 from bodyschema.evaluation.reaching import goal_pose, report as reaching_report
-from bodyschema.evaluation.reaching.loop import ImpedancePolicy, ServoPolicy, TorquePolicy, VelocityPolicy, rollout
-from bodyschema.evaluation.reaching.robot_defaults import reaching_defaults
 from bodyschema.evaluation.reaching.servo_baseline import servo_targets
 
 PANDA_CONTROLLERS = ("velocity", "aic")
-GOAL_PREFERENCE = ("image", "ee_xyz", "ee_pixel", "joints")   # "auto": the first modality among the models
+GOAL_PREFERENCE = ("ee_xyz", "ee_pixel", "joints")   # "auto": the first camera among the models, else of these
 
 
 @dataclass(frozen=True)
@@ -99,8 +102,8 @@ class ReachingRunConfig(TrialsConfig):
             raise ValueError(must_be("panda_controller", f"one of {PANDA_CONTROLLERS}", self.panda_controller))
         if self.goal_inference not in goal_pose.MODES:
             raise ValueError(must_be("goal_inference", f"one of {goal_pose.MODES}", self.goal_inference))
-        if self.goal not in ("auto", *GOAL_PREFERENCE):
-            raise ValueError(must_be("goal", f"'auto' or one of {GOAL_PREFERENCE}", self.goal))
+        if self.goal not in ("auto", *goal_names()):
+            raise ValueError(must_be("goal", f"'auto' or one of {goal_names()}", self.goal))
 
     @property
     def default_models(self) -> tuple[str, ...]:
@@ -153,7 +156,12 @@ def goal_modality(config: ReachingRunConfig, models, robot) -> str:
         if config.goal not in names:
             raise ValueError(must_be("goal", f"the modality of one of the models {names}", config.goal))
         return config.goal
-    return next(g for g in GOAL_PREFERENCE if g in names)
+    return next(g for g in goal_names() if g in names)
+
+
+def goal_names() -> tuple[str, ...]:
+    """The goal modalities in the order "auto" prefers them: every camera's, then the vector ones."""
+    return (*(m.name for m in modalities.images()), *GOAL_PREFERENCE)
 
 
 def make_goal(robot, modality: str, q: np.ndarray) -> torch.Tensor:
@@ -185,7 +193,7 @@ def check_goal(robot, modality: str, goal, output_shape: tuple[int, ...]) -> Non
         if far.any():
             raise ValueError(must_be("ee_xyz goal", f"within the arm's reach ({reach:.3f} m from {base.round(3)})",
                                      x[far][0].round(4).tolist(), "Pick a goal inside the workspace."))
-    elif modality == "image" and ((x < 0) | (x > 1)).any():
+    elif is_image(modality) and ((x < 0) | (x > 1)).any():
         raise ValueError(must_be("image goal", "intensities in [0, 1] (uint8 / 255)", (x.min(), x.max())))
 
 
@@ -194,15 +202,6 @@ def spread_ranges(robot, spread: float) -> np.ndarray:
     ranges = np.asarray(robot.sampling_ranges, dtype=np.float64)
     mid, half = ranges.mean(1), 0.5 * (ranges[:, 1] - ranges[:, 0])
     return np.stack([mid - spread * half, mid + spread * half], axis=1)
-
-
-def in_view_targets(rng: np.random.Generator, robot, n: int, ranges=None) -> np.ndarray:
-    """n uniform poses of the sampling ranges (or `ranges`) whose ee the camera sees (a goal pixel must be in the
-    image; nao_arm's camera workspace keeps it in view for ~90 % of its poses); the first n draws when all are seen.
-    Too few seen: the first n, and check_goal names a pose the camera cannot see. # (n, Dq) rad"""
-    q = uniform(rng, robot.sampling_ranges if ranges is None else ranges, 20 * n)   # (20n, Dq)
-    seen = q[robot.in_view(q)]
-    return seen[:n] if len(seen) >= n else q[:n]
 
 
 def make_episodes(config: ReachingConfig, robot, modality: str, output_shape) -> Episodes:
@@ -326,7 +325,7 @@ def prepare(config: ReachingConfig, models=None):
                                  "(velocity controller)", config.depth_cue_deg, "Add analytic:<robot>:joints."))
     shape = (robot.dq,) if modality == "joints" else next(m.output_shape for m in models if m.modality == modality)
     infer_pose = goal_inference_on(config, modality, names, robot)
-    if config.encoder is not None and not (infer_pose and modality == "image"):
+    if config.encoder is not None and not (infer_pose and is_image(modality)):
         raise ValueError(must_be("encoder", "None unless goal inference runs on an image goal", config.encoder,
                                  "Pass an image model and leave --goal-inference at auto or on."))
     encoder = resolve_encoder(config.encoder, robot, config.tracking_uri) if infer_pose else None

@@ -17,15 +17,16 @@ import torch
 
 from bodyschema.aif.goal_inference import GoalPose, infer_goal_pose
 from bodyschema.aif.perception import Perception, PerceptionConfig
+from bodyschema.datagen.modalities import is_image
 from bodyschema.datagen.samplers import uniform
 
 MODES = ("auto", "on", "off")
-POSE_GOALS = ("image", "ee_xyz")     # goal modalities "auto" infers a pose for
+POSE_GOALS = ("ee_xyz",)     # vector goal modalities "auto" infers a pose for, besides every camera's
 _log = logging.getLogger(__name__)
 
 
 def wanted(mode: str, modality: str) -> bool:
-    return mode == "on" or (mode == "auto" and modality in POSE_GOALS)
+    return mode == "on" or (mode == "auto" and (modality in POSE_GOALS or is_image(modality)))
 
 
 def imagine(config, models, robot, episodes, rng: np.random.Generator, ranges: np.ndarray,
@@ -38,16 +39,16 @@ def imagine(config, models, robot, episodes, rng: np.random.Generator, ranges: n
     perception = Perception(goal_models, PerceptionConfig(),     # "auto": the update of perception proper
                             {name: pi for name, pi in given.items() if name in episodes.goal})
     guesses = []
-    if encoder is not None and "image" in episodes.goal:
+    if encoder is not None and encoder.modality in episodes.goal:
         low, high = robot.sampling_ranges.T
-        guesses.append(np.clip(encoder.encode(episodes.goal["image"]).double().numpy(), low, high))
+        guesses.append(np.clip(encoder.encode(episodes.goal[encoder.modality]).double().numpy(), low, high))
     n, dq = episodes.q_start.shape
     more = max(config.goal_starts - 1 - len(guesses), 0)
     guesses += list(uniform(rng, ranges, n * more).reshape(more, n, dq))   # start-major: one draw per start
     stacked = torch.from_numpy(np.stack(guesses, axis=1)) if guesses else None   # (N, S−1, Dq) rad
     _log.debug("goal imagination: %s goals of %d episodes from %d starts each (%d guessed by the encoder); "
                "perception method %s (config %s), step control %s", "+".join(episodes.goal), n, 1 + len(guesses),
-               int(encoder is not None and "image" in episodes.goal), perception.config.method,
+               int(encoder is not None and encoder.modality in episodes.goal), perception.config.method,
                PerceptionConfig().method, perception.config.flow.step_control)
     start = time.perf_counter()
     pose = infer_goal_pose(perception, episodes.goal, torch.from_numpy(episodes.q_start), stacked,

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from bodyschema.datagen.modalities import get, is_image
 from bodyschema.evaluation.core.mlflow_log import table_metrics
 from bodyschema.evaluation.core.publish import publish
 from bodyschema.evaluation.core.sensing import sense
@@ -20,7 +21,6 @@ from bodyschema.evaluation.reaching import goal_pose
 
 SUMMARY_COLUMNS = ("episodes", "success", "goal_success", "ee_err_mm", "ee_err_median_mm", "joint_err_deg",
                    "time_to_reach_s", "failed", "wall_s")
-GOAL_UNITS = {"joints": "deg", "ee_xyz": "mm", "ee_pixel": "px", "image": "MSE"}
 
 
 def time_to_reach(t: np.ndarray, err: np.ndarray, tolerance: float) -> np.ndarray:
@@ -62,7 +62,7 @@ def episode_rows(config, robot, modality, episodes, name: str, result) -> list[d
     for i in range(len(final)):
         rows.append({"controller": name, "target": i, "success": bool(final[i] < tol and not result.failed[i]),
                      "ee_err_mm": 1e3 * float(final[i]), "joint_err_deg": float(joint[i]),
-                     "time_to_reach_s": float(reach[i]), f"goal_err_{GOAL_UNITS[modality]}": float(goal_err[i]),
+                     "time_to_reach_s": float(reach[i]), f"goal_err_{get(modality).reported_unit}": float(goal_err[i]),
                      "goal_success": bool(goal_ok[i] and not result.failed[i]), "failed": bool(result.failed[i]),
                      "reason": result.reasons[i] or ""})
         if imagined_mm is not None:
@@ -90,8 +90,8 @@ def summarize(rows: list[dict], walls: dict[str, float]) -> list[dict]:
 
 
 def markdown(table: list[dict], config, modality: str, robot_name: str) -> str:
-    tol = {"ee_pixel": f"{config.pixel_tolerance:g} px", "image": f"image MSE {config.image_mse_threshold:g}",
-           "ee_xyz": f"{config.success_mm:g} mm", "joints": "1°"}[modality]
+    tol = f"image MSE {config.image_mse_threshold:g}" if is_image(modality) else {
+        "ee_pixel": f"{config.pixel_tolerance:g} px", "ee_xyz": f"{config.success_mm:g} mm", "joints": "1°"}[modality]
     text = (f"Reaching on {robot_name}: {table[0]['episodes']} random reachable targets, {modality} goals, "
             f"{config.seconds:g} s at {config.rate:g} Hz, seed {config.seed}. `success`: final simulator "
             f"ee error < {config.success_mm:g} mm; `goal_success`: final error in the goal space < {tol}; "
