@@ -9,7 +9,7 @@ for every rule; the PD is handed the target's true joint pose, as in `bodyschema
   old    PDConfig(gains="record"): the record's [pd] (the Panda's libfranka gains; for an arm from a file what
          `robot init` inferred: K_p = (20 rad/s)² × each joint's largest diagonal inertia, critically damped)
          + gravity compensation;
-  model  PDConfig(gains="model"): the rule of evaluation/core/pd_gains.py (computed torque at ω = min(20, 0.4/Δt)
+  model  PDConfig(gains="model"): the rule of control/pd_gains.py (computed torque at ω = min(20, 0.4/Δt)
          + bias, springs and dry friction from the model);
   auto   what the benchmark runs (PDConfig()): "record" for tuned [pd] gains, else "model".
 Arms: the three shipped ones (nao_arm and planar2 on motors here; their reaching baseline is their position servos)
@@ -44,14 +44,14 @@ from bodyschema.datagen.robot import Robot  # first: bodyschema sets MUJOCO_GL b
 import mujoco
 import numpy as np
 
+from bodyschema.control.loop import ServoPolicy, TorquePolicy, rollout
+from bodyschema.control.pd import PDConfig, PDController
+from bodyschema.control.robot_defaults import DEFAULTS
+from bodyschema.control.sim import control_substeps
 from bodyschema.datagen.robot_build import build_model
 from bodyschema.datagen.robot_infer import inertia_gains, infer_record
 from bodyschema.datagen.robot_record import RobotRecord
-from bodyschema.evaluation.core.pd import PDConfig, PDController
 from bodyschema.evaluation.core.sensing import Sensors
-from bodyschema.evaluation.core.sim import control_substeps
-from bodyschema.evaluation.reaching.loop import ServoPolicy, TorquePolicy, rollout
-from bodyschema.evaluation.reaching.robot_defaults import DEFAULTS
 from bodyschema.evaluation.reaching.servo_baseline import servo_targets
 
 SUCCESS_M = 0.010

@@ -7,7 +7,7 @@
   turn around its middle.
 - actuators: the model's own when every chosen joint has one; else position servos, critically damped, stiff
   enough for the joint's inertia (ω = SERVO_RAD_S) and to sag at most SAG_RAD under gravity.
-- no PD gains: the torque baseline derives its own from the model at run time (evaluation/core/pd_gains.py); a
+- no PD gains: the torque baseline derives its own from the model at run time (control/pd_gains.py); a
   record's [pd] is a tuning someone wrote.
 - camera: a camera of the model that sees the ee in ≥ GOOD_VIEW of the poses, else one placed to frame the ee's
   workspace (`place_camera`, from sampled forward kinematics), written into the record.
@@ -67,7 +67,7 @@ def infer_record(path: Path, mesh_dir: Path | None = None, visual: str = "mesh",
     actuators = {"kind": "model"} if actuated >= set(range(built.model.njnt)) else \
         {"kind": "servos", "kp": gains[0], "kv": gains[1]}
     box = tuple(map(tuple, ranges.tolist()))
-    # no [pd]: the torque baseline derives its gains from the model at run time (evaluation/core/pd_gains.py); a
+    # no [pd]: the torque baseline derives its gains from the model at run time (control/pd_gains.py); a
     # [pd] in a record means someone tuned it
     draft = dataclasses.replace(draft, workspaces={"full": box, "camera": box}, actuators=actuators)
     return dataclasses.replace(draft, camera=_infer_camera(draft, spec, ranges))

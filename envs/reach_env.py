@@ -1,14 +1,15 @@
 """`ReachEnv`: one simulated arm reaching for a goal, as a Gymnasium environment (reaching's episode, one at a time).
 
-The arm is the core simulator's (`evaluation.core.sim.ArmBatch`, a batch of one) at the robot record's reaching
+The arm is the control layer's simulator (`control.sim.ArmBatch`, a batch of one) at the robot record's reaching
 control rate and duration ([reaching] control_hz, duration_s). `reset(seed=...)` draws, from `np_random`, a goal pose
-the camera sees (`reaching.benchmark.in_view_targets`) and a start pose uniform in the robot's sampling ranges; the
-arm starts there at rest. The goal is what the goal sensor reads at the goal pose (`reaching.benchmark.make_goal`):
-reachable by construction. `options={"target": q, "start": q}` (rad, (Dq,)) set either pose instead.
+the camera sees (`control.targets.in_view_targets`) and a start pose uniform in the robot's sampling ranges; the
+arm starts there at rest. The goal is what the goal sensor reads at the goal pose (the env's own sensors, `_SENSORS`,
+as reaching's `benchmark.make_goal` reads it): reachable by construction. `options={"target": q, "start": q}`
+(rad, (Dq,)) set either pose instead.
 Actions (`action=`): "position" servo targets (servo robots), "torque" motor torques (torque robots), or "velocity"
 joint velocity commands, integrated into the servo targets (servos) or into the setpoint of the joint impedance
 servo (torque robots: PD + gravity compensation), the way reaching integrates the AIF's commands
-(`reaching.loop.VelocityPolicy` / `ImpedancePolicy`, which do it here too).
+(`control.loop.VelocityPolicy` / `ImpedancePolicy`, which do it here too).
 Reward: −ee distance to the goal pose's ee (m). Terminated: within `success_mm` and resting (ee slower than
 REST_M_S), or the simulation diverged (info["failure"]); truncated at the duration. Joint velocities are not
 observed (the simulator bounds them nowhere): a torque policy differences the joints (`policies.py`).
@@ -21,11 +22,25 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
+from bodyschema.aif.action import ActionConfig
+from bodyschema.control.loop import ImpedancePolicy, VelocityPolicy
+from bodyschema.control.pd import PDController
+from bodyschema.control.robot_defaults import reaching_defaults
+from bodyschema.control.sim import ArmBatch, control_substeps
+from bodyschema.control.targets import in_view_targets
+from bodyschema.datagen.robot import Robot
 from bodyschema.datagen.robot_record import check_robot_ref
+from bodyschema.datagen.samplers import uniform
 from bodyschema.envs import spaces as env_spaces
 from bodyschema.errors import must_be
 
 REST_M_S = 0.01     # m/s: an ee slower than this within success_mm stays there (it would take 1 s to leave 1 cm)
+
+# What each sensor reads with the arm at q (Dq,) rad and its ee at xyz (3,) m, in observation units (the image uint8),
+# in the observation's key order; the goal is the goal modality's reading at the goal pose.
+_SENSORS = {"joints": lambda robot, q, xyz: q, "ee_xyz": lambda robot, q, xyz: xyz,
+            "ee_pixel": lambda robot, q, xyz: robot.project(xyz[None])[0],
+            "image": lambda robot, q, xyz: robot.render(q[None], check=False)[0]}
 
 
 class _Commanded:
@@ -55,9 +70,6 @@ class ReachEnv(gym.Env):
                  image_size: tuple[int, int] | None = None, success_mm: float = 10.0, duration: float | None = None,
                  render_mode: str | None = None):
         _check_arguments(robot, goal, action, image, success_mm, duration, render_mode)
-        from bodyschema.datagen.robot import Robot
-        from bodyschema.evaluation.core.sim import control_substeps
-        from bodyschema.evaluation.reaching.robot_defaults import reaching_defaults
         defaults = reaching_defaults(str(robot))
         self.robot_ref, self.goal_modality, self.image, self.success_mm = str(robot), goal, bool(image), success_mm
         self.robot = Robot.load(self.robot_ref, image_size=image_size, actuators=defaults.actuators)
@@ -66,7 +78,7 @@ class ReachEnv(gym.Env):
         self.substeps = control_substeps(self.control_hz, self.robot.model.opt.timestep)
         self.dt = self.substeps * self.robot.model.opt.timestep                    # s, one control period
         self.max_steps = int(round(self.duration * self.control_hz))
-        self.max_velocity = (defaults.action or _action_config()).max_velocity      # rad/s, velocity actions
+        self.max_velocity = (defaults.action or ActionConfig()).max_velocity      # rad/s, velocity actions
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": self.control_hz}
         self.observation_space = env_spaces.observation_space(self.robot, goal, self.image)
@@ -78,9 +90,6 @@ class ReachEnv(gym.Env):
     # ---- the Gymnasium API --------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
-        from bodyschema.datagen.samplers import uniform
-        from bodyschema.evaluation.core.sim import ArmBatch
-        from bodyschema.evaluation.reaching.benchmark import in_view_targets, make_goal
         options = dict(options or {})
         unknown = sorted(set(options) - {"target", "start"})
         if unknown:
@@ -90,7 +99,7 @@ class ReachEnv(gym.Env):
         q_start = self._pose(options, "start") if "start" in options else \
             uniform(self.np_random, self.robot.sampling_ranges, 1)                # (1, Dq) rad
         self.goal_pose, self.goal_xyz = q_target, self.robot.fk(q_target)        # (1, Dq) rad, (1, 3) m
-        self._goal = make_goal(self.robot, self.goal_modality, q_target).numpy()[0]
+        self._goal = _SENSORS[self.goal_modality](self.robot, q_target[0], self.goal_xyz[0])
         self.arm = ArmBatch(self.robot, q_start)
         self._integrator = self._velocity_integrator()
         self.steps, self.episode = 0, self.episode + 1
@@ -132,19 +141,10 @@ class ReachEnv(gym.Env):
     def _observation(self) -> dict[str, np.ndarray]:
         space, q = self.observation_space, self._joints()
         xyz = self.arm.ee_xyz[0]                                                  # (3,) m
-        obs = {"joints": q, "ee_xyz": env_spaces.clip_to(space["ee_xyz"], xyz),
-               "ee_pixel": env_spaces.clip_to(space["ee_pixel"], self.robot.project(xyz[None])[0])}
-        if self.image:
-            obs["image"] = self.robot.render(q[None], check=False)[0]
-        obs["goal"] = env_spaces.clip_to(space["goal"], self._goal_reading())
+        obs = {k: env_spaces.clip_to(space[k], sensor(self.robot, q, xyz)) for k, sensor in _SENSORS.items()
+               if k in space.spaces}
+        obs["goal"] = env_spaces.clip_to(space["goal"], self._goal)
         return obs
-
-    def _goal_reading(self) -> np.ndarray:
-        """The goal in its modality's observation units (an image goal as uint8, like the image observation)."""
-        if self.goal_modality != "image":
-            return self._goal.copy()
-        from bodyschema.models.scaling import IMAGE_SCALE
-        return np.rint(self._goal * IMAGE_SCALE)
 
     def _info(self) -> dict:
         error = self.ee_error_mm()
@@ -158,8 +158,6 @@ class ReachEnv(gym.Env):
         """Reaching's own integration of velocity commands (servo targets / impedance setpoint), or None."""
         if self.action_kind != "velocity":
             return None
-        from bodyschema.evaluation.core.pd import PDController
-        from bodyschema.evaluation.reaching.loop import ImpedancePolicy, VelocityPolicy
         integrator = VelocityPolicy(_Commanded()) if self.robot.actuation == "position" else \
             ImpedancePolicy(_Commanded(), PDController(self.robot), tuple(self.robot.joint_limits.T))
         integrator.reset(self.arm, {})
@@ -193,11 +191,6 @@ class ReachEnv(gym.Env):
     def _pose(self, options: dict, key: str) -> np.ndarray:
         q = np.asarray(options[key], dtype=np.float64).reshape(1, -1)
         return self.robot.check_q(q)
-
-
-def _action_config():
-    from bodyschema.aif.action import ActionConfig
-    return ActionConfig()
 
 
 def _action_kind(action: str, actuation: str) -> str:

@@ -6,7 +6,7 @@ from importlib import resources
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-TOP_LEVEL = ("bodyschema", "datagen", "models", "training", "aif", "evaluation", "envs")
+TOP_LEVEL = ("bodyschema", "datagen", "models", "training", "aif", "evaluation", "envs", "control")
 
 
 def _pyproject():

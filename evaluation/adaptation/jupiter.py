@@ -2,7 +2,7 @@
 
 As in the AIC paper's experiment (Pezzato, Ferrari & Hernández Corbato 2020, §VI), the same joint goals are held
 by three controllers from the same start poses: the PD baseline with Earth-gravity compensation
-(core/pd.py, the "built-in" controller), the unimodal AIC (joint sensors) and the multimodal AIC (joints +
+(control/pd.py, the "built-in" controller), the unimodal AIC (joint sensors) and the multimodal AIC (joints +
 an extra SensoryModel, by default the analytic ee_xyz). Recorded over time: the joint tracking error (deg, mean
 over joints) and the end-effector error (mm). Summary per controller: steady error before and after the switch,
 peak error after it, settle time, failed episodes. An episode whose controller or simulation fails (non-finite
@@ -19,17 +19,17 @@ import numpy as np
 import torch
 
 from bodyschema.aif.aic import AICConfig, AICController
+from bodyschema.control.pd import PDConfig, PDController
+from bodyschema.control.sim import ArmBatch, control_substeps
 from bodyschema.datagen.robot import GRAVITY, Robot
 from bodyschema.errors import must_be
 from bodyschema.evaluation.adaptation.jupiter_report import ControllerRun, summarize, write_report
 from bodyschema.evaluation.core.config import TrialsConfig
 from bodyschema.evaluation.core.mlflow_log import table_metrics
-from bodyschema.evaluation.core.pd import PDConfig, PDController
 from bodyschema.evaluation.core.publish import publish
 from bodyschema.evaluation.core.runs import new_run
 from bodyschema.evaluation.core.seeds import eval_rng
 from bodyschema.evaluation.core.sensing import sense_all
-from bodyschema.evaluation.core.sim import ArmBatch, control_substeps
 from bodyschema.evaluation.core.specs import check_models_match, models_field, resolve_models
 from bodyschema.threads import pinned
 

@@ -25,13 +25,13 @@ import torch
 
 from bodyschema.aif.action import ActionConfig, VelocityController
 from bodyschema.aif.perception_config import FlowSettings, PerceptionConfig
+from bodyschema.control.sim import ArmBatch, control_substeps
 from bodyschema.errors import must_be
 from bodyschema.evaluation.adaptation import marker_shift_report as report
 from bodyschema.evaluation.core.config import TrialsConfig
 from bodyschema.evaluation.core.runs import new_run
 from bodyschema.evaluation.core.seeds import eval_rng
 from bodyschema.evaluation.core.sensing import sense, sense_all
-from bodyschema.evaluation.core.sim import ArmBatch, control_substeps
 from bodyschema.evaluation.core.specs import load_robot, models_field, resolve_models
 
 # Unit direction of each shift in the hand (LForeArm body) frame: x along the forearm towards the marker, y the

@@ -20,9 +20,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bodyschema.control.sim import ArmBatch, control_substeps
 from bodyschema.evaluation.core.seeds import EVAL_STREAM
 from bodyschema.evaluation.core.sensing import sense
-from bodyschema.evaluation.core.sim import ArmBatch, control_substeps
 
 SELF = "self"
 SOURCES = ("pushed", "scene_moved")

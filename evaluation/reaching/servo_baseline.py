@@ -8,7 +8,7 @@ of ee error; an inferred servo up to `robot_infer.SAG_RAD`). The rule: command t
 the torque that holds q_d,
     ctrl = (τ_hold(q_d) / gear − b₀ − b₁·q_d) / g₀          (= q_d + τ_hold(q_d) / kp for a `<position>` servo)
     τ_hold(q) = qfrc_bias(q, q̇ = 0) − qfrc_passive(q)     gravity (RNE at rest) minus springs,
-once per target, on a private copy of the robot's model under Earth gravity (9.81 m/s², as `core.pd.PDController`:
+once per target, on a private copy of the robot's model under Earth gravity (9.81 m/s², as `control.pd.PDController`:
 a compensation identified on Earth stays Earth's when the simulated gravity changes), clipped to the ctrlrange
 (a target near a joint limit keeps what the clip takes). Dry friction is left: a servo sticks within f / kp of
 its rest (Jaco 0.07°, TALOS's wrists 0.24°, nao_arm and planar2 none).

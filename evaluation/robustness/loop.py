@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bodyschema.control.robot_defaults import reaching_defaults
 from bodyschema.datagen import modalities
 from bodyschema.errors import must_be
 from bodyschema.evaluation.core.mlflow_log import table_metrics
@@ -27,7 +28,6 @@ from bodyschema.evaluation.reaching.benchmark import (
     builtin_sensors,
     simulate,
 )
-from bodyschema.evaluation.reaching.robot_defaults import reaching_defaults
 from bodyschema.evaluation.robustness.units import noise_label
 
 COLUMNS = ("success", "goal_success", "ee_err_mm", "ee_err_median_mm", "time_to_reach_s", "failed")

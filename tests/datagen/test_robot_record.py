@@ -30,9 +30,9 @@ def test_each_shipped_robot_is_a_record_beside_its_mjcf(name):
 
 
 def test_the_robot_tables_are_gone():
+    import bodyschema.control.pd as pd
     import bodyschema.datagen.config as config
     import bodyschema.datagen.robot as robot
-    import bodyschema.evaluation.core.pd as pd
     import bodyschema.evaluation.reaching.benchmark as reaching
     assert not hasattr(robot, "ROBOT_DEFAULTS") and not hasattr(config, "ROBOTS")
     assert not hasattr(reaching, "ROBOTS") and not hasattr(pd, "FRANKA_KP")

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from bodyschema.aif.aic import AICConfig, AICController
+from bodyschema.control.pd import PDController
 from bodyschema.datagen.robot import Robot
 from bodyschema.evaluation.adaptation.jupiter import (
     READY,
@@ -18,7 +19,6 @@ from bodyschema.evaluation.adaptation.jupiter import (
     sample_poses,
     simulate,
 )
-from bodyschema.evaluation.core.pd import PDController
 from bodyschema.evaluation.core.seeds import eval_rng
 from bodyschema.models.analytic import AnalyticModel
 

@@ -9,6 +9,7 @@ import csv
 import numpy as np
 import pytest
 
+from bodyschema.control.sim import control_substeps
 from bodyschema.evaluation.adaptation.marker_shift import (
     MarkerShiftConfig,
     goal_poses,
@@ -17,7 +18,6 @@ from bodyschema.evaluation.adaptation.marker_shift import (
     simulate,
 )
 from bodyschema.evaluation.adaptation.marker_shift_report import episode_rows, predicted_correction
-from bodyschema.evaluation.core.sim import control_substeps
 from bodyschema.evaluation.core.specs import load_robot
 from bodyschema.models.analytic import AnalyticModel
 

@@ -11,15 +11,15 @@ import mujoco
 import numpy as np
 import pytest
 
+from bodyschema.control.loop import TorquePolicy, rollout
+from bodyschema.control.pd import PDConfig, PDController
+from bodyschema.control.pd_gains import RATE_FRACTION, ModelLaw, bandwidth, inferred_pd
+from bodyschema.control.sim import control_substeps
 from bodyschema.datagen.robot import Robot
 from bodyschema.datagen.robot_build import build_model
 from bodyschema.datagen.robot_infer import SERVO_RAD_S, inertia_gains, infer_record
 from bodyschema.datagen.robot_record import RobotRecord
-from bodyschema.evaluation.core.pd import PDConfig, PDController
-from bodyschema.evaluation.core.pd_gains import RATE_FRACTION, ModelLaw, bandwidth, inferred_pd
 from bodyschema.evaluation.core.sensing import Sensors
-from bodyschema.evaluation.core.sim import control_substeps
-from bodyschema.evaluation.reaching.loop import TorquePolicy, rollout
 
 ERD = "cmeel.prefix/share/example-robot-data/robots"
 

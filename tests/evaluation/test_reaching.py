@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 import torch
 
+from bodyschema.control.loop import rollout
+from bodyschema.control.sim import control_substeps
 from bodyschema.evaluation.core.sensing import Sensors
-from bodyschema.evaluation.core.sim import control_substeps
 from bodyschema.evaluation.reaching import goal_pose
 from bodyschema.evaluation.reaching.benchmark import (
     ReachingConfig,
@@ -21,7 +22,6 @@ from bodyschema.evaluation.reaching.benchmark import (
     run_reaching,
     simulate,
 )
-from bodyschema.evaluation.reaching.loop import rollout
 from bodyschema.evaluation.reaching.report import time_to_reach
 
 SHORT = dict(trials=4, duration=1.5, mlflow=False, progress=False)

@@ -11,13 +11,13 @@ import mujoco
 import numpy as np
 import pytest
 
+from bodyschema.control.loop import ServoPolicy, rollout
+from bodyschema.control.sim import ArmBatch, control_substeps
 from bodyschema.datagen.robot import Robot
 from bodyschema.datagen.robot_build import build_model
 from bodyschema.datagen.robot_infer import inertia_gains, infer_record
 from bodyschema.datagen.robot_record import RobotRecord
 from bodyschema.evaluation.core.sensing import Sensors
-from bodyschema.evaluation.core.sim import ArmBatch, control_substeps
-from bodyschema.evaluation.reaching.loop import ServoPolicy, rollout
 from bodyschema.evaluation.reaching.servo_baseline import servo_targets
 
 ERD = "cmeel.prefix/share/example-robot-data/robots"

@@ -7,10 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from bodyschema.control.sim import ArmBatch, control_substeps
 from bodyschema.datagen.robot import GRAVITY, Robot
 from bodyschema.evaluation.adaptation.marker_shift import goal_poses, marker_offsets
 from bodyschema.evaluation.core.sensing import Sensors, sense, sense_all
-from bodyschema.evaluation.core.sim import ArmBatch, control_substeps
 from bodyschema.evaluation.core.specs import load_robot
 from bodyschema.models.analytic import AnalyticModel
 

@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from bodyschema.control.sim import ArmBatch
 from bodyschema.datagen.robot import Robot
 from bodyschema.datagen.robot_record import dumps_toml
-from bodyschema.evaluation.core.sim import ArmBatch
 from tests.evaluation.test_file_robot import ARM, RECORD
 
 

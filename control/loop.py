@@ -1,15 +1,15 @@
-"""The closed reaching loop: B episodes of one robot in the core simulator (`core.sim.ArmBatch`) at a fixed
+"""The closed reaching loop: B episodes of one robot in the batched simulator (`control.sim.ArmBatch`) at a fixed
 control rate.
 
-Per control tick: simulator state → observations (`core.sensing.Sensors`: the sensors' units, + Gaussian noise σ,
-or a stream frozen at its first value) → policy → actuation (servo targets or torques) → the simulator's control
-period. Policies wrap a controller into one interface: `reset(arm, goal)`, `command(arm, observations, dt) ->
-(B, nu)`, `failed`, `reasons`.
+Per control tick: simulator state → observations (a `Sensing`, e.g. the benchmarks' `core.sensing.Sensors`: the
+sensors' units, + Gaussian noise σ, or a stream frozen at its first value) → policy → actuation (servo targets or
+torques) → the simulator's control period. Policies wrap a controller into one interface: `reset(arm, goal)`,
+`command(arm, observations, dt) -> (B, nu)`, `failed`, `reasons`.
   VelocityPolicy  AIF velocity commands on position servos: ctrl ← clip(ctrl + a·Δt, ctrlrange)   (nao_arm)
   ServoPolicy     baseline on position servos: ctrl = fixed servo commands, the target's joint pose (its true inverse
-                  kinematics) + the servo's gravity feed-forward (servo_baseline.py)
+                  kinematics) + the servo's gravity feed-forward (evaluation/reaching/servo_baseline.py)
   TorquePolicy    torques on motors from a controller with AICController's interface: the AIC (aif/aic.py) or,
-                  as baseline, PD + model compensation on the target's joint pose (core/pd.py: the record's tuned
+                  as baseline, PD + model compensation on the target's joint pose (control/pd.py: the record's tuned
                   gains, else gains from the arm's model and the control period)  (panda, torque arms)
   ImpedancePolicy AIF velocity commands integrated into the setpoint of the arm's joint impedance servo (the
                   same PD + gravity compensation as the baseline, which gets the target pose instead): the panda's
@@ -20,12 +20,19 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 import torch
 
-from bodyschema.evaluation.core.sensing import Sensors
-from bodyschema.evaluation.core.sim import ArmBatch
+from bodyschema.control.sim import ArmBatch
+
+
+class Sensing(Protocol):
+    """What the loop reads observations from (the benchmarks' `evaluation.core.sensing.Sensors`): the layer below
+    the benchmarks names the interface, not their noise and frozen streams."""
+
+    def read(self, arm: ArmBatch) -> Mapping[str, torch.Tensor]: ...
 
 
 # ---- policies ---------------------------------------------------------------------------------------------
@@ -70,7 +77,7 @@ class TorquePolicy:
 
 class ImpedancePolicy:
     """AIF velocity commands (aif.action.VelocityController) integrated into the setpoint of a joint impedance
-    servo with AICController's interface (core.pd.PDController): ctrl ← clip(ctrl + a·Δt, joint range)."""
+    servo with AICController's interface (control.pd.PDController): ctrl ← clip(ctrl + a·Δt, joint range)."""
 
     def __init__(self, controller, servo, limits: tuple[np.ndarray, np.ndarray],
                  goal_precisions: Mapping[str, float] | None = None):
@@ -94,7 +101,8 @@ class ImpedancePolicy:
 
 class ServoPolicy:
     """Baseline on position servos: fixed servo commands, the target's joint pose (true inverse kinematics) with
-    its gravity feed-forward (`servo_baseline.servo_targets`), or the bare pose (the old baseline)."""
+    its gravity feed-forward (`evaluation.reaching.servo_baseline.servo_targets`), or the bare pose (the old
+    baseline)."""
 
     def __init__(self, q_target: np.ndarray):
         self.q_target = q_target                                           # (B, nu) servo commands (rad)
@@ -119,7 +127,7 @@ class Rollout:
 
 
 def rollout(robot, policy, q0: np.ndarray, goal: Mapping[str, torch.Tensor], target_xyz: np.ndarray,
-            sensors: Sensors, ticks: int, substeps: int, progress: bool = False, desc: str = "") -> Rollout:
+            sensors: Sensing, ticks: int, substeps: int, progress: bool = False, desc: str = "") -> Rollout:
     """Run B episodes for `ticks` control periods of substeps·timestep s each, all from rest at q0 (B, Dq)."""
     from tqdm import tqdm
     arm = ArmBatch(robot, q0)

@@ -25,9 +25,9 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from bodyschema.control.pd_gains import ModelLaw, inferred_pd
 from bodyschema.datagen.robot import GRAVITY, Robot
 from bodyschema.errors import must_be
-from bodyschema.evaluation.core.pd_gains import ModelLaw, inferred_pd
 
 GAINS = ("auto", "record", "model")
 
