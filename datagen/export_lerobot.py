@@ -34,10 +34,11 @@ import cv2
 import numpy as np
 import zarr
 
-from bodyschema.datagen.export import row_blocks
+from bodyschema.datagen import modalities
 from bodyschema.datagen.export_lerobot_stats import LeRobotStats
 from bodyschema.datagen.integrity import data_arrays
 from bodyschema.datagen.store_reader import attrs_json, feature, read, store_body
+from bodyschema.datagen.store_rows import row_blocks
 from bodyschema.errors import must_be
 
 FORMAT = "bodyschema-lerobot"
@@ -47,8 +48,7 @@ CHUNKS_SIZE = 1000                      # files per chunk directory (LeRobot's d
 DATA_FILE_MB = 100                      # target size of one data file (LeRobot's default)
 DATA_PATH = "data/chunk-{chunk_index:03d}/file-{file_index:03d}.parquet"
 EPISODES_PATH = "meta/episodes/chunk-000/file-000.parquet"
-KEYS = {"q": "observation.state", "qvel": "observation.velocity", "ee_xyz": "observation.ee_xyz",
-        "ee_pixel": "observation.ee_pixel", "jacobian": "observation.jacobian", "touch": "observation.touch"}
+STATE = {"q": "observation.state", "qvel": "observation.velocity"}    # the joints' keys, LeRobot's names
 ACTION = "action"
 COMMANDS = "target"                     # the store array holding the commands, where it has one (babbling)
 ACTION_NOTES = {
@@ -79,21 +79,29 @@ def lerobot_features(root: zarr.Group) -> dict[str, dict[str, Any]]:
     """LeRobot's `features`: {key: {dtype, shape, names}} for the store's arrays, then the five index columns."""
     out = {}
     names = set(data_arrays(root))
-    for name, key in KEYS.items():
+    for name, key in keys().items():
         if name in names:
             f = feature(root, name)
             out[key] = {"dtype": f["dtype"], "shape": [int(np.prod(f["shape"]))], "names": _names(root, name, f)}
-    out[ACTION] = dict(out[KEYS["q"]])               # a joint-angle command per frame: same dtype, width, names
-    if "image" in names:
-        h, w, *c = feature(root, "image")["shape"]
-        out[image_key(root)] = {"dtype": "image", "shape": [h, w, c[0] if c else 1],
-                                "names": ["height", "width", "channels"]}
+    out[ACTION] = dict(out[STATE["q"]])               # a joint-angle command per frame: same dtype, width, names
+    for camera in modalities.images_in(names):
+        h, w, *c = feature(root, camera)["shape"]
+        out[image_key(root, camera)] = {"dtype": "image", "shape": [h, w, c[0] if c else 1],
+                                        "names": ["height", "width", "channels"]}
     out.update({k: {"dtype": dtype, "shape": [1], "names": None} for k, dtype in INDEX_FEATURES.items()})
     return out
 
 
-def image_key(root: zarr.Group) -> str:
-    return f"observation.images.{root.attrs.get('camera_name') or 'camera'}"
+def keys() -> dict[str, str]:
+    """Store array → LeRobot key of every vector feature, in the export's column order (the store's)."""
+    sensors = [m.name for m in modalities.MODALITIES.values() if m.sensor]
+    rows = [m for m in modalities.stored(False, sensors) if m.store_array not in STATE]
+    return STATE | {m.store_array: f"observation.{m.name}" for m in rows}
+
+
+def image_key(root: zarr.Group, camera: str = modalities.IMAGE) -> str:
+    """observation.images.<camera> of the store array `camera` (the robot's own camera: its attrs name)."""
+    return f"observation.images.{modalities.get(camera).camera or root.attrs.get('camera_name') or 'camera'}"
 
 
 def _names(root: zarr.Group, name: str, f: dict) -> list[str]:
@@ -163,14 +171,14 @@ def _frames(root: zarr.Group, rows: tuple[int, int], episode: tuple[int, int], f
     frame = np.arange(first_frame, first_frame + stop - start, dtype=np.int64)        # (b,)
     t = read(root, "t", start, stop).astype(np.float32) if "t" in root.array_keys() else (frame / fps)
     columns = {}
-    for name, key in KEYS.items():
+    for name, key in keys().items():
         if key in feats:
             columns[key] = _vector_column(key, read(root, name, start, stop).reshape(stop - start, -1), stats)
     columns[ACTION] = _vector_column(ACTION, _action(root, start, stop, episode_stop), stats)
-    if "image" in root.array_keys():
-        images = read(root, "image", start, stop)                                      # (b, H, W[, C]) uint8
-        stats.add_images(image_key(root), images)
-        columns[image_key(root)] = pa.array([{"bytes": _png(img), "path": None} for img in images],
+    for camera in modalities.images_in(root.array_keys()):
+        images = read(root, camera, start, stop)                                      # (b, H, W[, C]) uint8
+        stats.add_images(image_key(root, camera), images)
+        columns[image_key(root, camera)] = pa.array([{"bytes": _png(img), "path": None} for img in images],
                                             type=pa.struct([("bytes", pa.binary()), ("path", pa.string())]))
     index = {"timestamp": np.asarray(t, np.float32), "frame_index": frame,
              "episode_index": np.full(len(frame), episode_index, np.int64),
@@ -254,12 +262,13 @@ def _write_meta(out: Path, attrs: dict, feats: dict, episodes: list[tuple[int, i
              "meta/episodes/chunk_index": 0, "meta/episodes/file_index": 0} for i, (start, stop) in enumerate(episodes)]
     (out / EPISODES_PATH).parent.mkdir(parents=True, exist_ok=True)
     pd.DataFrame(rows).to_parquet(out / EPISODES_PATH, index=False)
-    units = {KEYS[name]: feature(root, name)["unit"] for name in KEYS if KEYS[name] in feats} | {ACTION: "rad"}
-    arrays = {KEYS[n]: n for n in KEYS if KEYS[n] in feats}
+    vectors = {key: name for name, key in keys().items() if key in feats}
+    units = {key: feature(root, name)["unit"] for key, name in vectors.items()} | {ACTION: "rad"}
+    arrays = dict(vectors)
     if action_source(root) == COMMANDS:
         arrays[ACTION] = COMMANDS                  # the importer reads it back into the store's array
-    if "image" in root.array_keys():
-        units[image_key(root)], arrays[image_key(root)] = "intensity 0-255", "image"
+    for camera in modalities.images_in(root.array_keys()):
+        units[image_key(root, camera)], arrays[image_key(root, camera)] = "intensity 0-255", camera
     ours = {"format": FORMAT, "units": units, "body": store_body(root), "arrays": arrays,
             "frames": "a babbling trajectory" if "t" in root.array_keys() else "independent poses (fps 1: frame i "
             "at i s)", "action": ACTION_NOTES[action_source(root)], "store_attrs": json.loads(attrs_json(root))}

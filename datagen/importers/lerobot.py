@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bodyschema.datagen.export_lerobot import keys
 from bodyschema.datagen.importers.folder_csv import from_opencv
 from bodyschema.datagen.importers.recording import Recording
 from bodyschema.errors import must_be
@@ -26,8 +27,6 @@ from bodyschema.errors import must_be
 OWN_FORMAT = "bodyschema-lerobot"
 ACTION, COMMANDS = "action", "target"     # LeRobot's command column; the store array it comes from, when one does
 INDEX_COLUMNS = ("timestamp", "frame_index", "episode_index", "index", "task_index")   # LeRobot's, per frame
-OWN_ARRAYS = {"observation.velocity": "qvel", "observation.ee_xyz": "ee_xyz", "observation.ee_pixel": "ee_pixel",
-              "observation.jacobian": "jacobian", "observation.touch": "touch"}
 
 
 def read_lerobot(root: Path, joint_keys: tuple[str, ...], image_key: str | None, images: bool) -> Recording:
@@ -56,7 +55,7 @@ def read_lerobot(root: Path, joint_keys: tuple[str, ...], image_key: str | None,
             arrays[COMMANDS] = action
         else:
             dropped[ACTION] = why
-    used = {state_key, *INDEX_COLUMNS, *([key] if key else []), *(OWN_ARRAYS if ours else ()),
+    used = {state_key, *INDEX_COLUMNS, *([key] if key else []), *(own_arrays() if ours else ()),
             *([ACTION] if COMMANDS in arrays else [])}
     for name in feats:
         if name not in used and name not in dropped:
@@ -195,12 +194,17 @@ def _names(feature: dict, k: int) -> tuple[str, ...] | None:
     return tuple(map(str, names)) if isinstance(names, list) and len(names) == k else None
 
 
+def own_arrays() -> dict[str, str]:
+    """LeRobot key → store array of the vector features the export writes besides the state (export_lerobot.keys)."""
+    return {key: name for name, key in keys().items() if name != "q"}
+
+
 def _own_arrays(frames, dq: int, mapping: dict[str, str], root: Path) -> dict[str, np.ndarray]:
     """The store arrays this project's export wrote besides q and images (`mapping`: meta's key → array)."""
     out = {}
     if mapping.get(ACTION) == COMMANDS and ACTION in frames.column_names:
         out[COMMANDS] = _vectors(frames, ACTION, root)                         # (N, Dq) rad, the servo targets
-    for key, name in OWN_ARRAYS.items():
+    for key, name in own_arrays().items():
         if key in frames.column_names:
             values = _vectors(frames, key, root)
             out[name] = values.reshape(len(values), 3, dq) if name == "jacobian" else values
