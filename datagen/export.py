@@ -14,13 +14,16 @@ from pathlib import Path
 
 import zarr
 
+from bodyschema.datagen import export_hdf5, export_lerobot
 from bodyschema.datagen.integrity import data_arrays
 from bodyschema.datagen.outputs import check_out, write_atomically
 from bodyschema.datagen.store_reader import CREATE_HINT, check_store, source_digest
 from bodyschema.errors import must_be
 
 FORMATS = ("hdf5", "lerobot")
-ROWS_PER_READ = 4096          # rows read from the store at a time: images of 4096 × 56 × 80 are 18 MB
+# format → (its output kind, its size factor over the stored bytes, its writer)
+WRITERS = {"hdf5": (export_hdf5.FORMAT, export_hdf5.SIZE_FACTOR, export_hdf5.write_hdf5),
+           "lerobot": (export_lerobot.FORMAT, export_lerobot.SIZE_FACTOR, export_lerobot.write_lerobot)}
 
 
 def export_dataset(store: str | Path, out: str | Path, to: str, *, overwrite: bool = False) -> Path:
@@ -28,15 +31,12 @@ def export_dataset(store: str | Path, out: str | Path, to: str, *, overwrite: bo
     if to not in FORMATS:
         raise ValueError(must_be("--to", f"one of {FORMATS}", to))
     store, out = Path(store), Path(out)
-    if to == "hdf5":
-        from bodyschema.datagen.export_hdf5 import FORMAT, SIZE_FACTOR, write_hdf5 as write
-    else:
-        from bodyschema.datagen.export_lerobot import FORMAT, SIZE_FACTOR, write_lerobot as write
-    check_out(out, FORMAT, overwrite, [store])         # before the validation, which reads every chunk
+    kind, size_factor, write = WRITERS[to]
+    check_out(out, kind, overwrite, [store])           # before the validation, which reads every chunk
     root = checked_store(store)
     source = {"store": str(store.resolve()), "digest": source_digest(root)}
-    return write_atomically(out, lambda tmp: write(root, tmp), overwrite, kind=FORMAT, inputs=[store],
-                            need_bytes=int(SIZE_FACTOR * stored_bytes(root)), source=source)
+    return write_atomically(out, lambda tmp: write(root, tmp), overwrite, kind=kind, inputs=[store],
+                            need_bytes=int(size_factor * stored_bytes(root)), source=source)
 
 
 def checked_store(path: Path) -> zarr.Group:
@@ -53,9 +53,3 @@ def checked_store(path: Path) -> zarr.Group:
 def stored_bytes(root: zarr.Group) -> int:
     """Bytes the data arrays take in the store (compressed): the base of an export's size estimate."""
     return sum(int(root[name].nbytes_stored()) for name in data_arrays(root))
-
-
-def row_blocks(n: int, step: int | None = None):
-    """(start, stop) ranges covering [0, n) in steps of `step` rows (default ROWS_PER_READ)."""
-    step = step or ROWS_PER_READ
-    return ((start, min(n, start + step)) for start in range(0, n, step))

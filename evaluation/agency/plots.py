@@ -13,8 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bodyschema.evaluation.agency.report import ALL
-from bodyschema.evaluation.agency.streams import SELF
+from bodyschema.evaluation.agency.streams import ALL, SELF
 from bodyschema.evaluation.core.plots import plt, save_figure
 
 # (dash, marker, marker size, line width): the first drawn widest, so a later one on top leaves it visible

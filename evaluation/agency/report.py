@@ -8,10 +8,9 @@ from pathlib import Path
 import numpy as np
 from sklearn import metrics
 
-from bodyschema.evaluation.agency.streams import SELF
+from bodyschema.evaluation.agency.streams import ALL, SELF
 from bodyschema.evaluation.core.tables import markdown_table, write_csv
 
-ALL = "all senses"
 CLAIMED = 0.95            # fpr_at_tpr95: the false "I did it" rate once 95 % of own movements are claimed
 
 

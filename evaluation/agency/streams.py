@@ -21,10 +21,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from bodyschema.control.sim import ArmBatch, control_substeps
+from bodyschema.datagen.modalities import is_image
 from bodyschema.evaluation.core.seeds import EVAL_STREAM
 from bodyschema.evaluation.core.sensing import sense
 
 SELF = "self"
+ALL = "all senses"                       # the comparison on every sense at once (report and plots)
 SOURCES = ("pushed", "scene_moved")
 STREAM_WORD = 0xA6E7                     # second entropy word: agency episodes
 ROLE = {"start": 0, "commands": 1, "proprio_noise": 2, "visual_noise": 3}
@@ -109,10 +111,10 @@ def observe(robot, modalities: Sequence[str], episodes: Episodes, lag: int,
         source = episodes.felt if m == "joints" else episodes.seen
         q = delayed(source, episodes.rest, lag).reshape(n * t, dq)
         x = np.asarray(sense(robot, m, q, image_dtype=np.float32))
-        x = x.reshape(n, t, *x.shape[1:]).astype(np.float32 if m == "image" else np.float64)
+        x = x.reshape(n, t, *x.shape[1:]).astype(np.float32 if is_image(m) else np.float64)
         sigma = noise.get(m, 0.0)
         if sigma > 0:
             role = "proprio_noise" if m == "joints" else "visual_noise"
             x = x + sigma * np.stack([episode_rng(seed, i, role).standard_normal(x.shape[1:]) for i in range(n)])
-        out[m] = np.clip(x, 0.0, 1.0) if m == "image" else x
+        out[m] = np.clip(x, 0.0, 1.0) if is_image(m) else x
     return out

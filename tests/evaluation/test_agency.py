@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from bodyschema.evaluation.agency.benchmark import AgencyConfig, predicted_free_energy, prepare, run_agency
-from bodyschema.evaluation.agency.report import ALL, roc_rows
-from bodyschema.evaluation.agency.streams import SELF, delayed, make_episodes, observe
+from bodyschema.evaluation.agency.report import roc_rows
+from bodyschema.evaluation.agency.streams import ALL, SELF, delayed, make_episodes, observe
 from bodyschema.models.analytic import AnalyticModel
 
 QUIET = {"mlflow": False, "progress": False, "plots": False}
