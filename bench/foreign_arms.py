@@ -43,9 +43,11 @@ def bodyschema(args: list[str], log: Path) -> tuple[str, float]:
     done = subprocess.run([sys.executable, "-m", "bodyschema.cli", *args], capture_output=True, text=True)
     seconds = time.monotonic() - start
     with log.open("a") as out:
-        out.write(f"$ bodyschema {' '.join(args)}  # {seconds:.1f} s, exit {done.returncode}\n{done.stdout}{done.stderr}\n")
+        out.write(f"$ bodyschema {' '.join(args)}  # {seconds:.1f} s, exit {done.returncode}\n")
+        out.write(f"{done.stdout}{done.stderr}\n")
     if done.returncode != 0:
-        raise RuntimeError(f"`bodyschema {' '.join(args[:3])}` exit {done.returncode}: {done.stderr.strip()[-400:]}")
+        tail = done.stderr.strip()[-400:]
+        raise RuntimeError(f"`bodyschema {' '.join(args[:3])}` exit {done.returncode}: {tail}")
     return done.stdout + done.stderr, seconds
 
 

@@ -37,7 +37,7 @@ def run(folder: Path) -> None:
     env = {**os.environ, "BODYSCHEMA_THREADS": "1", "MLFLOW_TRACKING_URI": f"sqlite:///{folder}/mlflow.db"}
     folder.mkdir(parents=True, exist_ok=False)
     commands = [DEMO + ["--out", str(folder / "demo")]]
-    commands += [["evaluate", *b, "--out", str(folder / "bench" / "-".join(w for w in b if not w[0] in "-0123456789")),
+    commands += [["evaluate", *b, "--out", str(folder / "bench" / "-".join(w for w in b if w[0] not in "-0123456789")),
                   "--no-progress"] for b in BENCHMARKS]
     for command in commands:
         print("$ bodyschema", " ".join(command), flush=True)
