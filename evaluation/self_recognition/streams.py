@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bodyschema.datagen.modalities import is_image
 from bodyschema.evaluation.core.seeds import EVAL_STREAM
 from bodyschema.evaluation.core.sensing import sense
 
@@ -103,7 +104,7 @@ def make_episodes(config, robot, modalities: Sequence[str]) -> Episodes:
         x = sense(robot, m, seen.reshape(n * t, dq), image_dtype=np.float32)      # (N·T, *out); float32 images
         x = x.reshape(n, t, *x.shape[1:])
         x[mirrored] = mirror(robot, m, x[mirrored].reshape(-1, *x.shape[2:])).reshape(x[mirrored].shape)
-        visual[m] = _noisy(x, noise.get(m, 0.0), config.seed, "visual_noise", m == "image").astype(np.float32)
+        visual[m] = _noisy(x, noise.get(m, 0.0), config.seed, "visual_noise", is_image(m)).astype(np.float32)
     proprio = _noisy(own, noise["joints"], config.seed, "proprio_noise", False)
     delay = np.where(kinds == IMITATOR, lags * period, np.nan)
     return Episodes(kinds, names, delay, own, proprio, visual, period)
@@ -120,7 +121,7 @@ def imitate(late: np.ndarray, config, robot, rng: np.random.Generator) -> np.nda
 
 def mirror(robot, modality: str, x: np.ndarray) -> np.ndarray:
     """The mirrored view: a reflection through the camera's vertical plane (x_cam → −x_cam)."""
-    if modality == "image":
+    if is_image(modality):
         return np.ascontiguousarray(np.flip(x, axis=2))            # (M, H, W[, C]): columns reversed
     if modality == "ee_pixel":
         return np.stack([robot.image_size[1] - 1 - x[:, 0], x[:, 1]], axis=1)   # u about the centre column

@@ -25,6 +25,7 @@ from bodyschema.aif.free_energy import sensory_terms
 from bodyschema.aif.perception import Perception
 from bodyschema.aif.perception_config import FlowSettings, PerceptionConfig
 from bodyschema.aif.tracker import Tracker, TrackerConfig
+from bodyschema.datagen.modalities import is_image
 from bodyschema.models.contract import FUSED_CALLS
 
 METHODS = ("encoder", "flow", "tracker", "tracker+command")
@@ -118,7 +119,7 @@ class EncoderFollower(Follower):
         pass
 
     def frame(self, obs, command, dt):
-        mu = np.clip(self.encoder.encode(obs["image"]).double().numpy(), self.low, self.high)
+        mu = np.clip(self.encoder.encode(obs[self.encoder.modality]).double().numpy(), self.low, self.high)
         return Step(mu, np.zeros(len(mu), bool), 0.0)
 
 
@@ -161,7 +162,7 @@ def make_followers(methods, models, tracker_config: TrackerConfig, encoder, prec
     The encoder row needs an encoder and an image model, and is left out without them."""
     q, observations = calibration
     out = {}
-    has_image = any(m.modality == "image" for m in models)
+    has_image = any(is_image(m.modality) for m in models)
     for name in methods:
         if name == "encoder":
             if encoder is not None and has_image:

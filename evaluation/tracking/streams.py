@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bodyschema.datagen.modalities import is_image
 from bodyschema.datagen.samplers import uniform
 from bodyschema.evaluation.core.seeds import Stream, eval_rng
 from bodyschema.evaluation.core.sensing import sense
@@ -64,7 +65,7 @@ def observe(robot, modalities: Sequence[str], q: np.ndarray, noise: Mapping[str,
         if sigma > 0:
             rng = eval_rng(seed, None, "noise", key, j, stream=TRACKING)
             x = x + sigma * rng.standard_normal(x.shape).astype(x.dtype)
-            x = np.clip(x, 0.0, 1.0) if m == "image" else x
+            x = np.clip(x, 0.0, 1.0) if is_image(m) else x
         out[m] = x.reshape(*lead, *x.shape[1:])
     return out
 
