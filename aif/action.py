@@ -35,7 +35,7 @@ import torch
 
 from bodyschema.aif.free_energy import JACOBIAN_MAX_OUTPUTS, model_input
 from bodyschema.aif.perception import Perception, PerceptionConfig
-from bodyschema.aif.perception_config import DEFAULTS
+from bodyschema.aif.perception_config import DEFAULTS, resolve
 from bodyschema.errors import must_be
 
 
@@ -80,15 +80,6 @@ class ActionConfig:
             raise ValueError(must_be("drive", "at least one modality", self.drive, "Use ('joints',)."))
 
 
-def per_tick(perception: PerceptionConfig) -> PerceptionConfig:
-    """perception with "auto" resolved for a control tick: the flow, without descent control. A tick takes a few
-    updates warm-started at the belief: LM and Adam would restart their step sizes (λ, lr) every tick, and the
-    attractor moves F every tick, so a step that raises F is the loop working, not a step to undo."""
-    method = "flow" if perception.method == "auto" else perception.method
-    control = "none" if perception.flow.step_control == "auto" else perception.flow.step_control
-    return replace(perception, method=method, flow=replace(perception.flow, step_control=control))
-
-
 class VelocityController:
     """Batched active-inference controller: B episodes, belief μ (B, Dq) rad → joint velocity commands (B, Dq) rad/s.
 
@@ -100,7 +91,8 @@ class VelocityController:
 
     def __init__(self, models: Sequence, perception: PerceptionConfig = DEFAULTS,
                  action: ActionConfig = ActionConfig(), precisions: Mapping[str, float] | None = None):
-        self._perception_config = replace(per_tick(perception), prior="attractor",
+        warm = resolve(perception, (m.modality for m in models), warm=True)     # a few updates per tick
+        self._perception_config = replace(warm, prior="attractor",
                                           attractor_gain=action.attractor_gain, max_steps=action.perception_steps,
                                           record=False)
         self._precision_overrides = dict(precisions or {})

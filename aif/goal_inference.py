@@ -34,6 +34,7 @@ from tqdm.auto import tqdm
 from bodyschema import log
 from bodyschema.aif.free_energy import model_input, sensory_terms
 from bodyschema.aif.perception import Perception
+from bodyschema.aif.perception_config import is_image
 from bodyschema.aif.precisions import perceived_precisions
 from bodyschema.errors import must_be
 
@@ -77,7 +78,7 @@ def _search(perception: Perception, goal: Mapping[str, torch.Tensor], starts: to
     """Perception of every goal from every start → (mu (B, S, Dz) rad, F (B, S), inf where diverged; evaluations).
     An image goal: one start at a time (module doc); else all B·S in one batch."""
     b, s, dz = starts.shape
-    if "image" not in goal:
+    if not any(map(is_image, goal)):
         tiled = {name: x.repeat_interleave(s, dim=0) for name, x in goal.items()}
         with log.phase(f"imagining {b} goals from {s} starts", progress):
             result = perception.infer(tiled, starts.reshape(b * s, dz))

@@ -4,7 +4,10 @@ group (`FlowSettings`, `LMSettings`, `AdamSettings`), and `resolve`, the one pla
 "auto" is decided here, from the models a perception is given, for every caller: the method is "adam+lm" at order 0
 with an image model (its F has shallow local minima that Gauss–Newton jumps land in; bench/aif.py [2]), else "flow"
 (Gauss–Newton descent: exact in ~5–20 steps on kinematics); the flow's step control is "descent" at order 0 (F is
-then a Lyapunov function of the flow: monotone, no jitter at the noise floor), "none" above.
+then a Lyapunov function of the flow: monotone, no jitter at the noise floor), "none" above. A warm perception (a few
+updates per control tick or frame from the last belief: action, the tracker) runs the flow without descent control:
+LM and Adam would restart their step sizes every tick, and a moving attractor makes a step that raises F the loop
+working, not a step to undo. Whether a model sees images is asked of its modality's record (datagen/modalities.py).
 The CLI spells every knob flat (`--perception.dt`, `--perception.lr`): the groups carry no prefix of their own.
 """
 
@@ -19,6 +22,7 @@ import tyro
 
 from bodyschema.aif import descent
 from bodyschema.aif.priors import PRIORS
+from bodyschema.datagen import modalities as modality_table
 from bodyschema.errors import must_be
 
 INTEGRATORS = ("local_linear", "implicit", "euler")
@@ -148,13 +152,19 @@ class PerceptionConfig:
 DEFAULTS = PerceptionConfig()           # the default of every `config` argument (frozen: one instance serves all)
 
 
-def resolve(config: PerceptionConfig, modalities: Iterable[str]) -> PerceptionConfig:
-    """config with "auto" replaced by the update for models of these modalities (module docstring)."""
+def is_image(modality: str) -> bool:
+    """Whether `modality` is a camera's frames, asked of its record; a modality outside the table is not."""
+    return modality in modality_table.MODALITIES and modality_table.get(modality).is_image
+
+
+def resolve(config: PerceptionConfig, modalities: Iterable[str], warm: bool = False) -> PerceptionConfig:
+    """config with "auto" replaced by the update for models of these modalities; warm: for a few updates per tick or
+    frame from the last belief (module docstring)."""
     method, control, modalities = config.method, config.flow.step_control, set(modalities)
     if method == "auto":
-        method = "adam+lm" if config.order == 0 and "image" in modalities else "flow"
+        method = "adam+lm" if not warm and config.order == 0 and any(map(is_image, modalities)) else "flow"
     if control == "auto":
-        control = "descent" if config.descends else "none"
+        control = "descent" if not warm and config.descends else "none"
     if "auto" in (config.method, config.flow.step_control):
         _log.debug("perception of %s: method %s → %s, step control %s → %s", "+".join(sorted(modalities)),
                    config.method, method, config.flow.step_control, control)   # "auto" shown as what it became

@@ -32,7 +32,7 @@ import torch
 from bodyschema.aif.consistency import SensorChecks, above_spread
 from bodyschema.aif.multistart import infer_multistart
 from bodyschema.aif.perception import Perception, as_inputs
-from bodyschema.aif.perception_config import FlowSettings, LMSettings, PerceptionConfig
+from bodyschema.aif.perception_config import FlowSettings, LMSettings, PerceptionConfig, resolve
 from bodyschema.errors import must_be
 from bodyschema.models.contract import as_input
 
@@ -47,10 +47,12 @@ RESTART = PerceptionConfig(max_steps=2, lm=LMSettings(trial_derivatives=True))  
 
 @dataclass(frozen=True)
 class TrackerConfig:
-    perception: PerceptionConfig = PerceptionConfig(method="flow", tol=1e-4, flow=FlowSettings(step_control="descent"))
-    # per frame (order 0): Gauss–Newton steps (local-linear flow) under descent control: a step that raises F is undone
-    # and the next one shorter. Measured (nao_arm, 30 Hz, README-recipe decoder and encoder, 20 s): 0.70° mean joint
-    # error and 3 % of frames restarted, against 0.86° and 8 % with every undamped step taken (step_control "none")
+    perception: PerceptionConfig = resolve(PerceptionConfig(tol=1e-4, flow=FlowSettings(step_control="descent")), (),
+                                           warm=True)
+    # per frame (order 0): a warm perception's update (perception_config.resolve: Gauss–Newton steps of the
+    # local-linear flow), here under descent control: a step that raises F is undone and the next one shorter.
+    # Measured (nao_arm, 30 Hz, README-recipe decoder and encoder, 20 s): 0.70° mean joint error and 3 % of frames
+    # restarted, against 0.86° and 8 % with every undamped step taken (step_control "none")
     budget: int = 5                 # model evaluations per stream and frame, an encoder proposal's 2 included
     # (with an encoder and an image model: the proposal and three descent-controlled steps; else five steps)
     budget_ms: float | None = None  # per frame, on top of `budget`; None: off (timing makes runs irreproducible)

@@ -29,7 +29,7 @@ from bodyschema.aif.perception import Perception, PerceptionConfig
 from bodyschema.aif.perception_config import FlowSettings
 from bodyschema.evaluation.core.seeds import eval_rng
 from bodyschema.evaluation.core.specs import load_robot, resolve_model
-from bodyschema.evaluation.levels.benchmark import LevelsConfig, levels_update, run_levels
+from bodyschema.evaluation.levels.benchmark import LevelsConfig, run_levels
 from bodyschema.evaluation.levels.plain import PLAIN_STEPS, plain_infer
 from bodyschema.evaluation.levels.report import markdown
 from bodyschema.evaluation.levels.targets import initial_beliefs, make_targets
@@ -61,7 +61,7 @@ def label(models) -> str:
 
 def batched_vs_loop(models, n, precisions=None, noise=None):
     targets, mu0 = problem(models, n, noise=noise)
-    perception = Perception(models, replace(levels_update(LevelsConfig()), record=False), precisions)
+    perception = Perception(models, replace(LevelsConfig().perception, record=False), precisions)
     obs = targets.tensors([m.modality for m in models])
     t = time.perf_counter()
     batched = perception.infer(obs, mu0)
@@ -77,7 +77,7 @@ def batched_vs_loop(models, n, precisions=None, noise=None):
 
 def updates(models):
     """The updates compared in [2]: Pixel-AIF's plain protocol, the Gauss–Newton descent flow, LM, Adam, default."""
-    default = Perception(models, levels_update(LevelsConfig())).config       # "auto" resolved for these models
+    default = Perception(models, LevelsConfig().perception).config       # "auto" resolved for these models
     return {"plain Pixel-AIF (Euler Δt 0.1, Π=1/Σ_v)": None,
             "Gauss–Newton descent (flow)": PerceptionConfig(method="flow", flow=FlowSettings(step_control="descent")),
             "Levenberg–Marquardt": PerceptionConfig(method="lm"),

@@ -31,7 +31,6 @@ from bodyschema.evaluation.core.specs import load_robot, resolve_encoder, resolv
 from bodyschema.evaluation.levels.benchmark import (
     LevelsConfig,
     evaluate_level,
-    levels_update,
     measure_levels,
     measure_run,
 )
@@ -67,7 +66,7 @@ def former_protocol(config, perception, robot, targets, encoder) -> list[dict]:
 
 def protocols(config, models, encoder) -> None:
     robot = load_robot(models, config.image_size)
-    perception = Perception(models, replace(levels_update(config), record=False))
+    perception = Perception(models, replace(config.perception, record=False))
     targets = make_targets(robot, config.trials, eval_rng(config.seed, 0, "targets"), True, {},
                            eval_rng(config.seed, 0, "noise"))
     start = time.perf_counter()

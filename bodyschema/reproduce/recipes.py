@@ -173,7 +173,7 @@ SELF_RECOGNITION = Recipe(
            _benchmark("self_exact", "evaluate self-recognition --model analytic:nao_arm:ee_pixel --no-plots"),
            _benchmark("self_decoder", "evaluate self-recognition --model {decoder} --no-plots"),
            _benchmark("self_decoder_before", "evaluate self-recognition --model {decoder} --start previous "
-                                             "--update flow --no-plots")),
+                                             "--perception.method flow --no-plots")),
     table=Table(marker="self-recognition", step="self_exact", csv="summary.csv", key="comparison",
                 rows=(Row("exact (", step="self_exact"), Row("pixel decoder (`dec_hand`", step="self_decoder"),
                       Row("pixel decoder, before", step="self_decoder_before")),

@@ -29,7 +29,7 @@ import torch
 
 from bodyschema.aif.multistart import infer_multistart, lowest_free_energy
 from bodyschema.aif.perception import Perception
-from bodyschema.aif.perception_config import METHODS, FlowSettings, PerceptionConfig
+from bodyschema.aif.perception_config import FlowSettings, PerceptionConfig
 from bodyschema.datagen.modalities import is_image
 from bodyschema.datagen.samplers import uniform
 from bodyschema.errors import must_be
@@ -61,16 +61,10 @@ class PerceptionRunConfig(TrialsConfig):
     runs: int = 5                      # runs with different target seeds
     noise: tuple[tuple[str, float], ...] = ()   # observation noise σ per modality (m, px, rad, intensity)
     perception: PerceptionConfig = PerceptionConfig(record=True, flow=FlowSettings(step_control="descent"))  # monotone
-    update: str = "auto"               # perception.method; "auto": adam+lm with an image model, else flow (aif decides)
     success_deg: float = 1.0           # a trial succeeds when its mean |joint error| is below this
     device: str = "cpu"                # where networks run: "cpu", "cuda" or "cuda:N" (the belief stays on the CPU)
     image_size: tuple[int, int] | None = None   # robot camera (H, W); default: the image model's, else the robot's
     plots: bool = True                 # write the PNG plots beside the tables
-
-    def __post_init__(self):
-        super().__post_init__()
-        if self.update not in ("auto", *METHODS):
-            raise ValueError(must_be("update", f"'auto' or one of {METHODS}", self.update))
 
 
 @dataclass(frozen=True)
@@ -111,14 +105,6 @@ class LevelsSummary:
     targets: dict | None = None                 # recorded targets: store path, digest, frames (None: simulator)
     floor: dict | None = None                   # the floor row: mean (and std) over runs (None: --no-floor)
     floor_rows: list[dict] = field(default_factory=list)   # the floor row of each run
-
-
-# ---- models ------------------------------------------------------------------------------------------
-def levels_update(config: PerceptionRunConfig) -> PerceptionConfig:
-    """config.perception with the update method of this run: --update, else --perception.method; "auto" (both's
-    default) is resolved by the Perception for its models (aif/perception_config.py)."""
-    return replace(config.perception, method=config.update if config.update != "auto" else config.perception.method)
-
 
 
 # ---- one level ----------------------------------------------------------------------------------------
@@ -235,7 +221,7 @@ def measure_run(config: LevelsConfig, models: Sequence, encoder, run: int, robot
     run 0)."""
     if robot is None:
         robot, recorded = _setting(config, models)
-    perception = Perception(models, replace(levels_update(config), record=config.perception.record and run == 0))
+    perception = Perception(models, replace(config.perception, record=config.perception.record and run == 0))
     noise_rng = eval_rng(config.seed, run, "noise")
     has_image = any(is_image(m.modality) for m in models) or encoder is not None
     targets = make_targets(robot, config.trials, eval_rng(config.seed, run, "targets"), has_image,

@@ -27,7 +27,7 @@ import torch
 
 from bodyschema.aif.free_energy import sensory_terms
 from bodyschema.aif.perception import Perception
-from bodyschema.aif.perception_config import METHODS, FlowSettings, PerceptionConfig
+from bodyschema.aif.perception_config import FlowSettings, PerceptionConfig
 from bodyschema.datagen.robot_record import check_robot_ref
 from bodyschema.errors import must_be
 from bodyschema.evaluation.core.config import TrialsConfig, check_names, within
@@ -36,7 +36,7 @@ from bodyschema.evaluation.core.publish import publish
 from bodyschema.evaluation.core.runs import new_run
 from bodyschema.evaluation.core.specs import body_and_senses, models_field, resolve_models
 from bodyschema.evaluation.self_recognition.report import roc_table, summary_notes, write_report
-from bodyschema.evaluation.self_recognition.sensors import perception_config, sensors_of, visual_only
+from bodyschema.evaluation.self_recognition.sensors import sensors_of, visual_only
 from bodyschema.evaluation.self_recognition.streams import IMITATOR, Episodes, frames_of, make_episodes
 
 SOURCES = (IMITATOR, "second_arm", "mirrored")
@@ -69,7 +69,6 @@ class SelfRecognitionConfig(TrialsConfig):
                                                     flow=FlowSettings(step_control="none"))   # ≤ 10 per frame
     # "auto": "adam+lm" with an image model (≤ 10 Adam then ≤ 10 LM steps: monotone; the flow's undamped Gauss–Newton
     # jumps left 3 % of own-body episodes off the pose), else "flow" (exact on kinematics in a few steps)
-    update: str = "auto"               # perception.method; "auto": adam+lm with an image model, else flow
     start: str = "reading"             # one body's start per frame: "reading" (joints) or "previous" (last belief)
     plots: bool = True                 # write the PNG plots beside the tables
 
@@ -91,8 +90,6 @@ class SelfRecognitionConfig(TrialsConfig):
             raise ValueError(must_be("visual_noise", f"σ per modality among {VISUAL}", self.visual_noise))
         if self.score not in SCORES:
             raise ValueError(must_be("score", f"one of {SCORES}", self.score))
-        if self.update not in ("auto", *METHODS):
-            raise ValueError(must_be("update", f"'auto' or one of {METHODS}", self.update))
         if self.start not in STARTS:
             raise ValueError(must_be("start", f"one of {STARTS}", self.start))
 
@@ -140,7 +137,7 @@ def prepare(config: SelfRecognitionConfig, models: Sequence):
     another robot or of a modality that has no visual stream."""
     robot, used = body_and_senses(models, config.robot, VISUAL)    # checks joints; camera of the image model
     sensors, precisions = sensors_of(config, used)
-    perception = Perception(sensors, perception_config(config), precisions)
+    perception = Perception(sensors, config.perception, precisions)
     return robot, perception, [m.modality for m in used[1:]]
 
 

@@ -17,7 +17,6 @@ import numpy as np
 
 from bodyschema.aif.perception_config import resolve
 from bodyschema.evaluation.core.tables import markdown_table, write_csv
-from bodyschema.evaluation.self_recognition.sensors import perception_config
 from bodyschema.evaluation.self_recognition.streams import SELF
 
 TABLE_COLUMNS = ("delay_s", "others", "auc", "threshold", "tpr", "fpr", "t95_s", "t_auc95_s", "median_self",
@@ -151,7 +150,7 @@ def summary_notes(config, robot: str, visual: Sequence[str], period: float, rows
 
 def _updates(config, visual: Sequence[str]) -> str:
     """The perception updates of one hypothesis per frame, e.g. "≤ 10 + 10 adam+lm updates"."""
-    perception = resolve(perception_config(config), visual)
+    perception = resolve(config.perception, visual)
     steps = perception.max_steps
     return f"≤ {steps} + {steps} adam+lm updates" if perception.method == "adam+lm" else \
         f"≤ {steps} {perception.method} updates"

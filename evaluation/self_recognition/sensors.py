@@ -1,7 +1,6 @@
-"""What the self-recognition robot perceives through: its models seen through noisy sensors (core/sensing.py), the
-perception update (`perception_config`: "auto" as in the levels), and the two hypotheses it compares:
-one body behind the joints and the visual stream (the benchmark's Perception), or a visual stream of its own
-(`visual_only`: the same visual models, their belief free of the joints)."""
+"""What the self-recognition robot perceives through: its models seen through noisy sensors (core/sensing.py), and
+the two hypotheses it compares: one body behind the joints and the visual stream (the benchmark's Perception), or a
+visual stream of its own (`visual_only`: the same visual models, their belief free of the joints)."""
 
 from __future__ import annotations
 
@@ -10,12 +9,6 @@ from dataclasses import replace
 
 from bodyschema.aif.perception import Perception
 from bodyschema.evaluation.core.sensing import through_noise
-
-
-def perception_config(config):
-    """config.perception with the update of this run: --update, else --perception.method; "auto" (both's default) is
-    resolved by the Perception for its models (aif/perception_config.py: adam+lm with an image model, else flow)."""
-    return replace(config.perception, method=config.update if config.update != "auto" else config.perception.method)
 
 
 def sensors_of(config, models: Sequence) -> tuple[list, dict[str, float]]:

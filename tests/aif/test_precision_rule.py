@@ -15,7 +15,7 @@ from bodyschema.aif.perception import Perception
 from bodyschema.aif.precisions import perceived_precisions
 from bodyschema.aif.tracker import Tracker, TrackerConfig
 from bodyschema.datagen import modalities
-from bodyschema.evaluation.levels.benchmark import LevelsConfig, levels_update
+from bodyschema.evaluation.levels.benchmark import LevelsConfig
 from bodyschema.evaluation.reaching.benchmark import ReachingConfig, aif_policy
 from bodyschema.evaluation.tracking.benchmark import TrackingConfig, sensed
 from bodyschema.evaluation.tracking.methods import Clock
@@ -73,7 +73,7 @@ def test_a_pose_varying_model_perceived_by_the_rule_lands_on_the_reading():
 
 def test_levels_reaching_and_tracking_resolve_the_same_precision_for_the_same_model():
     models = [ToyVaryingArm(), ToyJoints()]                       # reaching drives the joints by default
-    levels = Perception(models, levels_update(LevelsConfig())).precisions
+    levels = Perception(models, LevelsConfig().perception).precisions
     reaching = aif_policy(ReachingConfig(), models, SimpleNamespace(actuation="position")).controller.perception
     timed, given = sensed(models, dict(TrackingConfig().noise), Clock(), {})   # simulated σ = 1 mm: Π = 1/σ²
     tracking = Tracker(timed, TrackerConfig(), precisions=given).perception.precisions

@@ -17,9 +17,8 @@ from bodyschema.aif.multistart import infer_multistart
 from bodyschema.aif.perception import Perception
 from bodyschema.aif.perception_config import AdamSettings, FlowSettings, LMSettings, PerceptionConfig
 from bodyschema.evaluation.core.mlflow_log import config_params
-from bodyschema.evaluation.levels.benchmark import LevelsConfig, levels_update
+from bodyschema.evaluation.levels.benchmark import LevelsConfig
 from bodyschema.evaluation.self_recognition.benchmark import SelfRecognitionConfig
-from bodyschema.evaluation.self_recognition.sensors import perception_config
 from tests.aif.toys import ToyBlobImage, ToyJoints, perturb, planar_poses
 from tests.test_cli_fuzz import run_and_check
 from tests.toy_models import ToyPlanarArm
@@ -38,20 +37,24 @@ def test_auto_is_adam_then_lm_with_an_image_model_else_the_flow(kinds, method):
 
 
 def test_every_benchmark_passes_auto_and_gets_the_same_update_for_the_same_models():
-    levels = levels_update(LevelsConfig())
-    recognition = perception_config(SelfRecognitionConfig())
+    levels = LevelsConfig().perception
+    recognition = SelfRecognitionConfig().perception
     assert levels.method == recognition.method == "auto"
     for kinds in (WITH_IMAGE, KINEMATIC):
         assert resolved(levels, kinds).method == resolved(recognition, kinds).method == resolved(PerceptionConfig(),
                                                                                                   kinds).method
 
 
-def test_perception_method_is_honoured_when_update_is_left_at_auto():
-    """--perception.method was silently overridden by --update's default; --update still wins when given."""
-    lm = PerceptionConfig(method="lm")
-    assert levels_update(LevelsConfig(perception=lm)).method == "lm"
-    assert perception_config(SelfRecognitionConfig(perception=lm)).method == "lm"
-    assert levels_update(LevelsConfig(perception=lm, update="adam")).method == "adam"
+@pytest.mark.parametrize("benchmark, config", [("levels", LevelsConfig), ("self-recognition", SelfRecognitionConfig)])
+def test_the_perception_method_is_one_knob(benchmark, config, capsys):
+    """--perception.method chooses the update; the former alias --update is gone (one knob, no legacy spelling)."""
+    assert "update" not in {f.name for f in dataclasses.fields(config)}
+    try:
+        code = cli.main(["evaluate", benchmark, "--update", "lm"])
+    except SystemExit as stop:                                    # tyro's parse error exits 2
+        code = stop.code
+    assert code == 2
+    assert "--update" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("order", [1, 2])
@@ -118,7 +121,7 @@ def test_the_cli_keeps_every_perception_flag_flat_and_fills_the_groups():
 def test_mlflow_params_name_every_grouped_knob():
     params = config_params(LevelsConfig())
     assert params["perception.flow.dt"] == "1000.0" and params["perception.adam.lr"] == "0.02"
-    assert params["perception.method"] == "auto" and params["update"] == "auto"
+    assert params["perception.method"] == "auto" and "update" not in params
 
 
 CASES = [   # (id, argv): a bad value of a grouped knob, named as the flag is typed
