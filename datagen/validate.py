@@ -26,6 +26,7 @@ import zarr
 
 from bodyschema.datagen.camera import project
 from bodyschema.datagen.integrity import block_digest, data_arrays, missing_chunks
+from bodyschema.datagen.modalities import images_in
 from bodyschema.datagen.store import DONE, MAX_JOINT_SPEED, REQUIRED_ATTRS, features, has_checksums, open_store
 from bodyschema.errors import must_be
 
@@ -163,10 +164,10 @@ def _check_layout(root: zarr.Group, attrs: dict, problems: list[str]) -> dict[st
                                 "Arrays of one store share the sample axis; regenerate the store."))
         for name in bad_axes:
             usable.pop(name, None)
-    if "image" in usable and "image_size" in attrs:
+    for camera in images_in(usable) if "image_size" in attrs else ():
         h, w = attrs["image_size"]
-        if tuple(usable["image"].shape[1:3]) != (h, w):
-            problems.append(must_be("image height, width", f"attrs image_size {(h, w)}", usable["image"].shape[1:3]))
+        if tuple(usable[camera].shape[1:3]) != (h, w):
+            problems.append(must_be(f"{camera} height, width", f"attrs image_size {(h, w)}", usable[camera].shape[1:3]))
     return usable
 
 

@@ -19,6 +19,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
+from bodyschema.datagen.modalities import is_image
 from bodyschema.errors import must_be
 from bodyschema.models._nn_fit import (
     LeafParams,
@@ -67,7 +68,7 @@ class MultimodalMember(NetModel, BaseSensoryModel):
         if decoder not in DECODERS:
             raise ValueError(must_be("decoder", f"one of {DECODERS}", decoder))
         if decoder == "auto":
-            decoder = "pixel" if modality == "image" or len(self.output_shape) >= 2 else "mlp"
+            decoder = "pixel" if is_image(modality) or len(self.output_shape) >= 2 else "mlp"
         if precision is not None and not precision > 0:
             raise ValueError(must_be("precision", "> 0 or None (learned)", precision))
         self.decoder, self.hidden, self.fc_hidden, self.channels = decoder, tuple(hidden), fc_hidden, tuple(channels)

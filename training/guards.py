@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+from bodyschema.datagen.modalities import is_image
 from bodyschema.errors import must_be
 from bodyschema.models import kinds
 from bodyschema.models.capabilities import GPMemory
@@ -39,7 +40,7 @@ def gp_memory(kind: str) -> GPMemory | None:
 
 def check_config(model: str, modalities: tuple[str, ...]) -> None:
     """Refuse a GP on images before anything is loaded (a GP per pixel cannot fit in any memory)."""
-    if "image" in modalities and gp_memory(model) is not None:
+    if any(is_image(m) for m in modalities) and gp_memory(model) is not None:
         raise ValueError(must_be("model", "'pixel' for modality 'image'", f"{model} on image",
                                  "An exact GP keeps an n×n matrix per output, and an image has thousands of "
                                  "outputs (56×80 = 4480): train the pixel decoder, `bodyschema train pixel`."))

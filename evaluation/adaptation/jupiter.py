@@ -21,6 +21,7 @@ import torch
 from bodyschema.aif.aic import AICConfig, AICController
 from bodyschema.control.pd import PDConfig, PDController
 from bodyschema.control.sim import ArmBatch, control_substeps
+from bodyschema.datagen.modalities import is_image
 from bodyschema.datagen.robot import GRAVITY, Robot
 from bodyschema.errors import must_be
 from bodyschema.evaluation.adaptation.jupiter_report import ControllerRun, summarize, write_report
@@ -86,7 +87,7 @@ def load_torque_panda(models: Sequence) -> Robot:
         if m.modality not in SENSED:
             raise ValueError(must_be(f"{m.modality} model", f"of a simulated extra modality {SENSED}", m.modality,
                                      "The joints sensor is built into the AIC; drop the joints model."))
-    image = next((m for m in models if m.modality == "image"), None)
+    image = next((m for m in models if is_image(m.modality)), None)
     pixel = next((m for m in models if getattr(m, "image_size", None)), None)
     size = tuple(image.output_shape[:2]) if image else (tuple(pixel.image_size) if pixel else None)
     rgb = image is not None and len(image.output_shape) == 3
