@@ -18,17 +18,15 @@ from collections.abc import Iterable
 from dataclasses import dataclass, replace
 from typing import Annotated
 
-import tyro
-
 from bodyschema.aif import descent
 from bodyschema.aif.priors import PRIORS
+from bodyschema.cli_marks import Ungrouped
 from bodyschema.datagen import modalities as modality_table
 from bodyschema.errors import must_be
 
 INTEGRATORS = ("local_linear", "implicit", "euler")
 STEP_CONTROLS = ("auto", "descent", "none")
 METHODS = ("flow", *descent.DESCENT_METHODS)
-UNPREFIXED = tyro.conf.arg(name="")   # a group's flags keep the flat spelling of the CLI (`--perception.dt`)
 
 
 _log = logging.getLogger(__name__)
@@ -116,9 +114,9 @@ class PerceptionConfig:
     method: str = "auto"           # "flow": generalized filtering; order 0 only: "lm" (Levenberg–Marquardt), "adam"
                                    # (adaptive first-order flow) or "adam+lm" (Adam, then LM once in a basin);
                                    # "auto": adam+lm at order 0 with an image model, else flow
-    flow: Annotated[FlowSettings, UNPREFIXED] = FlowSettings()   # the flow's integrator, step control, divergence
-    lm: Annotated[LMSettings, UNPREFIXED] = LMSettings()
-    adam: Annotated[AdamSettings, UNPREFIXED] = AdamSettings()
+    flow: Annotated[FlowSettings, Ungrouped()] = FlowSettings()   # the flow's integrator, step control, divergence
+    lm: Annotated[LMSettings, Ungrouped()] = LMSettings()
+    adam: Annotated[AdamSettings, Ungrouped()] = AdamSettings()
 
     @property
     def descends(self) -> bool:

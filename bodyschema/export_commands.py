@@ -13,14 +13,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Literal
 
-import tyro
+from bodyschema.cli_marks import Positional
 
 
 @dataclass(frozen=True)
 class ShowArgs:
     """Summarize a dataset store and draw a contact sheet of its images (PNG) with the stored ee_pixel on each."""
 
-    path: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="STORE")]   # the .zarr store
+    path: Annotated[Path, Positional("STORE")]   # the .zarr store
     out: Path | None = None            # the PNG; None: <store name>_contact_sheet.png beside the store
     n: int = 16                        # images on the sheet, evenly spread over the store
 
@@ -30,8 +30,8 @@ class ExportDatasetArgs:
     """Write a dataset store as HDF5 (one file) or in LeRobot's v3.0 dataset layout (a directory)."""
 
     to: Literal["hdf5", "lerobot"]     # the format
-    store: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="STORE")]   # the .zarr store (it must validate)
-    out: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="OUT")]   # .h5 file (hdf5), a directory (lerobot)
+    store: Annotated[Path, Positional("STORE")]   # the .zarr store (it must validate)
+    out: Annotated[Path, Positional("OUT")]   # .h5 file (hdf5), a directory (lerobot)
     overwrite: bool = False            # replace OUT if it is a previous export in this format (never anything else)
 
 
@@ -40,9 +40,9 @@ class ExportOnnxArgs:
     """Export a fitted model to ONNX: joint angles in rad in, its prediction out (scaling inside), checked with
     onnxruntime against the model before it is written."""
 
-    model: Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="MODEL_SPEC")]
+    model: Annotated[str, Positional("MODEL_SPEC")]
     """models:/<name>@<alias>, a `bodyschema train` run or model directory, or trusted:<dir>"""
-    out: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="OUT")]   # the .onnx file
+    out: Annotated[Path, Positional("OUT")]   # the .onnx file
     opset: int = 18                    # ONNX opset, in the installed exporter's range (the file's is in its metadata)
     tracking_uri: str | None = None    # None: $MLFLOW_TRACKING_URI, else sqlite:///<cwd>/mlflow.db
     overwrite: bool = False            # replace OUT if it is a previous ONNX export (never anything else)
@@ -95,9 +95,6 @@ def _load(spec: str, tracking_uri: str | None):
         tracking_line(uri)
         check_tracking(uri, timeout_s=5)
     return resolve_model(spec, tracking_uri)
-
-
-RUNNERS = {ShowArgs: run_show, ExportDatasetArgs: run_export_dataset, ExportOnnxArgs: run_export_onnx}
 
 
 def model_dir_of_run(spec: str) -> str:

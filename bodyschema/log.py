@@ -16,7 +16,7 @@ MLflow reads its logging level and bar switch from the environment, tqdm its def
 `configure`: the CLI imports a stage lazily), so they are set here as environment defaults; a value the user set
 wins. MLflow's loggers are also set directly in case it was imported already (tests, the demo).
 
-It imports nothing of ours (the standard library and tyro only): any stage may import it, as `bodyschema.errors`.
+It imports nothing of ours but the leaf bodyschema/cli_marks.py: any stage may import it, as `bodyschema.errors`.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ import time
 from collections.abc import Iterator
 from typing import Annotated
 
-import tyro
+from bodyschema.cli_marks import Flag
 
 LOGGER = "bodyschema"
 QUIET, NORMAL, VERBOSE = -1, 0, 1
@@ -45,8 +45,8 @@ MLFLOW_LOGGERS = ("mlflow", "alembic", "huey")
 # there, not tqdm's 10 per second (reaching's bars left 150 redraws per controller in a log file).
 FILE_BAR_INTERVAL_S = 30
 # The type of a config's `progress` field: off by default (a library call prints nothing unless asked), on in the CLI
-# (`progress_of`); its --help says so instead of tyro's "(default: False)".
-Progress = Annotated[bool, tyro.conf.arg(help_behavior_hint="(default: on; off from Python)")]
+# (`progress_of`); its --help says so instead of "(default: False)".
+Progress = Annotated[bool, Flag(default_hint="(default: on; off from Python)")]
 _PASSWORD = re.compile(r"(?<=://)([^/@:]*):[^/@]*@")     # user:password@ of a URL
 _handler: logging.Handler | None = None
 _verbosity: int | None = None        # the last configure()'s; None: never configured, a library call

@@ -18,8 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Literal
 
-import tyro
-
+from bodyschema.cli_marks import Positional
 from bodyschema.errors import must_be
 
 logger = logging.getLogger(__name__)
@@ -29,7 +28,7 @@ logger = logging.getLogger(__name__)
 class RobotInitArgs:
     """Write the robot record of an MJCF/URDF file (values inferred from the file) for you to edit."""
 
-    model: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="FILE")]   # the .xml or .urdf
+    model: Annotated[Path, Positional("FILE")]   # the .xml or .urdf
     out: Path | None = None            # the record; None: <FILE stem>.toml beside the file (what --robot FILE reads)
     mesh_dir: Path | None = None       # URDF: where package:// meshes are, besides the file's folder and its parents
     # URDF: collision renders the collision geometry (e.g. .dae visuals); primitives draws capsules and boxes sized
@@ -47,7 +46,7 @@ class RobotShowArgs:
     pixels each joint changes per degree (a warning for a joint under the threshold), and write a contact sheet of
     rendered poses (PNG) with the ee pixel on each."""
 
-    robot: Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="FILE|NAME")]   # shipped name or model file
+    robot: Annotated[str, Positional("FILE|NAME")]   # shipped name or model file
     out: Path | None = None            # the PNG; None: <robot>_robot_sheet.png in the current folder
     n: int = 16                        # poses on the sheet (uniform in the camera workspace, seed 0)
     mesh_dir: Path | None = None       # URDF without a record: as `robot init --mesh-dir`
@@ -63,7 +62,7 @@ class RobotCameraArgs:
     for its weakest joints, and a larger image (up to --max-image-size) where that sees more joints; joints still
     not seen are named with why. Rewrites the record in place (its leading comment kept, other comments not)."""
 
-    record: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="RECORD")]   # a robot record (.toml)
+    record: Annotated[Path, Positional("RECORD")]   # a robot record (.toml)
     workspace: str = "camera"          # the joint box whose ee positions the camera frames
     max_image_size: int = 128          # px: the image's longer side may grow up to this (never shrinks)
 
@@ -199,6 +198,3 @@ def robot_sheet(robot, out: Path, n: int) -> Path:
         for key in ("image", "ee_pixel"):
             root.create_array(key, data=observed[key])
         return write_contact_sheet(Path(tmp) / "poses.zarr", out, n=n)
-
-
-RUNNERS = {RobotInitArgs: run_init, RobotShowArgs: run_show, RobotCameraArgs: run_camera}

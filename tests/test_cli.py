@@ -48,9 +48,7 @@ def test_validate_exit_code_reflects_the_store(tmp_path, capsys):
 @pytest.mark.parametrize("words", [["evaluate", "levels"], ["evaluate", "reaching"], ["evaluate", "self-recognition"],
                                    ["evaluate", "adaptation", "jupiter"]], ids=" ".join)
 def test_repeated_model_flags_fuse_instead_of_replacing(words):
-    import tyro
-
-    from bodyschema.cli import COMMANDS
+    from bodyschema.cli import parse_command
     models = ["--model", "analytic:nao_arm:ee_xyz", "--model", "analytic:nao_arm:joints"]
-    config = tyro.cli(COMMANDS, args=[*words, *models])
+    config = parse_command([*words, *models])
     assert config.models == ("analytic:nao_arm:ee_xyz", "analytic:nao_arm:joints")

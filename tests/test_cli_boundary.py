@@ -93,7 +93,7 @@ ARGV = ["report", "--results", "."]                   # any valid command; `run`
                                           (AssertionError("bug"), 1), (NameError("bug"), 1),
                                           (TypeError("unsupported operand"), 1)])
 def test_expected_failures_exit_2_without_traceback_and_bugs_exit_1_with_one(raised, code, monkeypatch, capsys):
-    monkeypatch.setattr(cli, "run", lambda config: (_ for _ in ()).throw(raised))
+    monkeypatch.setattr(cli, "run", lambda *args: (_ for _ in ()).throw(raised))
     monkeypatch.delenv("BODYSCHEMA_DEBUG", raising=False)
     assert cli.main(ARGV) == code
     err = capsys.readouterr().err
@@ -103,7 +103,7 @@ def test_expected_failures_exit_2_without_traceback_and_bugs_exit_1_with_one(rai
 
 @pytest.mark.parametrize("how", ["flag", "env"])
 def test_debug_shows_the_traceback_of_an_expected_failure(how, monkeypatch, capsys):
-    monkeypatch.setattr(cli, "run", lambda config: (_ for _ in ()).throw(ValueError(must_be("x", "1", 2))))
+    monkeypatch.setattr(cli, "run", lambda *args: (_ for _ in ()).throw(ValueError(must_be("x", "1", 2))))
     monkeypatch.setenv("BODYSCHEMA_DEBUG", "1" if how == "env" else "0")
     assert cli.main(["--debug", *ARGV] if how == "flag" else ARGV) == 2
     err = capsys.readouterr().err
@@ -111,7 +111,7 @@ def test_debug_shows_the_traceback_of_an_expected_failure(how, monkeypatch, caps
 
 
 def test_ctrl_c_exits_130_with_one_line(monkeypatch, capsys):
-    monkeypatch.setattr(cli, "run", lambda config: (_ for _ in ()).throw(KeyboardInterrupt()))
+    monkeypatch.setattr(cli, "run", lambda *args: (_ for _ in ()).throw(KeyboardInterrupt()))
     assert cli.main(ARGV) == 130
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "interrupted" in err and "Traceback" not in err
@@ -131,9 +131,10 @@ def test_ctrl_c_exits_130_with_one_line(monkeypatch, capsys):
     (["demo"], True),
 ])
 def test_every_command_that_talks_to_mlflow_is_checked_first(argv, uses):
-    import tyro
+    from bodyschema import commands
+    from bodyschema.tracking_check import tracking_of
 
-    assert cli.tracking_of(tyro.cli(cli.COMMANDS, args=argv))[0] is uses
+    assert tracking_of(cli.parse_command(argv), commands.find(commands.words_of(argv)).mlflow)[0] is uses
 
 
 def test_the_tracking_uri_is_named_and_a_silent_server_fails_within_the_timeout(monkeypatch, capsys):

@@ -102,10 +102,10 @@ def _leaves(node, words=()):
 
 
 def test_every_command_takes_a_config_file(tmp_path, capsys):
-    from bodyschema.cli import commands
+    from bodyschema.commands import tyro_type
     empty = tmp_path / "empty.json"
     empty.write_text("{}")
-    leaves = list(_leaves(commands(None)))
+    leaves = list(_leaves(tyro_type(None)))
     assert ("evaluate", "adaptation", "jupiter") in leaves and ("registry", "promote") in leaves and len(leaves) > 20
     for words in leaves:
         with pytest.raises(SystemExit) as done:

@@ -14,9 +14,9 @@ from dataclasses import dataclass
 
 import pytest
 import torch
-import tyro
 
 from bodyschema import cli, log
+from bodyschema.tracking_check import dataclass_tree
 from tests.training.conftest import empty_db, kin_store, tiny_kind, workdir  # noqa: F401 — fixtures, by name
 
 
@@ -95,7 +95,7 @@ class Outer:
 
 @pytest.mark.parametrize("verbosity, on", [(None, False), (log.QUIET, False), (log.NORMAL, True), (log.VERBOSE, True)])
 def test_every_progress_flag_of_the_tree_is_the_clis_and_off_in_a_library_call(verbosity, on, monkeypatch):
-    train = tyro.cli(cli.COMMANDS, args=["train", "gpr", "--data", "d.zarr"])
+    train = cli.parse_command(["train", "gpr", "--data", "d.zarr"])
     monkeypatch.setattr(log, "_verbosity", verbosity)
     assert log.progress_bars() is on
     assert log.progress_of(Outer()) == Outer(inner=Inner(progress=on), progress=on, n=3)
@@ -106,8 +106,8 @@ def test_every_progress_flag_of_the_tree_is_the_clis_and_off_in_a_library_call(v
                                       (["evaluate", "loop-robustness", "--no-progress"], False)])
 def test_the_cli_shows_bars_unless_told_not_to(argv, on, monkeypatch):
     monkeypatch.setattr(log, "_verbosity", log.NORMAL)
-    config = log.progress_of(tyro.cli(cli.COMMANDS, args=argv), cli.progress_flag(argv))
-    assert all(c.progress is on for c in cli._dataclass_tree(config) if hasattr(c, "progress"))
+    config = log.progress_of(cli.parse_command(argv), cli.progress_flag(argv))
+    assert all(c.progress is on for c in dataclass_tree(config) if hasattr(c, "progress"))
 
 
 def test_a_benchmark_config_from_python_shows_no_bars():

@@ -1,13 +1,12 @@
 """`bodyschema train <kind>`: one subcommand per model kind whose --help lists every hyper-parameter with its
-default, typed flags that reach the model config, and the old `--model` / `--hyper` naming the new form."""
+default, and typed flags that reach the model config."""
 
 import dataclasses
 import re
 
 import pytest
-import tyro
 
-from bodyschema.cli import COMMANDS, main
+from bodyschema.cli import main, parse_command
 from bodyschema.models import kinds
 from bodyschema.training.config import TrainConfig
 
@@ -45,37 +44,12 @@ def test_train_help_names_every_kind(capsys, monkeypatch):
 
 
 def test_typed_flags_reach_the_kind_config():
-    config = tyro.cli(COMMANDS, args=["train", "pixel", "--data", "d.zarr", "--epochs", "7", "--channels", "8", "4",
-                                      "--refine", "True", "--size", "pixel_aif", "--seed", "3"])
+    config = parse_command(["train", "pixel", "--data", "d.zarr", "--epochs", "7", "--channels", "8", "4",
+                           "--refine", "True", "--size", "pixel_aif", "--seed", "3"])
     assert isinstance(config, TrainConfig) and config.kind == "pixel" and config.seed == 3
     assert (config.model.epochs, config.model.channels, config.model.refine, config.model.size) == \
         (7, (8, 4), True, "pixel_aif")
     assert config.modality == "image", "the kind's default modality"
-    multi = tyro.cli(COMMANDS, args=["train", "multimodal", "--data", "d.zarr", "--no-joint",
-                                     "--precisions", "image", "100"])
+    multi = parse_command(["train", "multimodal", "--data", "d.zarr", "--no-joint",
+                          "--precisions", "image", "100"])
     assert multi.model.joint is False and multi.model.precisions == {"image": 100.0}
-
-
-# old command → the flags the suggested command must give the kind's config
-OLD_COMMANDS = [
-    ("train --model pixel --data d.zarr --hyper epochs 50", "pixel", {"epochs": 50}),
-    ("train --model mdn --data d.zarr --hyper hidden [32,32] mode max --seed 2", "mdn",
-     {"hidden": (32, 32), "mode": "max"}),
-    ("train gpr --data d.zarr --hyper noise_floor 1e-6", "gpr", {"noise_floor": 1e-6}),
-    ("train --model=multimodal --data d.zarr --hyper joint false", "multimodal", {"joint": False}),
-    ("train --model gpr --data d.zarr", "gpr", {}),
-]
-
-
-@pytest.mark.parametrize("old, kind, hyper", OLD_COMMANDS, ids=[c[0] for c in OLD_COMMANDS])
-def test_old_model_and_hyper_flags_name_a_new_command_that_works(old, kind, hyper, capsys):
-    assert main(old.split()) == 2
-    err = capsys.readouterr().err
-    flags = [f for f in ("--model", "--hyper") if f in old]
-    assert err.startswith("bodyschema train") and f"{' and '.join(flags)} must be " in err, err
-    assert f"(see `bodyschema train {kind} --help`)" in err
-    suggested = re.search(r"Use `bodyschema (.*?)`", err)[1].split()
-    config = tyro.cli(COMMANDS, args=suggested)                        # the advice parses as it stands
-    assert config.kind == kind and config.data.name == "d.zarr"
-    assert {k: getattr(config.model, k) for k in hyper} == hyper
-    assert config.seed == (2 if "--seed 2" in old else 0), "the other flags are kept"

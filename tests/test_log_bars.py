@@ -9,7 +9,6 @@ import sys
 from pathlib import Path
 
 import pytest
-import tyro
 
 from bodyschema import cli, log
 
@@ -57,6 +56,6 @@ def test_a_bar_in_a_log_file_redraws_at_most_every_interval_on_a_fake_clock(tmp_
 def test_datagen_takes_progress_flags_as_every_command(argv, on, monkeypatch):
     """`datagen --no-progress` was refused (no such flag) while the other commands took it."""
     monkeypatch.setattr(log, "_verbosity", log.NORMAL)
-    config = log.progress_of(tyro.cli(cli.COMMANDS, args=argv), cli.progress_flag(argv))
+    config = log.progress_of(cli.parse_command(argv), cli.progress_flag(argv))
     assert config.progress is on
     assert "progress" not in config.identity(), "how, not what: a store made with bars resumes without"

@@ -11,13 +11,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated
 
-import tyro
-
+from bodyschema.cli_marks import Positional
 from bodyschema.errors import must_be
 
 LIST_FLAGS = ("--grid", "--space")   # each takes its items after one flag: a second one would replace the first
 
-KindWord = Annotated[str, tyro.conf.Positional, tyro.conf.arg(metavar="KIND")]
+KindWord = Annotated[str, Positional("KIND")]
 
 
 @dataclass(frozen=True)

@@ -10,8 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Literal
 
-import tyro
-
+from bodyschema.cli_marks import Positional
 from bodyschema.errors import must_be
 
 FORMATS = ("auto", "folder", "hdf5", "lerobot")
@@ -26,7 +25,7 @@ class ImportConfig:
     SOURCE: a folder of images plus a CSV of joint angles (one row per image), an HDF5 file (this project's export,
     or per episode `<episode>/obs/<joint key>` + `<episode>/obs/<image key>`) or a LeRobot v3.0 dataset folder."""
 
-    source: Annotated[Path, tyro.conf.Positional, tyro.conf.arg(metavar="SOURCE")]
+    source: Annotated[Path, Positional("SOURCE")]
     """a folder of images + a CSV of angles, an .h5/.hdf5 file, or a LeRobot v3.0 dataset folder"""
     out: Path                              # the .zarr store to write (built beside it, then renamed into place)
     format: Literal["auto", "folder", "hdf5", "lerobot"] = "auto"   # auto: .h5 file, meta/info.json, else folder

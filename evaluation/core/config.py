@@ -16,6 +16,7 @@ import typing
 from dataclasses import dataclass
 from pathlib import Path
 
+from bodyschema.cli_marks import Ungrouped
 from bodyschema.errors import must_be
 from bodyschema.log import Progress
 
@@ -105,10 +106,10 @@ def check_numbers(config, prefix: str = "") -> None:
 
 
 def _unprefixed(config, name: str) -> bool:
-    """Whether the CLI spells the nested group `name` of config without a prefix of its own (tyro `name=""`, e.g.
-    PerceptionConfig's per-algorithm settings: `--perception.dt`), so the error names the flag as it is typed."""
+    """Whether the CLI spells the nested group `name` of config without a prefix of its own (marked `Ungrouped`,
+    e.g. PerceptionConfig's per-algorithm settings: `--perception.dt`), so the error names the flag as it is typed."""
     hint = typing.get_type_hints(type(config), include_extras=True)[name]
-    return any(getattr(meta, "name", None) == "" for meta in getattr(hint, "__metadata__", ()))
+    return any(isinstance(meta, Ungrouped) for meta in getattr(hint, "__metadata__", ()))
 
 
 def within(name: str, value: float, limit: str) -> None:

@@ -31,7 +31,8 @@ _REGISTRY = re.compile(r"^models:/(?P<name>[^/@]+)(?:@(?P<alias>[^/@]+)|/(?P<ver
 def models_field(when_empty: str):
     """The `models` field of a benchmark config: `--model SPEC`, repeated to fuse several models (a flag that takes
     one value each time, so a second --model never silently replaces the first); none given: `when_empty`."""
-    return Annotated[tuple[str, ...], Flag(append=True, aliases=("--model",), help=f"{MODELS_HELP}. None given: {when_empty}")]
+    return Annotated[tuple[str, ...],
+                     Flag(append=True, aliases=("--model",), help=f"{MODELS_HELP}. None given: {when_empty}")]
 
 
 def resolve_models(specs: Sequence[str], when_empty: Sequence[str], tracking_uri: str | None = None,

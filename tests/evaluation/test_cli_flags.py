@@ -1,31 +1,10 @@
-"""The flags of `evaluate` that changed (issue 13) exit 2 with the house error naming the new flag; the new flat
-flags parse."""
+"""The flat flags of `evaluate` (issue 13: --trials everywhere, no nested prefixes) parse."""
 
 from __future__ import annotations
 
 import pytest
-import tyro
 
-from bodyschema.cli import COMMANDS, RENAMED_FLAGS, main
-
-FLATTENED_CASES = [(["evaluate", "robustness"], "--levels.trials", "--trials"),
-                   (["evaluate", "robustness"], "--levels.no-mlflow", "--no-mlflow"),
-                   (["evaluate", "loop-robustness"], "--reaching.robot", "--robot")]
-
-
-@pytest.mark.parametrize("words, old", list(RENAMED_FLAGS), ids=lambda x: " ".join(x) if isinstance(x, tuple) else x)
-def test_every_renamed_flag_names_its_new_spelling(words, old, capsys):
-    assert main([*words, old, "3"]) == 2
-    err = capsys.readouterr().err
-    new = RENAMED_FLAGS[(words, old)]
-    assert f"flag {old} must be" in err and "Got" in err
-    assert (f"spelled {new}" in err) if new else "absent from" in err
-
-
-@pytest.mark.parametrize("words, old, new", FLATTENED_CASES, ids=lambda x: x if isinstance(x, str) else "")
-def test_nested_prefixes_are_flattened(words, old, new, capsys):
-    assert main([*words, f"{old}=1" if "no-" not in old else old]) == 2
-    assert f"spelled {new}" in capsys.readouterr().err
+from bodyschema.cli import parse_command
 
 
 @pytest.mark.parametrize("args, field, value", [
@@ -37,4 +16,4 @@ def test_nested_prefixes_are_flattened(words, old, new, capsys):
     (["evaluate", "self-recognition", "--trials", "12"], "trials", 12),
 ])
 def test_the_flat_flags_parse(args, field, value):
-    assert getattr(tyro.cli(COMMANDS, args=args), field) == value
+    assert getattr(parse_command(args), field) == value

@@ -9,7 +9,6 @@ import dataclasses
 
 import pytest
 import torch
-import tyro
 
 from bodyschema import cli
 from bodyschema.aif.action import VelocityController
@@ -107,7 +106,7 @@ def test_multistart_screens_with_the_short_config_and_refines_with_the_full_one(
 
 def parse(*flags: str):
     argv = ["evaluate", "levels", *flags]
-    return tyro.cli(cli.commands(cli._command_words(argv)), prog="bodyschema", args=argv)
+    return cli.parse_command(argv)
 
 
 def test_the_cli_keeps_every_perception_flag_flat_and_fills_the_groups():

@@ -82,6 +82,6 @@ def test_a_network_too_large_is_refused_before_an_mlflow_run_exists(in_world, ca
 @pytest.mark.parametrize("argv, resumes", [(["evaluate", "levels"], False), (["evaluate", "reaching"], False),
                                            (["datagen"], True), (["demo"], True)])
 def test_after_ctrl_c_the_message_says_whether_the_command_resumes(argv, resumes, monkeypatch, capsys):
-    monkeypatch.setattr(cli, "run", lambda config: (_ for _ in ()).throw(KeyboardInterrupt()))
+    monkeypatch.setattr(cli, "run", lambda *args: (_ for _ in ()).throw(KeyboardInterrupt()))
     assert cli.main(argv) == 130
     assert ("resume" in capsys.readouterr().err) is resumes

@@ -7,9 +7,9 @@ from __future__ import annotations
 import shutil
 
 import pytest
-import tyro
 
-from bodyschema import cli
+from bodyschema import cli, commands
+from bodyschema.tracking_check import check_tracking_first
 from bodyschema.training.tracking_store import local_store
 
 
@@ -62,7 +62,7 @@ def test_the_default_store_missing_is_named_for_registry_list(clean_env, capsys)
                                   ["evaluate", "levels", "--model", "analytic:nao_arm:ee_xyz"]],
                          ids=["train", "demo", "levels-analytic"])
 def test_a_command_that_only_writes_may_create_its_store_in_an_existing_folder(argv, clean_env):
-    cli.check_tracking_first(tyro.cli(cli.COMMANDS, args=argv))      # passes; the store is made when first written
+    check_tracking_first(cli.parse_command(argv), commands.find(commands.words_of(argv)))   # passes; made when written
     assert files_under(clean_env) == []
 
 
@@ -91,7 +91,7 @@ def test_servers_and_database_urls_are_no_local_stores():
 def test_an_existing_store_passes_unchanged(clean_env, request):
     shutil.copy(request.getfixturevalue("empty_db"), clean_env / "mlflow.db")
     before = (clean_env / "mlflow.db").read_bytes()
-    cli.check_tracking_first(tyro.cli(cli.COMMANDS, args=["registry", "list"]))
+    check_tracking_first(cli.parse_command(["registry", "list"]), commands.find(["registry", "list"]))
     assert (clean_env / "mlflow.db").read_bytes() == before
 
 
