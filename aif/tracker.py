@@ -141,8 +141,8 @@ class FrameInfo:
 class Tracker:
     """Tracks B streams of observations of one body (any set of SensoryModels, as `Perception` takes them).
 
-    encoder: an image encoder (`encode(images) → (N, Dz) rad`) for restarts and the first frame; precisions,
-    limits: as `Perception`'s; seed: the multi-start draws (`reset` draws them anew from it)."""
+    encoder: an image encoder (`encode(images) → (N, Dz) rad`, images of its `modality`) for restarts and the first
+    frame; precisions, limits: as `Perception`'s; seed: the multi-start draws (`reset` draws them anew from it)."""
 
     def __init__(self, models: Sequence, config: TrackerConfig = TrackerConfig(), encoder=None,
                  precisions: Mapping[str, float | torch.Tensor] | None = None,
@@ -150,7 +150,7 @@ class Tracker:
         self.config, self.encoder, self.seed = config, encoder, seed
         self.perception = Perception(models, config.perception, precisions, limits)
         resolved = self.perception.config
-        self.proposes = config.proposals and encoder is not None and "image" in self._modalities
+        self.proposes = config.proposals and encoder is not None and encoder.modality in self._modalities
         spent = PROPOSAL_EVALUATIONS if self.proposes else 0
         self.steps = steps_within(resolved, config.budget - spent)
         if self.steps < least_steps(resolved):
@@ -159,7 +159,7 @@ class Tracker:
                                      f"{resolved.method}{' after the encoder proposal' if spent else ''}",
                                      config.budget))
         self.restart = config.restart if config.restart != "auto" else ("encoder" if encoder else "multistart")
-        if self.restart == "encoder" and (encoder is None or "image" not in self._modalities):
+        if self.restart == "encoder" and (encoder is None or encoder.modality not in self._modalities):
             raise ValueError(must_be("restart", "'multistart' without an encoder and an image model", "encoder"))
         self.threshold = config.lost_threshold
         self.settled: float | None = None       # F of a start good enough to skip a frame's updates (`calibrate`)
@@ -296,7 +296,7 @@ class Tracker:
         """Per stream the lower-F start of the predicted belief and the encoder's guess, the guess (a restart of
         this frame reuses it) and F at the start. → (B, Dz), (B, Dz) rad, (B,)"""
         b = len(predicted)
-        guess = self._clamp(self.encoder.encode(obs["image"]).to(torch.float64))          # (B, Dz) rad
+        guess = self._clamp(self.encoder.encode(obs[self.encoder.modality]).to(torch.float64))          # (B, Dz) rad
         twice = {m: torch.cat([x, x]) for m, x in obs.items()}
         both = self.perception.free_energy(twice, torch.cat([predicted, guess]))          # (2B,)
         worse = ~(both[b:] < both[:b])                                                    # NaN-safe: predicted wins
@@ -345,7 +345,7 @@ class Tracker:
         run = self._restarts
         if self.restart == "encoder":
             start = guess[rows] if guess is not None else \
-                self._clamp(self.encoder.encode(sub["image"]).to(torch.float64))          # (b, Dz) rad
+                self._clamp(self.encoder.encode(sub[self.encoder.modality]).to(torch.float64))          # (b, Dz) rad
             result = run.infer(sub, start)
             new_mu, new_free, evaluations = result.mu, torch.where(result.diverged, torch.inf, result.F), \
                 result.evaluations

@@ -40,6 +40,8 @@ def trajectory(frames: int, streams: int, seed: int = 0) -> torch.Tensor:
 class GridEncoder:
     """A toy image encoder: the pose of a coarse grid whose predicted image is nearest (elbow-bent branch)."""
 
+    modality = "image"                                                      # what it encodes
+
     def __init__(self, model):
         axis = torch.linspace(-1.5, 1.5, 31, dtype=torch.float64)
         elbow = torch.linspace(0.1, 2.0, 20, dtype=torch.float64)
