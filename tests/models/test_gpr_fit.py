@@ -120,3 +120,22 @@ def test_a_model_saved_with_the_former_gpytorch_loop_config_loads_and_predicts_t
     torch.testing.assert_close(loaded.predict(z), model.predict(z), rtol=0, atol=0)
     torch.testing.assert_close(loaded.jacobian(z), model.jacobian(z), rtol=0, atol=0)
     torch.testing.assert_close(loaded.precision(z), model.precision(z), rtol=1e-9, atol=0)   # factor recomputed
+
+
+def test_a_fit_stranded_on_the_tiny_lengthscale_plateau_is_searched_again_from_the_start():
+    # The toy arm's x, noise-free, 200 poses; a search started at ℓ = 1e-3 on every joint (K ≈ s·I: where the coarse
+    # run left SO-101's y output) stays there: its −MLL is that of independent noise. The restart finds structure.
+    gen = torch.Generator().manual_seed(3)
+    q = torch.rand(200, 2, generator=gen, dtype=torch.float64) * 4 - 2                  # (200, 2) rad
+    u, (ys, _, _) = TOY.body.to_unit(q), _gp_data.standardize(TOY.predict(q))
+    bounds = _gp_hyper.log_bounds(2, 3e-8)
+    stranded = torch.tensor([bounds[0, 0], bounds[1, 0], 0.0, -3.0], dtype=torch.float64)   # ℓ at the lower bound
+
+    def evaluate(row):                                                                 # θ (D+2,) of output x
+        return neg_mll(u, ys[:1], row[None])
+
+    theta, loss = _gp_hyper.lbfgs(evaluate, stranded, bounds, 200, _gp_hyper.FINE_FTOL)
+    assert loss / 200 > _gp_hyper.iid_neg_mll(ys[0]) - _gp_hyper.PLATEAU_NATS       # stuck: no better than noise
+    again, again_loss = _gp_hyper.restart_if_better(evaluate, theta, loss, bounds, 200)
+    assert again_loss / 200 < _gp_hyper.iid_neg_mll(ys[0]) - 1.0                     # found the arm's structure
+    assert float(evaluate(again)[0][0]) == pytest.approx(again_loss)                 # the loss is the θ's own
