@@ -108,11 +108,12 @@ def find(words: list[str] | tuple[str, ...]) -> Command | None:
 
 
 def words_of(argv: list[str]) -> list[str]:
-    """The command words at the start of `argv` (a group's or a command's)."""
-    known = {w for c in table() for w in c.words}
-    words = []
+    """The command words at the start of `argv` (a group's or a command's): each continues a command's words, so a
+    command's own positional argument is not one (`sweep mdn`: mdn is the kind, not `train mdn`)."""
+    paths = [c.words for c in table()]
+    words: list[str] = []
     for arg in argv:
-        if arg not in known:
+        if (*words, arg) not in {p[:len(words) + 1] for p in paths}:
             break
         words.append(arg)
     return words

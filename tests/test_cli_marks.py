@@ -97,3 +97,13 @@ def test_every_command_of_a_group_is_in_its_help(words, capsys):
     with pytest.raises(SystemExit):
         main([words[0], "--help"])
     assert words[1] in capsys.readouterr().out
+
+
+def test_a_commands_positional_argument_is_not_a_command_word(tmp_path):
+    """`sweep mdn`: mdn is the kind (also `train mdn`'s word); with --config FILE it stays the kind."""
+    assert commands.words_of(["sweep", "mdn", "--data", "d.zarr"]) == ["sweep"]
+    assert commands.words_of(["train", "mdn", "--data", "d.zarr"]) == ["train", "mdn"]
+    file = tmp_path / "sweep.json"
+    file.write_text(json.dumps({"data": "d.zarr"}))
+    config = parse_command(["sweep", "mdn", "--config", str(file)])
+    assert (config.kind, config.data) == ("mdn", Path("d.zarr"))
