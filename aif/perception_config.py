@@ -7,7 +7,7 @@ with an image model (its F has shallow local minima that Gauss–Newton jumps la
 then a Lyapunov function of the flow: monotone, no jitter at the noise floor), "none" above. A warm perception (a few
 updates per control tick or frame from the last belief: action, the tracker) runs the flow without descent control:
 LM and Adam would restart their step sizes every tick, and a moving attractor makes a step that raises F the loop
-working, not a step to undo. Whether a model sees images is asked of its modality's record (datagen/modalities.py).
+working, not a step to undo. Whether a model sees images is asked of its modality's record (base/modalities.py).
 The CLI spells every knob flat (`--perception.dt`, `--perception.lr`): the groups carry no prefix of their own.
 """
 
@@ -20,8 +20,8 @@ from typing import Annotated
 
 from bodyschema.aif import descent
 from bodyschema.aif.priors import PRIORS
+from bodyschema.base import modalities as modality_table
 from bodyschema.cli_marks import Ungrouped
-from bodyschema.datagen import modalities as modality_table
 from bodyschema.errors import must_be
 
 INTEGRATORS = ("local_linear", "implicit", "euler")

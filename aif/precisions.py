@@ -5,7 +5,7 @@ inference, every benchmark).
    sensor.
 2. A model whose precision varies with the pose (`precision_varies`: a GP's 1/predictive variance, an MDN's
    mixture) is perceived at its sensor's precision, `model.sensor_precision` (the modality's default,
-   datagen/modalities.py: σ = 1 mm, 1 px, 1°; a model without one keeps its own).
+   base/modalities.py: σ = 1 mm, 1 px, 1°; a model without one keeps its own).
 3. Any other model keeps its own precision: an exact model's fixed sensor noise (analytic FK), a decoder's calibrated
    noise (constant over the pose).
 

@@ -132,7 +132,7 @@ def full_levels(models_spec, n, runs, out, label, precisions=(), noise=()):
 def train_pixel(robot_name: str, n: int, size: tuple[int, int], epochs: int):
     """A pixel decoder (bodyschema.models.pixel) fitted here on n rendered poses (datagen's seed stream, not the
     evaluation's): used when no registered one is given."""
-    from bodyschema.datagen.robot import Robot
+    from bodyschema.datagen.body.robot import Robot
     from bodyschema.models.pixel import PixelDecoder
     from bodyschema.models.scaling import BodySpec
     robot = Robot.load(robot_name, image_size=size)

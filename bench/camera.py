@@ -21,7 +21,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from bodyschema.datagen.robot import Robot  # first: bodyschema sets MUJOCO_GL before mujoco is imported
+from bodyschema.datagen.body.robot import Robot  # first: bodyschema sets MUJOCO_GL before mujoco is imported
 
 # isort: split
 import cv2
@@ -29,8 +29,8 @@ import mujoco
 import numpy as np
 
 from bodyschema.datagen.config import DatagenConfig
-from bodyschema.datagen.contact_sheet import write_contact_sheet
 from bodyschema.datagen.generate import generate
+from bodyschema.datagen.store.contact_sheet import write_contact_sheet
 
 ROBOT, WORKSPACE = "nao_arm", "camera"
 CAMERAS = {"old": "eye", "new": "CameraBottom"}

@@ -20,7 +20,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from bodyschema.datagen.robot import Robot  # first: bodyschema sets MUJOCO_GL before mujoco is imported
+from bodyschema.datagen.body.robot import Robot  # first: bodyschema sets MUJOCO_GL before mujoco is imported
 
 # isort: split
 import cv2

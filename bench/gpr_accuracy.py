@@ -25,7 +25,7 @@ import numpy as np
 import torch
 from threadpoolctl import threadpool_limits
 
-from bodyschema.datagen.robot import Robot
+from bodyschema.datagen.body.robot import Robot
 from bodyschema.models import BodySpec
 from bodyschema.models.gpr import GPRModel
 from bodyschema.models.sklearn_gpr import SklearnGPRModel

@@ -26,7 +26,7 @@ from bodyschema.aif import descent
 from bodyschema.aif.perception import Perception
 from bodyschema.aif.perception_config import AdamSettings, PerceptionConfig
 from bodyschema.aif.tracker import Tracker, TrackerConfig
-from bodyschema.datagen.robot import Robot
+from bodyschema.datagen.body.robot import Robot
 from bodyschema.models.pixel import PixelDecoder
 from bodyschema.models.scaling import BodySpec
 

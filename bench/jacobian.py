@@ -20,7 +20,7 @@ import gpytorch
 import numpy as np
 import torch
 
-from bodyschema.datagen.robot import Robot
+from bodyschema.datagen.body.robot import Robot
 from bodyschema.models import BodySpec
 from bodyschema.models.gpr import GPRModel
 

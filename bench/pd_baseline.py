@@ -38,7 +38,7 @@ import importlib.metadata
 import time
 from pathlib import Path
 
-from bodyschema.datagen.robot import Robot  # first: bodyschema sets MUJOCO_GL before mujoco is imported
+from bodyschema.datagen.body.robot import Robot  # first: bodyschema sets MUJOCO_GL before mujoco is imported
 
 # isort: split
 import mujoco
@@ -48,9 +48,9 @@ from bodyschema.control.loop import ServoPolicy, TorquePolicy, rollout
 from bodyschema.control.pd import PDConfig, PDController
 from bodyschema.control.robot_defaults import DEFAULTS
 from bodyschema.control.sim import control_substeps
-from bodyschema.datagen.robot_build import build_model
-from bodyschema.datagen.robot_infer import inertia_gains, infer_record
-from bodyschema.datagen.robot_record import RobotRecord
+from bodyschema.datagen.body.build import build_model
+from bodyschema.datagen.body.infer import inertia_gains, infer_record
+from bodyschema.datagen.body.record import RobotRecord
 from bodyschema.evaluation.core.sensing import Sensors
 from bodyschema.evaluation.reaching.servo_baseline import servo_targets
 

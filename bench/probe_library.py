@@ -48,7 +48,7 @@ def record(world: Path, edit: str) -> None:
     import tomllib
     from importlib.resources import files
 
-    from bodyschema.datagen.robot_record import dumps_toml
+    from bodyschema.datagen.body.record import dumps_toml
 
     robots = files("bodyschema.datagen") / "robots"
     (world / "planar2.xml").write_text((robots / "planar2.xml").read_text())

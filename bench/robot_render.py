@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bodyschema.datagen.robot import Robot
-from bodyschema.datagen.robot_infer import infer_record
+from bodyschema.datagen.body.infer import infer_record
+from bodyschema.datagen.body.robot import Robot
 
 ROBOTS = "cmeel.prefix/share/example-robot-data/robots"
 

@@ -38,7 +38,7 @@ def dataset(args) -> Path:
         return Path(args.data)
     from bodyschema.datagen.config import DatagenConfig
     from bodyschema.datagen.generate import generate
-    from bodyschema.datagen.store import is_complete
+    from bodyschema.datagen.store.schema import is_complete
 
     out = Path(tempfile.gettempdir()) / f"bodyschema-bench-planar2-{args.n}-{args.image_size}.zarr"
     if not is_complete(out):

@@ -31,8 +31,8 @@ __version__ = "0.1.0"
 
 _EXPORTS = {   # public name → module defining it (imported on first access)
     "DatagenConfig": "bodyschema.datagen.config", "generate": "bodyschema.datagen.generate",
-    "validate_store": "bodyschema.datagen.validate", "show_store": "bodyschema.datagen.show",
-    "export_dataset": "bodyschema.datagen.export",
+    "validate_store": "bodyschema.datagen.store.validate", "show_store": "bodyschema.datagen.store.show",
+    "export_dataset": "bodyschema.datagen.exchange.export",
     "load_dataset": "bodyschema.training.data", "Dataset": "bodyschema.training.data",
     "BodySpec": "bodyschema.models.scaling", "SensoryModel": "bodyschema.models.contract",
     "load_model": "bodyschema.models.contract",

@@ -20,9 +20,9 @@ from typing import Annotated, Union
 import tyro
 
 from bodyschema import export_commands as export, runners
-from bodyschema.datagen import robot_commands as robot
+from bodyschema.datagen.body import commands as robot
 from bodyschema.datagen.config import DatagenConfig
-from bodyschema.datagen.importers.config import ImportConfig
+from bodyschema.datagen.exchange.importers.config import ImportConfig
 from bodyschema.demo import DemoConfig
 from bodyschema.evaluation import registry
 from bodyschema.evaluation.report import ReportConfig

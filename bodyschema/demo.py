@@ -123,9 +123,9 @@ def _datagen_jobs(config: DemoConfig) -> dict:
 
 
 def _datagen(config: DemoConfig) -> dict[str, Path]:
-    from bodyschema.datagen.contact_sheet import write_contact_sheet
     from bodyschema.datagen.generate import generate
-    from bodyschema.datagen.validate import summarize_store, validate_store
+    from bodyschema.datagen.store.contact_sheet import write_contact_sheet
+    from bodyschema.datagen.store.validate import summarize_store, validate_store
 
     stores = {}
     for robot, job in _datagen_jobs(config).items():

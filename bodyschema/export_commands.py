@@ -49,7 +49,7 @@ class ExportOnnxArgs:
 
 
 def run_show(args: ShowArgs) -> int:
-    from bodyschema.datagen.show import show_store
+    from bodyschema.datagen.store.show import show_store
 
     shown = show_store(args.path, args.out, args.n)
     print(shown.summary)
@@ -61,14 +61,14 @@ def run_show(args: ShowArgs) -> int:
 
 
 def run_export_dataset(args: ExportDatasetArgs) -> int:
-    from bodyschema.datagen.export import export_dataset
+    from bodyschema.datagen.exchange.export import export_dataset
 
     print(f"{args.to}: {export_dataset(args.store, args.out, args.to, overwrite=args.overwrite)}")
     return 0
 
 
 def run_export_onnx(args: ExportOnnxArgs) -> int:
-    from bodyschema.datagen.outputs import check_out
+    from bodyschema.base.outputs import check_out
     from bodyschema.models.onnx_export import FORMAT, check_opset, export_onnx, read_metadata
 
     check_opset(args.opset)                            # both before loading the model: a bad flag fails at once

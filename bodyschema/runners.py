@@ -45,14 +45,14 @@ class RegistryPromote:
 
 def run_datagen(config) -> None:
     from bodyschema.datagen.generate import generate
-    from bodyschema.datagen.validate import summarize_store
+    from bodyschema.datagen.store.validate import summarize_store
 
     _debug_datagen(config)
     print(summarize_store(generate(config, progress=config.progress)))   # on unless --no-progress / --quiet
 
 
 def run_validate(config: ValidateArgs) -> int:
-    from bodyschema.datagen.validate import validate_store
+    from bodyschema.datagen.store.validate import validate_store
 
     if not config.path.exists():     # bad input (exit 2), not an invalid store (exit 1)
         raise FileNotFoundError(must_be("path", "an existing .zarr store", str(config.path),
@@ -65,8 +65,8 @@ def run_validate(config: ValidateArgs) -> int:
 
 
 def run_import(config) -> None:
-    from bodyschema.datagen.importers.run import import_recording
-    from bodyschema.datagen.validate import summarize_store
+    from bodyschema.datagen.exchange.importers.run import import_recording
+    from bodyschema.datagen.store.validate import summarize_store
 
     print(summarize_store(import_recording(config)))
 

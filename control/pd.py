@@ -26,7 +26,7 @@ import mujoco
 import numpy as np
 
 from bodyschema.control.pd_gains import ModelLaw, inferred_pd
-from bodyschema.datagen.robot import GRAVITY, Robot
+from bodyschema.datagen.body.robot import GRAVITY, Robot
 from bodyschema.errors import must_be
 
 GAINS = ("auto", "record", "model")
@@ -142,6 +142,6 @@ def robot_gains(robot: Robot) -> tuple[tuple[float, ...], tuple[float, ...]]:
     diagonal inertia × (20 rad/s)², critically damped), what PDConfig(gains="record") runs without [pd]."""
     if robot.record.pd:
         return tuple(robot.record.pd["kp"]), tuple(robot.record.pd["kd"])
-    from bodyschema.datagen.robot_infer import inertia_gains
+    from bodyschema.datagen.body.infer import inertia_gains
     kp, kd = inertia_gains(robot.model, robot.workspaces["full"], sag=False)
     return tuple(kp), tuple(kd)

@@ -26,7 +26,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from bodyschema.datagen.robot_infer import SERVO_RAD_S, inertia_gains
+from bodyschema.datagen.body.infer import SERVO_RAD_S, inertia_gains
 
 OMEGA_MAX = SERVO_RAD_S     # rad/s, the bandwidth where the control rate allows it (the inferred servos' ω)
 RATE_FRACTION = 0.4         # ω·Δt at most: the sampled loop's poles stay real (≤ 0.5) with a margin

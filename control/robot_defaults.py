@@ -28,7 +28,7 @@ class ReachingDefaults:
 @functools.cache
 def reaching_defaults(robot: str) -> ReachingDefaults:
     """The [reaching] values of a robot reference (a shipped name or a file), DEFAULTS where absent."""
-    from bodyschema.datagen.robot import robot_record
+    from bodyschema.datagen.body.robot import robot_record
     values = {**DEFAULTS, **robot_record(robot).reaching}
     if values["actuators"] not in ("position", "torque"):
         raise ValueError(must_be(f"[reaching] actuators of {robot}", "'position' or 'torque'", values["actuators"]))

@@ -15,7 +15,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from bodyschema.datagen.robot import GRAVITY
+from bodyschema.datagen.body.robot import GRAVITY
 from bodyschema.errors import must_be
 
 DIVERGED = "simulation diverged (bad acceleration)"

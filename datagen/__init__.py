@@ -8,9 +8,10 @@ from __future__ import annotations
 
 from bodyschema.lazy import lazy_exports
 
-_EXPORTS = {"DatagenConfig": "config", "generate": "generate", "validate_store": "validate",
-            "summarize_store": "validate", "show_store": "show", "write_contact_sheet": "contact_sheet",
-            "export_dataset": "export", "open_store": "store"}
+_EXPORTS = {"DatagenConfig": "config", "generate": "generate", "validate_store": "store.validate",
+            "summarize_store": "store.validate", "show_store": "store.show",
+            "write_contact_sheet": "store.contact_sheet", "export_dataset": "exchange.export",
+            "open_store": "store.schema"}
 
 __all__, __getattr__, __dir__ = lazy_exports(
     "bodyschema.datagen", globals(),

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
-from bodyschema.datagen.robot_record import REQUIRED_WORKSPACES, check_robot_ref, robot_label
+from bodyschema.datagen.body.record import REQUIRED_WORKSPACES, check_robot_ref, robot_label
 from bodyschema.errors import must_be
 from bodyschema.log import Progress
 

@@ -25,17 +25,17 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from bodyschema import log
+from bodyschema.base.locks import store_lock
 from bodyschema.datagen.backends import Runner, backend
+from bodyschema.datagen.body.attrs import robot_attrs
+from bodyschema.datagen.body.infer import check_view
+from bodyschema.datagen.body.reach import arm_reach
+from bodyschema.datagen.body.robot import Robot
 from bodyschema.datagen.config import DatagenConfig
 from bodyschema.datagen.guards import check_resources, check_writable, n_shards, probe_render
-from bodyschema.datagen.integrity import clear_shard, data_arrays, failing_shards, shard_digest
-from bodyschema.datagen.locks import store_lock
-from bodyschema.datagen.reach import arm_reach
-from bodyschema.datagen.robot import Robot
-from bodyschema.datagen.robot_attrs import robot_attrs
-from bodyschema.datagen.robot_infer import check_view
 from bodyschema.datagen.samplers import Babbler, sample_kinematic
-from bodyschema.datagen.store import (
+from bodyschema.datagen.store.integrity import clear_shard, data_arrays, failing_shards, shard_digest
+from bodyschema.datagen.store.schema import (
     SCHEMA_VERSION,
     StoreWriteError,
     create_store,
@@ -297,7 +297,7 @@ def _checked(config: DatagenConfig, path: Path) -> tuple[dict, dict]:
 def report_observability(robot: Robot, ranges: np.ndarray) -> None:
     """Log the camera's observability table (pixels changed, ee mm per degree of each joint) and a house warning per
     joint under the threshold: a warning, not an error (the store is still worth making for the joints it sees)."""
-    from bodyschema.datagen.observability import observability
+    from bodyschema.datagen.body.observability import observability
     seen = observability(robot, ranges, np.random.default_rng(0))
     logger.info(seen.table())
     for warning in seen.warnings():

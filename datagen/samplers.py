@@ -16,7 +16,7 @@ import logging
 import mujoco
 import numpy as np
 
-from bodyschema.datagen.store import MAX_JOINT_SPEED
+from bodyschema.datagen.store.schema import MAX_JOINT_SPEED
 from bodyschema.errors import must_be
 
 logger = logging.getLogger(__name__)

@@ -28,8 +28,8 @@ from bodyschema.control.pd import PDController
 from bodyschema.control.robot_defaults import reaching_defaults
 from bodyschema.control.sim import ArmBatch, control_substeps
 from bodyschema.control.targets import in_view_targets
-from bodyschema.datagen.robot import Robot
-from bodyschema.datagen.robot_record import check_robot_ref
+from bodyschema.datagen.body.record import check_robot_ref
+from bodyschema.datagen.body.robot import Robot
 from bodyschema.datagen.samplers import uniform
 from bodyschema.envs import spaces as env_spaces
 from bodyschema.errors import must_be

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import functools
 
-from bodyschema.datagen.robot_record import SHIPPED
+from bodyschema.datagen.body.record import SHIPPED
 from bodyschema.errors import must_be
 
 try:

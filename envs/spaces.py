@@ -18,8 +18,8 @@ from __future__ import annotations
 import numpy as np
 from gymnasium import spaces
 
-from bodyschema.datagen.reach import arm_reach
-from bodyschema.datagen.robot import LIMIT_TOLERANCE
+from bodyschema.datagen.body.reach import arm_reach
+from bodyschema.datagen.body.robot import LIMIT_TOLERANCE
 
 GOALS = ("ee_xyz", "ee_pixel", "joints", "image")   # the goal modalities, as reaching's
 ACTIONS = ("position", "torque", "velocity")

@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from bodyschema.datagen import modalities
-from bodyschema.datagen.robot import Robot
+from bodyschema.base import modalities
+from bodyschema.datagen.body.robot import Robot
 from bodyschema.errors import must_be
 from bodyschema.models.body_robot import body_robot, robot_source
 from bodyschema.models.contract import BaseSensoryModel, register_kind

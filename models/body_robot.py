@@ -12,8 +12,8 @@ import hashlib
 from pathlib import Path
 from typing import Any
 
-from bodyschema.datagen.robot_attrs import MODEL_KEY, RECORD_KEY, robot_attrs
-from bodyschema.datagen.robot_record import SHIPPED, load_record
+from bodyschema.datagen.body.attrs import MODEL_KEY, RECORD_KEY, robot_attrs
+from bodyschema.datagen.body.record import SHIPPED, load_record
 from bodyschema.models.scaling import BodySpec
 
 
@@ -35,7 +35,7 @@ def body_robot(body: BodySpec, image_size: tuple[int, int] | None = None, rgb: b
                actuators: str = "position"):
     """The robot of `body`: the shipped one of its name, else rebuilt from its source. image_size None: the
     record's camera size."""
-    from bodyschema.datagen.robot import Robot
+    from bodyschema.datagen.body.robot import Robot
     return Robot.from_attrs({"robot": body.robot, **(body.source or {})}, image_size=image_size, rgb=rgb,
                             actuators=actuators)
 

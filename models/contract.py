@@ -68,10 +68,10 @@ class BaseSensoryModel(Estimator, Capabilities):
 
     @property
     def sensor_precision(self) -> float | None:
-        """Π of the sensor that reads this modality (datagen/modalities.py: 1/σ², σ = 1 mm, 1 px, 1°), or None (an
+        """Π of the sensor that reads this modality (base/modalities.py: 1/σ², σ = 1 mm, 1 px, 1°), or None (an
         image, a modality outside the table): what perception uses instead of a Π that varies with the pose
         (aif/precisions.py)."""
-        from bodyschema.datagen import modalities
+        from bodyschema.base import modalities
         row = modalities.MODALITIES.get(self.modality)
         return None if row is None else row.precision
 

@@ -19,7 +19,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from bodyschema.datagen.modalities import is_image
+from bodyschema.base.modalities import is_image
 from bodyschema.errors import must_be
 from bodyschema.models._nn_fit import (
     LeafParams,

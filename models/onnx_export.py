@@ -29,13 +29,13 @@ import numpy as np
 import torch
 from torch import nn
 
-from bodyschema.datagen import modalities
+from bodyschema.base import modalities
 from bodyschema.errors import must_be
 
 OPSET = 18                              # onnxruntime ≥ 1.14 runs it; torch's exporter targets ≥ 18
 TOLERANCE = 1e-5                        # max |onnxruntime − model| accepted (output units; rad for an encoder)
 CHECK_INPUTS = 64                       # seeded inputs of that check
-FORMAT = "bodyschema-onnx"              # the kind of output its marker names (datagen/outputs.py)
+FORMAT = "bodyschema-onnx"              # the kind of output its marker names (base/outputs.py)
 
 
 class PredictGraph(nn.Module):
@@ -104,10 +104,10 @@ def export_onnx(model, out: str | Path, *, opset: int = OPSET, overwrite: bool =
     batch axis, and metadata (opset, kind, modality, body, shapes, units, the check) in the file's `metadata_props`.
 
     The graph is run in onnxruntime against the model before anything is written; `out` appears only once that
-    check passed (datagen/outputs.py: beside it, then renamed; --overwrite replaces only a previous ONNX export)."""
+    check passed (base/outputs.py: beside it, then renamed; --overwrite replaces only a previous ONNX export)."""
     import onnx
 
-    from bodyschema.datagen.outputs import write_atomically
+    from bodyschema.base.outputs import write_atomically
 
     check_exportable(model)
     check_opset(opset)

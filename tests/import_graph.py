@@ -1,6 +1,6 @@
 """The package's module import graph, read from the source with `ast` (nothing is imported): every `import` and
 `from ... import` at any nesting level (module top, functions, classes, branches), relative imports resolved, each
-folder named by pyproject.toml's package-dir (`datagen/robot.py` is `bodyschema.datagen.robot`).
+folder named by pyproject.toml's package-dir (`datagen/body/robot.py` is `bodyschema.datagen.body.robot`).
 
 An edge goes to the deepest module the statement names: `from bodyschema.evaluation.reaching import goal_pose` to
 `...reaching.goal_pose`, `from bodyschema.evaluation.reaching import run_reaching` to the package `...reaching`.
@@ -68,7 +68,7 @@ def cycles(edges: dict[str, set[str]]) -> list[list[str]]:
 
 
 def stage(module: str) -> str:
-    """A module's stage: the top-level subpackage (`bodyschema.datagen.robot` → datagen), or bodyschema itself."""
+    """A module's stage: the top-level subpackage (`bodyschema.datagen.body.robot` → datagen), or bodyschema itself."""
     parts = module.split(".")
     return parts[1] if len(parts) > 2 or (len(parts) == 2 and parts[1] in _STAGES) else parts[0]
 

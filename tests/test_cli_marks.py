@@ -72,7 +72,7 @@ def test_a_configs_own_check_leaves_tyro_as_its_value_error():
 
 
 def test_a_library_call_a_config_file_and_the_cli_build_the_same_config(tmp_path):
-    from bodyschema.datagen.importers.config import ImportConfig
+    from bodyschema.datagen.exchange.importers.config import ImportConfig
 
     by_hand = ImportConfig(source=Path("rec"), out=Path("o.zarr"), angles="deg", robot="nao_arm")
     file = tmp_path / "import.json"

@@ -22,8 +22,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Any, Generic, TypeVar
 
+from bodyschema.base.modalities import MODALITIES
 from bodyschema.cli_marks import Flat
-from bodyschema.datagen.modalities import MODALITIES
 from bodyschema.errors import must_be
 from bodyschema.log import Progress
 from bodyschema.models import kinds

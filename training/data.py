@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from bodyschema.datagen.store_reader import check_store, read_arrays, store_body, store_digest
+from bodyschema.datagen.store.reader import check_store, read_arrays, store_body, store_digest
 from bodyschema.errors import must_be
 from bodyschema.models.body_robot import attrs_source
 from bodyschema.models.scaling import IMAGE_SCALE, BodySpec

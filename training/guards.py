@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from bodyschema.datagen.modalities import is_image
+from bodyschema.base.modalities import is_image
 from bodyschema.errors import must_be
 from bodyschema.models import kinds
 from bodyschema.models.capabilities import GPMemory

@@ -9,7 +9,7 @@ digest and the held-out score. The registered model's description names its newe
 
 from __future__ import annotations
 
-from bodyschema.datagen import modalities
+from bodyschema.base import modalities
 from bodyschema.training.digest import DIGEST_TAG
 
 NOTE = "mlflow.note.content"      # the tag MLflow's UI shows (and edits) as a logged model's description

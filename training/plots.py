@@ -16,7 +16,7 @@ matplotlib.use("Agg")   # files only, no display; set before pyplot is imported
 import matplotlib.pyplot as plt  # noqa: E402 — pyplot after matplotlib.use, so no display backend is tried
 import numpy as np  # noqa: E402 — in the same block as pyplot
 
-from bodyschema.datagen import modalities  # noqa: E402 — the component names and units of each modality
+from bodyschema.base import modalities  # noqa: E402 — the component names and units of each modality
 
 # What each logged history metric is (a multimodal member's metrics carry its modality as a "m/" prefix).
 OBJECTIVES = {

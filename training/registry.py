@@ -39,10 +39,10 @@ from mlflow import MlflowClient
 from mlflow.exceptions import MlflowException
 
 from bodyschema import log
+from bodyschema.base.locks import exclusive
 from bodyschema.errors import must_be
 from bodyschema.models.scaling import BodySpec
 from bodyschema.training.digest import DIGEST_TAG, verify_directory, version_digest
-from bodyschema.training.locks import exclusive
 from bodyschema.training.mlmodel_file import artifact_dir as _artifact_dir
 from bodyschema.training.model_card import NOTE, describe_registration
 from bodyschema.training.tracking_store import (  # noqa: F401 — TrackingUnreachable: importers name it here

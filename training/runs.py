@@ -23,8 +23,9 @@ from pathlib import Path
 
 from mlflow.exceptions import MlflowException
 
+from bodyschema.base.locks import exclusive
+from bodyschema.base.processes import pid_alive, process_start
 from bodyschema.training.digest import DIGEST_TAG
-from bodyschema.training.locks import exclusive, pid_alive, process_start
 
 IDENTITY_TAG = "bodyschema.identity"         # full config hash (sha256 of TrainConfig.identity)
 PID_TAG, HOST_TAG, START_TAG = "bodyschema.pid", "bodyschema.host", "bodyschema.pid_start"

@@ -29,7 +29,7 @@ from pathlib import Path
 import mlflow
 
 from bodyschema import log
-from bodyschema.datagen.backends import ray_session
+from bodyschema.base.ray_session import ray_session
 from bodyschema.errors import must_be
 from bodyschema.models import kinds
 from bodyschema.training import guards, sweep_report

@@ -35,7 +35,7 @@ from mlflow.exceptions import MlflowException
 from tqdm.auto import tqdm
 
 from bodyschema import log
-from bodyschema.datagen import modalities
+from bodyschema.base import modalities
 from bodyschema.errors import must_be
 from bodyschema.training import guards, plots, runs
 from bodyschema.training.config import NON_IDENTITY_FIELDS, TrainConfig, build_model
@@ -339,7 +339,7 @@ def _subset(split: Split, n: int, seed: int) -> Split:
 def _log_run_files(data: Dataset, history: "_History", run_dir: Path) -> None:
     """The dataset summary (`dataset_summary.txt`, as `bodyschema show` prints it) and the loss curves' numbers
     (`loss_curves.csv`: one row per epoch, beside plots/loss_curves.png) as artifacts of the run."""
-    from bodyschema.datagen.validate import summarize_store
+    from bodyschema.datagen.store.validate import summarize_store
 
     mlflow.log_text(summarize_store(data.path, check=False) + "\n", "dataset_summary.txt")
     if history.epochs:

@@ -19,10 +19,10 @@ import numpy as np
 import torch
 
 from bodyschema.aif.aic import AICConfig, AICController
+from bodyschema.base.modalities import is_image
 from bodyschema.control.pd import PDConfig, PDController
 from bodyschema.control.sim import ArmBatch, control_substeps
-from bodyschema.datagen.modalities import is_image
-from bodyschema.datagen.robot import GRAVITY, Robot
+from bodyschema.datagen.body.robot import GRAVITY, Robot
 from bodyschema.errors import must_be
 from bodyschema.evaluation.adaptation.jupiter_report import ControllerRun, summarize, write_report
 from bodyschema.evaluation.core.config import TrialsConfig

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bodyschema.datagen.robot import GRAVITY
-from bodyschema.datagen.robot_record import load_record
+from bodyschema.datagen.body.record import load_record
+from bodyschema.datagen.body.robot import GRAVITY
 from bodyschema.evaluation.core.tables import markdown_table, write_csv
 
 SUMMARY_COLUMNS = ("joint_err_before_deg", "joint_err_after_deg", "joint_peak_after_deg", "settle_s",

@@ -20,8 +20,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from bodyschema.base.modalities import is_image
 from bodyschema.control.sim import ArmBatch, control_substeps
-from bodyschema.datagen.modalities import is_image
 from bodyschema.evaluation.core.seeds import EVAL_STREAM
 from bodyschema.evaluation.core.sensing import sense
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from bodyschema.datagen.modalities import is_image
+from bodyschema.base.modalities import is_image
 from bodyschema.models.contract import FUSED_CALLS
 from bodyschema.models.scaling import IMAGE_SCALE
 

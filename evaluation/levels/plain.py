@@ -16,7 +16,7 @@ import torch
 
 from bodyschema.aif.perception import Perception
 from bodyschema.aif.perception_config import FlowSettings, PerceptionConfig
-from bodyschema.datagen.modalities import IMAGE, is_image
+from bodyschema.base.modalities import IMAGE, is_image
 
 PLAIN = PerceptionConfig(method="flow", flow=FlowSettings(integrator="euler", dt=0.1, k_z=1.0, step_control="none"),
                          max_steps=5000, tol=0.0, max_step=None, record=True)

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from bodyschema.datagen.modalities import IMAGE, images_in, is_image
+from bodyschema.base.modalities import IMAGE, images_in, is_image
 from bodyschema.errors import must_be
 from bodyschema.evaluation.core.specs import check_models_match, trained_workspace
 from bodyschema.evaluation.levels.targets import Targets, add_noise
@@ -52,7 +52,7 @@ class RecordedTargets:
     """A validated store's frames as level targets for `models` (+ an encoder's image)."""
 
     def __init__(self, path: Path, models, image: bool):
-        from bodyschema.datagen.store_reader import check_store, store_digest
+        from bodyschema.datagen.store.reader import check_store, store_digest
 
         self.path = Path(path)
         if not self.path.exists():
@@ -117,7 +117,7 @@ class RecordedTargets:
 def _robot_of(attrs: dict):
     """The store's robot for forward kinematics when it loads (its own record and model text, or a shipped robot's
     name), else None."""
-    from bodyschema.datagen.robot import Robot
+    from bodyschema.datagen.body.robot import Robot
 
     try:
         robot = Robot.from_attrs(attrs, image_size=None)          # the record's camera size: only FK is asked

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from bodyschema.datagen.modalities import is_image
+from bodyschema.base.modalities import is_image
 
 
 def score(models, robot, targets, label: str, result, evaluations: int, wall: float, success_deg: float):

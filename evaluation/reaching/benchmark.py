@@ -39,15 +39,15 @@ from bodyschema.aif.action import ActionConfig, VelocityController
 from bodyschema.aif.aic import AICConfig, AICController
 from bodyschema.aif.goal_inference import goal_precision
 from bodyschema.aif.perception_config import FlowSettings, PerceptionConfig
+from bodyschema.base import modalities
+from bodyschema.base.modalities import is_image
 from bodyschema.control.loop import ImpedancePolicy, ServoPolicy, TorquePolicy, VelocityPolicy, rollout
 from bodyschema.control.pd import PDController
 from bodyschema.control.robot_defaults import reaching_defaults
 from bodyschema.control.sim import control_substeps
 from bodyschema.control.targets import in_view_targets
-from bodyschema.datagen import modalities
-from bodyschema.datagen.modalities import is_image
-from bodyschema.datagen.reach import arm_reach
-from bodyschema.datagen.robot_record import check_robot_ref
+from bodyschema.datagen.body.reach import arm_reach
+from bodyschema.datagen.body.record import check_robot_ref
 from bodyschema.datagen.samplers import uniform
 from bodyschema.errors import must_be
 from bodyschema.evaluation.core.config import TrialsConfig

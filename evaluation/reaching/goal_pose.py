@@ -17,7 +17,7 @@ import torch
 
 from bodyschema.aif.goal_inference import GoalPose, infer_goal_pose
 from bodyschema.aif.perception import Perception, PerceptionConfig
-from bodyschema.datagen.modalities import is_image
+from bodyschema.base.modalities import is_image
 from bodyschema.datagen.samplers import uniform
 
 MODES = ("auto", "on", "off")

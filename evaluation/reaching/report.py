@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from bodyschema.datagen.modalities import get, is_image
+from bodyschema.base.modalities import get, is_image
 from bodyschema.evaluation.core.mlflow_log import table_metrics
 from bodyschema.evaluation.core.publish import publish
 from bodyschema.evaluation.core.sensing import sense

@@ -23,7 +23,7 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from bodyschema.datagen.robot import GRAVITY, Robot
+from bodyschema.datagen.body.robot import GRAVITY, Robot
 from bodyschema.errors import must_be
 
 

@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
+from bodyschema.base import modalities
 from bodyschema.control.robot_defaults import reaching_defaults
-from bodyschema.datagen import modalities
 from bodyschema.errors import must_be
 from bodyschema.evaluation.core.mlflow_log import table_metrics
 from bodyschema.evaluation.core.publish import publish
@@ -58,7 +58,7 @@ class LoopRobustnessConfig(ReachingRunConfig):
 def run_loop_robustness(config: LoopRobustnessConfig = LoopRobustnessConfig(), models=None) -> dict[str, Path]:
     base = config.reaching()
     models = resolve_models(base.models, base.default_models, base.tracking_uri, models)
-    from bodyschema.datagen.robot import Robot
+    from bodyschema.datagen.body.robot import Robot
     robot = Robot.load(base.robot, actuators=reaching_defaults(base.robot).actuators)
     names = [m.modality for m in models] + builtin_sensors(robot)
     if config.modality not in names:

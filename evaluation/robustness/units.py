@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from bodyschema.datagen import modalities
+from bodyschema.base import modalities
 
 
 def noise_label(modality: str) -> str:

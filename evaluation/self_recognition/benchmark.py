@@ -28,7 +28,7 @@ import torch
 from bodyschema.aif.free_energy import sensory_terms
 from bodyschema.aif.perception import Perception
 from bodyschema.aif.perception_config import FlowSettings, PerceptionConfig
-from bodyschema.datagen.robot_record import check_robot_ref
+from bodyschema.datagen.body.record import check_robot_ref
 from bodyschema.errors import must_be
 from bodyschema.evaluation.core.config import TrialsConfig, check_names, within
 from bodyschema.evaluation.core.mlflow_log import table_metrics

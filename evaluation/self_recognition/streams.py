@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bodyschema.datagen.modalities import is_image
+from bodyschema.base.modalities import is_image
 from bodyschema.evaluation.core.seeds import EVAL_STREAM
 from bodyschema.evaluation.core.sensing import sense
 

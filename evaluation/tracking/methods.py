@@ -25,7 +25,7 @@ from bodyschema.aif.free_energy import sensory_terms
 from bodyschema.aif.perception import Perception
 from bodyschema.aif.perception_config import FlowSettings, PerceptionConfig
 from bodyschema.aif.tracker import Tracker, TrackerConfig
-from bodyschema.datagen.modalities import is_image
+from bodyschema.base.modalities import is_image
 from bodyschema.models.contract import FUSED_CALLS
 
 METHODS = ("encoder", "flow", "tracker", "tracker+command")

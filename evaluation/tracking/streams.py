@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bodyschema.datagen.modalities import is_image
+from bodyschema.base.modalities import is_image
 from bodyschema.datagen.samplers import uniform
 from bodyschema.evaluation.core.seeds import Stream, eval_rng
 from bodyschema.evaluation.core.sensing import sense

@@ -14,7 +14,7 @@ from bodyschema.aif.goal_inference import goal_precision
 from bodyschema.aif.perception import Perception
 from bodyschema.aif.precisions import perceived_precisions
 from bodyschema.aif.tracker import Tracker, TrackerConfig
-from bodyschema.datagen import modalities
+from bodyschema.base import modalities
 from bodyschema.evaluation.levels.benchmark import LevelsConfig
 from bodyschema.evaluation.reaching.benchmark import ReachingConfig, aif_policy
 from bodyschema.evaluation.tracking.benchmark import TrackingConfig, sensed

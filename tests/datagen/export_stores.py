@@ -10,10 +10,10 @@ from pathlib import Path
 import zarr
 
 from bodyschema.datagen.config import DatagenConfig
-from bodyschema.datagen.export import export_dataset
+from bodyschema.datagen.exchange.export import export_dataset
 from bodyschema.datagen.generate import generate
-from bodyschema.datagen.integrity import shard_digest
-from bodyschema.datagen.store import mark_shard_done
+from bodyschema.datagen.store.integrity import shard_digest
+from bodyschema.datagen.store.schema import mark_shard_done
 
 
 def babble_store(folder: Path) -> Path:

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bodyschema.datagen.robot import Robot
+from bodyschema.datagen.body.robot import Robot
 
 SIZE = (24, 24)          # px: rendering 24 planar2 frames takes well under a second
 

@@ -7,10 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bodyschema.datagen import modalities
-from bodyschema.datagen.export_lerobot import keys, lerobot_features
-from bodyschema.datagen.modalities import Modality
-from bodyschema.datagen.store import create_store, features
+from bodyschema.base import modalities
+from bodyschema.base.modalities import Modality
+from bodyschema.datagen.exchange.export_lerobot import keys, lerobot_features
+from bodyschema.datagen.store.schema import create_store, features
 
 TORQUE = Modality("torque", "N·m", ("Dq",), ("joint",), sensor=True)
 WRIST = Modality("wrist_image", "intensity", ("image",), ("row", "col", "channel"), dtype="uint8", kind="image",

@@ -7,8 +7,8 @@ import pytest
 import zarr
 
 from bodyschema.datagen.config import DatagenConfig
-from bodyschema.datagen.contact_sheet import LABEL_BOX, draw_label, label_corner, write_contact_sheet
 from bodyschema.datagen.generate import generate
+from bodyschema.datagen.store.contact_sheet import LABEL_BOX, draw_label, label_corner, write_contact_sheet
 
 
 @pytest.mark.parametrize(("marker", "corner"), [((10, 10), (True, True)), ((150, 10), (False, True)),

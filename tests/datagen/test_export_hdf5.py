@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import zarr
 
-from bodyschema.datagen.export import export_dataset
-from bodyschema.datagen.store import DONE
+from bodyschema.datagen.exchange.export import export_dataset
+from bodyschema.datagen.store.schema import DONE
 from tests.datagen.export_stores import babble_store, uniform_store
 
 h5py = pytest.importorskip("h5py")

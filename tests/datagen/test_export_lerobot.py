@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 import zarr
 
-from bodyschema.datagen import export_lerobot
 from bodyschema.datagen.config import DatagenConfig
-from bodyschema.datagen.export import export_dataset
+from bodyschema.datagen.exchange import export_lerobot
+from bodyschema.datagen.exchange.export import export_dataset
 from bodyschema.datagen.generate import generate
 from tests.datagen.export_stores import babble_store, uniform_store, without_targets
 
@@ -145,7 +145,7 @@ def assert_action_is_the_next_state(info: dict, frames: list, q: np.ndarray) -> 
 
 def test_frames_equal_the_store(stores, tmp_path, monkeypatch):
     monkeypatch.setattr(export_lerobot, "DATA_FILE_MB", 0.05)      # ~13 frames of 24×32 RGB per file: several files
-    monkeypatch.setattr("bodyschema.datagen.store_rows.ROWS_PER_READ", 16)   # several row groups per file
+    monkeypatch.setattr("bodyschema.datagen.store.rows.ROWS_PER_READ", 16)   # several row groups per file
     store = stores["babble"]
     out = export_dataset(store, tmp_path / "lr", "lerobot")
     info, episodes, files, frames = _read(out)

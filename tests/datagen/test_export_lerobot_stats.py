@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 import zarr
 
-from bodyschema.datagen.export import export_dataset
-from bodyschema.datagen.export_lerobot_stats import _histogram_stats
+from bodyschema.datagen.exchange.export import export_dataset
+from bodyschema.datagen.exchange.export_lerobot_stats import _histogram_stats
 from tests.datagen.export_stores import babble_store
 
 pq = pytest.importorskip("pyarrow.parquet")

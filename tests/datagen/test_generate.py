@@ -15,8 +15,8 @@ import zarr
 import bodyschema.datagen.generate as gen
 from bodyschema.datagen.config import DatagenConfig
 from bodyschema.datagen.generate import generate, plan_shards
-from bodyschema.datagen.store import DONE, is_complete
-from bodyschema.datagen.validate import validate_store
+from bodyschema.datagen.store.schema import DONE, is_complete
+from bodyschema.datagen.store.validate import validate_store
 from tests.datagen.export_stores import without_targets
 
 SMALL = dict(robot="planar2", n=96, shard_size=16, seed=7)  # 6 shards of 16 rendered 64 x 64 frames

@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from bodyschema.datagen.backends import WATCH_S
+from bodyschema.base.processes import WATCH_S
 from tests.datagen.processes import descendants, running
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads processes from /proc")

@@ -11,7 +11,7 @@ import pytest
 
 from bodyschema.datagen.config import DatagenConfig
 from bodyschema.datagen.generate import generate
-from bodyschema.datagen.validate import validate_store
+from bodyschema.datagen.store.validate import validate_store
 from tests.datagen.processes import descendants, is_loopback, listening
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads sockets from /proc")

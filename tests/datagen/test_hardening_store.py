@@ -18,7 +18,7 @@ import bodyschema.datagen.generate as gen
 import bodyschema.datagen.guards as guards
 from bodyschema.datagen.config import DatagenConfig
 from bodyschema.datagen.generate import generate
-from bodyschema.datagen.validate import validate_store
+from bodyschema.datagen.store.validate import validate_store
 
 JOB = dict(robot="planar2", n=40, shard_size=16, seed=4)  # 3 shards of rendered frames, the last one partial
 

@@ -12,15 +12,15 @@ import numpy as np
 import pytest
 import zarr
 
-from bodyschema.datagen.export import export_dataset
-from bodyschema.datagen.importers.config import ImportConfig
-from bodyschema.datagen.importers.run import import_recording
-from bodyschema.datagen.validate import validate_store
+from bodyschema.datagen.exchange.export import export_dataset
+from bodyschema.datagen.exchange.importers.config import ImportConfig
+from bodyschema.datagen.exchange.importers.run import import_recording
+from bodyschema.datagen.store.validate import validate_store
 from tests.datagen.import_sources import planar2_frames, write_folder
 
 pa = pytest.importorskip("pyarrow")
 pq = pytest.importorskip("pyarrow.parquet")
-LOGGER = "bodyschema.datagen.importers.run"
+LOGGER = "bodyschema.datagen.exchange.importers.run"
 
 
 @pytest.fixture(scope="module")

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 import zarr
 
-from bodyschema.datagen.importers.config import ImportConfig
-from bodyschema.datagen.importers.run import import_recording
-from bodyschema.datagen.validate import validate_store
+from bodyschema.datagen.exchange.importers.config import ImportConfig
+from bodyschema.datagen.exchange.importers.run import import_recording
+from bodyschema.datagen.store.validate import validate_store
 from tests.datagen.import_sources import planar2_frames, write_demo_hdf5
 
 pytest.importorskip("h5py")

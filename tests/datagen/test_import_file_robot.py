@@ -8,11 +8,11 @@ import shutil
 
 import numpy as np
 
-from bodyschema.datagen.importers.config import ImportConfig
-from bodyschema.datagen.importers.run import import_recording
-from bodyschema.datagen.robot import Robot
-from bodyschema.datagen.store import open_store
-from bodyschema.datagen.validate import validate_store
+from bodyschema.datagen.body.robot import Robot
+from bodyschema.datagen.exchange.importers.config import ImportConfig
+from bodyschema.datagen.exchange.importers.run import import_recording
+from bodyschema.datagen.store.schema import open_store
+from bodyschema.datagen.store.validate import validate_store
 from tests.datagen.import_sources import write_folder
 from tests.evaluation.test_file_robot import write_arm
 

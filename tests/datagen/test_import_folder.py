@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 import zarr
 
-from bodyschema.datagen.importers.config import ImportConfig
-from bodyschema.datagen.importers.run import import_recording
-from bodyschema.datagen.robot import Robot
-from bodyschema.datagen.validate import validate_store
+from bodyschema.datagen.body.robot import Robot
+from bodyschema.datagen.exchange.importers.config import ImportConfig
+from bodyschema.datagen.exchange.importers.run import import_recording
+from bodyschema.datagen.store.validate import validate_store
 from tests.datagen.import_sources import SIZE, planar2_frames, write_folder
 
 
@@ -104,7 +104,7 @@ def test_overwrite_replaces_and_refusal_keeps_the_old_store(tmp_path):
 
 
 def test_show_draws_the_contact_sheet_of_a_recording_without_ee_pixel(tmp_path):
-    from bodyschema.datagen.show import show_store
+    from bodyschema.datagen.store.show import show_store
 
     q, images = planar2_frames(4)
     folder = write_folder(tmp_path / "rec", q, images)

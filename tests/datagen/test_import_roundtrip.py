@@ -11,13 +11,13 @@ import pytest
 import zarr
 
 from bodyschema.datagen.config import DatagenConfig
-from bodyschema.datagen.export import export_dataset
+from bodyschema.datagen.exchange.export import export_dataset
+from bodyschema.datagen.exchange.importers.config import ImportConfig
+from bodyschema.datagen.exchange.importers.recording import source_sha256
+from bodyschema.datagen.exchange.importers.run import import_recording
 from bodyschema.datagen.generate import generate
-from bodyschema.datagen.importers.config import ImportConfig
-from bodyschema.datagen.importers.recording import source_sha256
-from bodyschema.datagen.importers.run import import_recording
-from bodyschema.datagen.store import DONE
-from bodyschema.datagen.validate import validate_store
+from bodyschema.datagen.store.schema import DONE
+from bodyschema.datagen.store.validate import validate_store
 from tests.datagen.export_stores import babble_store, uniform_store, without_targets
 
 pytest.importorskip("h5py")

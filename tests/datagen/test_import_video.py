@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 import zarr
 
-from bodyschema.datagen.importers.config import ImportConfig
-from bodyschema.datagen.importers.run import import_recording
+from bodyschema.datagen.exchange.importers.config import ImportConfig
+from bodyschema.datagen.exchange.importers.run import import_recording
 
 av = pytest.importorskip("av")
 pytest.importorskip("pyarrow")

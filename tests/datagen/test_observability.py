@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 from bodyschema.cli import main
+from bodyschema.datagen.body.infer import ee_samples, infer_record, place_camera
+from bodyschema.datagen.body.observability import MIN_PX_PER_DEG, observability
+from bodyschema.datagen.body.record import read_record, write_record
+from bodyschema.datagen.body.robot import Robot
 from bodyschema.datagen.config import DatagenConfig
 from bodyschema.datagen.generate import generate
-from bodyschema.datagen.observability import MIN_PX_PER_DEG, observability
-from bodyschema.datagen.robot import Robot
-from bodyschema.datagen.robot_infer import ee_samples, infer_record, place_camera
-from bodyschema.datagen.robot_record import read_record, write_record
-from bodyschema.datagen.show import show_store
+from bodyschema.datagen.store.show import show_store
 
 # A shoulder swinging a forearm, and a roll about the forearm's own axis turning a round tool whose tip is on it.
 ROLL = """<mujoco model="roll">

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bodyschema.datagen.robot import LIMIT_TOLERANCE, ROBOT_NAMES, VECTORIZE_FROM, Robot
+from bodyschema.datagen.body.robot import LIMIT_TOLERANCE, ROBOT_NAMES, VECTORIZE_FROM, Robot
 
 FD_STEP = 1e-6          # rad
 TEST_SIZES = {"planar2": (128, 128), "nao_arm": (56, 80), "panda": (192, 192)}   # (H, W) px

@@ -9,13 +9,13 @@ import numpy as np
 import pytest
 
 from bodyschema.cli import main
+from bodyschema.datagen.body.infer import infer_record, view_fraction
+from bodyschema.datagen.body.record import load_record, read_record, shipped_dir
+from bodyschema.datagen.body.robot import Robot
 from bodyschema.datagen.config import DatagenConfig
 from bodyschema.datagen.generate import generate
-from bodyschema.datagen.robot import Robot
-from bodyschema.datagen.robot_infer import infer_record, view_fraction
-from bodyschema.datagen.robot_record import load_record, read_record, shipped_dir
-from bodyschema.datagen.store import open_store
-from bodyschema.datagen.validate import validate_store
+from bodyschema.datagen.store.schema import open_store
+from bodyschema.datagen.store.validate import validate_store
 
 # A 3-hinge arm on a slide rail, no site named ee, no camera: everything but the model is inferred.
 TOY = """<mujoco model="toy">
@@ -145,5 +145,5 @@ def test_robot_camera_frames_a_narrowed_workspace_closer_and_keeps_the_rest(toy,
 
 
 def _toml(values):
-    from bodyschema.datagen.robot_record import dumps_toml
+    from bodyschema.datagen.body.record import dumps_toml
     return dumps_toml(values)

@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 
 from bodyschema.cli import main
+from bodyschema.datagen.body.build import build_model, read_source
+from bodyschema.datagen.body.infer import SAG_RAD, ee_samples, infer_record, place_camera, view_fraction
+from bodyschema.datagen.body.record import RobotRecord, write_record
+from bodyschema.datagen.body.robot import Robot
 from bodyschema.datagen.config import DatagenConfig
 from bodyschema.datagen.generate import generate
-from bodyschema.datagen.robot import Robot
-from bodyschema.datagen.robot_build import build_model, read_source
-from bodyschema.datagen.robot_infer import SAG_RAD, ee_samples, infer_record, place_camera, view_fraction
-from bodyschema.datagen.robot_record import RobotRecord, write_record
-from bodyschema.datagen.validate import validate_store
+from bodyschema.datagen.store.validate import validate_store
 
 
 def _package_file(dist: str, relative: str) -> Path:

@@ -15,14 +15,14 @@ import pytest
 import zarr
 
 from bodyschema.cli import main
+from bodyschema.datagen.body.attrs import MODEL_KEY
+from bodyschema.datagen.body.infer import infer_record
+from bodyschema.datagen.body.record import NAME_PATTERN, read_record
+from bodyschema.datagen.body.render_scope import HIDDEN_GROUP, render_model
+from bodyschema.datagen.body.robot import Robot
 from bodyschema.datagen.config import DatagenConfig
 from bodyschema.datagen.generate import generate
-from bodyschema.datagen.render_scope import HIDDEN_GROUP, render_model
-from bodyschema.datagen.robot import Robot
-from bodyschema.datagen.robot_attrs import MODEL_KEY
-from bodyschema.datagen.robot_infer import infer_record
-from bodyschema.datagen.robot_record import NAME_PATTERN, read_record
-from bodyschema.datagen.validate import validate_store
+from bodyschema.datagen.store.validate import validate_store
 
 LEFT_ARM = tuple(f"arm_left_{i}_joint" for i in range(1, 8))
 

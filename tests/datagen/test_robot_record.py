@@ -5,8 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from bodyschema.datagen.robot import Robot
-from bodyschema.datagen.robot_record import (
+from bodyschema.datagen.body.record import (
     SHIPPED,
     RobotRecord,
     dumps_toml,
@@ -16,6 +15,7 @@ from bodyschema.datagen.robot_record import (
     shipped_dir,
     write_record,
 )
+from bodyschema.datagen.body.robot import Robot
 
 
 @pytest.mark.parametrize("name", SHIPPED)
@@ -31,8 +31,8 @@ def test_each_shipped_robot_is_a_record_beside_its_mjcf(name):
 
 def test_the_robot_tables_are_gone():
     import bodyschema.control.pd as pd
+    import bodyschema.datagen.body.robot as robot
     import bodyschema.datagen.config as config
-    import bodyschema.datagen.robot as robot
     import bodyschema.evaluation.reaching.benchmark as reaching
     assert not hasattr(robot, "ROBOT_DEFAULTS") and not hasattr(config, "ROBOTS")
     assert not hasattr(reaching, "ROBOTS") and not hasattr(pd, "FRANKA_KP")

@@ -6,8 +6,8 @@ import shutil
 import mujoco
 import pytest
 
-from bodyschema.datagen.robot import Robot
-from bodyschema.datagen.robot_infer import infer_record
+from bodyschema.datagen.body.infer import infer_record
+from bodyschema.datagen.body.robot import Robot
 from tests.datagen.test_robot_foreign import _package_file
 
 

@@ -4,7 +4,7 @@ records the targets it tracks."""
 import numpy as np
 import pytest
 
-from bodyschema.datagen.robot import Robot
+from bodyschema.datagen.body.robot import Robot
 from bodyschema.datagen.samplers import Babbler, gaussian, sample_kinematic, to_stored_q, uniform
 
 RANGES = np.array([[-1.0, 2.0], [0.5, 0.7], [-3.0, -2.0]])

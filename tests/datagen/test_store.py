@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from bodyschema.datagen.store import (
+from bodyschema.datagen.store.schema import (
     DONE,
     create_store,
     features,

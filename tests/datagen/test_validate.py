@@ -13,13 +13,13 @@ import numpy as np
 import pytest
 import zarr
 
-from bodyschema.datagen.camera import project
+from bodyschema.datagen.body.camera import project
 from bodyschema.datagen.config import DatagenConfig
-from bodyschema.datagen.contact_sheet import write_contact_sheet
 from bodyschema.datagen.generate import generate
-from bodyschema.datagen.integrity import shard_digest
-from bodyschema.datagen.store import mark_shard_done
-from bodyschema.datagen.validate import summarize_store, validate_store
+from bodyschema.datagen.store.contact_sheet import write_contact_sheet
+from bodyschema.datagen.store.integrity import shard_digest
+from bodyschema.datagen.store.schema import mark_shard_done
+from bodyschema.datagen.store.validate import summarize_store, validate_store
 from tests.datagen.export_stores import without_targets
 
 

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 import zarr
 
+from bodyschema.datagen.body.robot import DEFAULT_WORKSPACE, ROBOT_NAMES, Robot
 from bodyschema.datagen.config import WORKSPACES, DatagenConfig
 from bodyschema.datagen.generate import generate
-from bodyschema.datagen.robot import DEFAULT_WORKSPACE, ROBOT_NAMES, Robot
 
 
 @pytest.fixture(scope="module")

@@ -13,10 +13,10 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import bodyschema.envs
-from bodyschema.datagen.robot_record import SHIPPED
+from bodyschema.datagen.body.record import SHIPPED
 from bodyschema.envs import PDPolicy, RandomPolicy, ReachEnv, compare
-from bodyschema.evaluation.reaching import AIFPolicy
 from bodyschema.envs.registration import GENERIC_ID, env_id
+from bodyschema.evaluation.reaching import AIFPolicy
 from tests.evaluation.test_file_robot import write_arm
 
 

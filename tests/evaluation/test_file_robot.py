@@ -15,13 +15,13 @@ import numpy as np
 import pytest
 import torch
 
+from bodyschema.datagen.body.attrs import robot_attrs
+from bodyschema.datagen.body.record import dumps_toml
+from bodyschema.datagen.body.robot import Robot
 from bodyschema.datagen.config import DatagenConfig
 from bodyschema.datagen.generate import generate
-from bodyschema.datagen.robot import Robot
-from bodyschema.datagen.robot_attrs import robot_attrs
-from bodyschema.datagen.robot_record import dumps_toml
-from bodyschema.datagen.store import open_store
-from bodyschema.datagen.validate import validate_store
+from bodyschema.datagen.store.schema import open_store
+from bodyschema.datagen.store.validate import validate_store
 from bodyschema.evaluation.core.specs import load_robot, resolve_model
 from bodyschema.evaluation.levels.benchmark import LevelsConfig, measure_levels, run_levels
 from bodyschema.models import load_model

@@ -9,7 +9,7 @@ import pytest
 
 from bodyschema.aif.aic import AICConfig, AICController
 from bodyschema.control.pd import PDController
-from bodyschema.datagen.robot import Robot
+from bodyschema.datagen.body.robot import Robot
 from bodyschema.evaluation.adaptation.jupiter import (
     READY,
     JupiterConfig,

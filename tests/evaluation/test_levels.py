@@ -150,7 +150,7 @@ def test_noise_and_broken_sensor_sweeps(tmp_path, planar2_xyz):
 # ---- level 3 from an amortized encoder --------------------------------------------------------------------
 def _encoder(robot_name: str, image_size, tmp_path):
     """A one-epoch image encoder of `robot_name` saved to tmp_path: enough to test the plumbing, not accuracy."""
-    from bodyschema.datagen.robot import Robot
+    from bodyschema.datagen.body.robot import Robot
     from bodyschema.models.encoder import ImageEncoder
     from bodyschema.models.scaling import BodySpec
     robot = Robot.load(robot_name, image_size=image_size)

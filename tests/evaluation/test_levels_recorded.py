@@ -11,9 +11,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from bodyschema.datagen.importers.config import ImportConfig
-from bodyschema.datagen.importers.run import import_recording
-from bodyschema.datagen.robot import Robot
+from bodyschema.datagen.body.robot import Robot
+from bodyschema.datagen.exchange.importers.config import ImportConfig
+from bodyschema.datagen.exchange.importers.run import import_recording
 from bodyschema.evaluation.core.seeds import eval_rng
 from bodyschema.evaluation.core.specs import load_robot
 from bodyschema.evaluation.levels.benchmark import LevelsConfig, measure_levels, run_levels
@@ -81,8 +81,8 @@ def test_image_levels_on_recorded_frames_with_the_plain_pixel_aif_row(tmp_path, 
     text = summary.paths["summary_md"].read_text()
     assert f"1 {PLAIN_LABEL}" in text and "wins" in text
     lineage = json.loads(summary.paths["targets_json"].read_text())
-    from bodyschema.datagen.store import open_store
-    from bodyschema.datagen.store_reader import store_digest
+    from bodyschema.datagen.store.reader import store_digest
+    from bodyschema.datagen.store.schema import open_store
     assert lineage["sha256"] == store_digest(open_store(store)) and lineage["frames"] == 4
 
 

@@ -15,10 +15,10 @@ from bodyschema.control.loop import TorquePolicy, rollout
 from bodyschema.control.pd import PDConfig, PDController
 from bodyschema.control.pd_gains import RATE_FRACTION, ModelLaw, bandwidth, inferred_pd
 from bodyschema.control.sim import control_substeps
-from bodyschema.datagen.robot import Robot
-from bodyschema.datagen.robot_build import build_model
-from bodyschema.datagen.robot_infer import SERVO_RAD_S, inertia_gains, infer_record
-from bodyschema.datagen.robot_record import RobotRecord
+from bodyschema.datagen.body.build import build_model
+from bodyschema.datagen.body.infer import SERVO_RAD_S, inertia_gains, infer_record
+from bodyschema.datagen.body.record import RobotRecord
+from bodyschema.datagen.body.robot import Robot
 from bodyschema.evaluation.core.sensing import Sensors
 
 ERD = "cmeel.prefix/share/example-robot-data/robots"

@@ -13,10 +13,10 @@ import pytest
 
 from bodyschema.control.loop import ServoPolicy, rollout
 from bodyschema.control.sim import ArmBatch, control_substeps
-from bodyschema.datagen.robot import Robot
-from bodyschema.datagen.robot_build import build_model
-from bodyschema.datagen.robot_infer import inertia_gains, infer_record
-from bodyschema.datagen.robot_record import RobotRecord
+from bodyschema.datagen.body.build import build_model
+from bodyschema.datagen.body.infer import inertia_gains, infer_record
+from bodyschema.datagen.body.record import RobotRecord
+from bodyschema.datagen.body.robot import Robot
 from bodyschema.evaluation.core.sensing import Sensors
 from bodyschema.evaluation.reaching.servo_baseline import servo_targets
 

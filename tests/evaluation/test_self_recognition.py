@@ -224,7 +224,7 @@ def test_auc_falls_as_the_imitators_delay_shrinks_to_zero(pixel_model, seed):
 
 
 def test_image_streams_are_rendered_frames_scaled_as_training_data_and_flipped_in_the_mirror():
-    from bodyschema.datagen.robot import Robot
+    from bodyschema.datagen.body.robot import Robot
     from bodyschema.models.scaling import IMAGE_SCALE
     robot = Robot.load("nao_arm", image_size=(14, 20))
     config = replace(SHORT, trials=3, steps=2, visual_noise=(), sources=("mirrored",))
@@ -238,7 +238,7 @@ def test_image_streams_are_rendered_frames_scaled_as_training_data_and_flipped_i
 
 @pytest.mark.usefixtures("single_thread")
 def test_an_image_model_runs_the_benchmark_on_frames_from_its_own_camera(tmp_path, pixel_model):
-    from bodyschema.datagen.robot import Robot
+    from bodyschema.datagen.body.robot import Robot
     from bodyschema.models.pixel import PixelDecoder
     robot = Robot.load("nao_arm", image_size=(14, 20))
     q = np.random.default_rng(0).uniform(*robot.sampling_ranges.T, size=(32, robot.dq))

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from bodyschema.control.sim import ArmBatch, control_substeps
-from bodyschema.datagen.robot import GRAVITY, Robot
+from bodyschema.datagen.body.robot import GRAVITY, Robot
 from bodyschema.evaluation.adaptation.marker_shift import goal_poses, marker_offsets
 from bodyschema.evaluation.core.sensing import Sensors, sense, sense_all
 from bodyschema.evaluation.core.specs import load_robot

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from bodyschema.datagen.robot import VECTORIZE_FROM, Robot
+from bodyschema.datagen.body.robot import VECTORIZE_FROM, Robot
 from bodyschema.models import load_model
 from bodyschema.models.analytic import DEFAULT_PRECISION, AnalyticModel
 from tests.models.contract import SensoryModelContract

@@ -17,15 +17,15 @@ import pytest
 import zarr
 
 import bodyschema.datagen.generate as gen
-from bodyschema.datagen.backends import check_reachable
+from bodyschema.base.locks import Locked, lock_path, store_lock
+from bodyschema.base.ray_session import check_reachable
+from bodyschema.datagen.body.robot import Robot
 from bodyschema.datagen.config import DatagenConfig, max_workers
 from bodyschema.datagen.generate import generate
-from bodyschema.datagen.integrity import shard_digest
-from bodyschema.datagen.locks import StoreLocked, lock_path, store_lock
-from bodyschema.datagen.robot import Robot
 from bodyschema.datagen.samplers import Babbler
-from bodyschema.datagen.store import DONE, mark_shard_done
-from bodyschema.datagen.validate import validate_store
+from bodyschema.datagen.store.integrity import shard_digest
+from bodyschema.datagen.store.schema import DONE, mark_shard_done
+from bodyschema.datagen.store.validate import validate_store
 from tests.test_cli_fuzz import build_world, check_clear_failure, run_in_process, snapshot
 
 KINEMATIC = dict(robot="planar2", n=48, shard_size=16, images=False, seed=3)  # 3 shards, no rendering: ~1 s
@@ -74,7 +74,7 @@ def test_a_second_run_into_a_locked_store_is_refused_naming_the_holder(tmp_path)
     """Two runs into one store interleaved: a store claiming one config over another's data, exit 0."""
     out = tmp_path / "s.zarr"
     with store_lock(out):  # another open file description: flock refuses it even within this process
-        with pytest.raises(StoreLocked, match=rf"store .* must be free .* Got 'locked by pid {os.getpid()}'"):
+        with pytest.raises(Locked, match=rf"store .* must be free .* Got 'locked by pid {os.getpid()}'"):
             generate(DatagenConfig(**KINEMATIC, out=out), progress=False)
     assert not out.exists() and not lock_path(out).exists()
     generate(DatagenConfig(**KINEMATIC, out=out), progress=False)  # free again

@@ -23,9 +23,9 @@ from types import SimpleNamespace
 import pytest
 import torch
 
+from bodyschema.base.outputs import marker_path
 from bodyschema.cli import after_interrupt, main
-from bodyschema.datagen.export import export_dataset
-from bodyschema.datagen.outputs import marker_path
+from bodyschema.datagen.exchange.export import export_dataset
 from tests.limits import file_size_limit
 from tests.test_cli_fuzz import build_world, check_clear_failure, run_in_process, snapshot
 
@@ -110,7 +110,7 @@ def test_overwrite_replaces_a_previous_export_and_leaves_only_it(world, tmp_path
 
 # ---- a full disk -------------------------------------------------------------------------------------------
 def test_the_free_space_is_checked_before_anything_is_written(world, tmp_path, monkeypatch):
-    import bodyschema.datagen.outputs as outputs
+    import bodyschema.base.outputs as outputs
 
     monkeypatch.setattr(outputs.shutil, "disk_usage", lambda _: SimpleNamespace(free=1000))   # bytes
     with pytest.raises(OSError, match=r"free space beside OUT must be >= .* MB .*Got '0.0 MB free"):
@@ -168,7 +168,7 @@ def test_partials_of_dead_exports_are_removed_and_a_live_ones_kept(world, tmp_pa
 
 
 def test_ctrl_c_during_an_export_leaves_nothing_and_says_so(world, tmp_path, monkeypatch, capsys):
-    import bodyschema.datagen.export_hdf5 as export_hdf5
+    import bodyschema.datagen.exchange.export_hdf5 as export_hdf5
 
     def interrupted(root, out):
         out.write_bytes(b"half")

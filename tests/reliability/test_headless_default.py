@@ -17,7 +17,7 @@ def run_python(code: str, **env: str) -> str:
 
 
 def test_the_package_sets_egl_before_mujoco_is_imported():
-    out = run_python("import bodyschema.datagen.reach, mujoco, os\n"
+    out = run_python("import bodyschema.datagen.body.reach, mujoco, os\n"
                      "print(os.environ['MUJOCO_GL'], os.environ['PYOPENGL_PLATFORM'], mujoco.GLContext.__module__)")
     assert out.split() == ["egl", "egl", "mujoco.egl"]
 

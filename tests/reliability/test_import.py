@@ -100,8 +100,8 @@ def make_world(w):
 
 def _stores(w) -> None:
     """Level targets: fk.zarr (the good recording with its forward kinematics), q_only.zarr (angles only)."""
-    from bodyschema.datagen.importers.config import ImportConfig
-    from bodyschema.datagen.importers.run import import_recording
+    from bodyschema.datagen.exchange.importers.config import ImportConfig
+    from bodyschema.datagen.exchange.importers.run import import_recording
 
     import_recording(ImportConfig(source=w / "rec", out=w / "fk.zarr", angles="deg", robot="planar2", fk=True))
     import_recording(ImportConfig(source=w / "rec", out=w / "q_only.zarr", angles="deg", robot="planar2",
@@ -120,7 +120,7 @@ def _own_exports(w) -> None:
     import shutil
 
     from bodyschema.datagen.config import DatagenConfig
-    from bodyschema.datagen.export import export_dataset
+    from bodyschema.datagen.exchange.export import export_dataset
     from bodyschema.datagen.generate import generate
 
     store = generate(DatagenConfig(robot="planar2", n=8, images=False, out=w / "tmp_store.zarr"), progress=False)

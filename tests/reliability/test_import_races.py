@@ -1,5 +1,5 @@
 """Two writers, one OUT (issue 32, items 1 and 2): `import`, `export` and `datagen` hold OUT's lock
-(datagen/locks.py) for the whole write, check OUT again under it, and move a new output in with a rename that fails
+(base/locks.py) for the whole write, check OUT again under it, and move a new output in with a rename that fails
 when OUT appeared meanwhile. Whatever the interleaving, one writer wins, the others get the house error, nothing is
 lost silently and the store validates.
 
@@ -20,15 +20,15 @@ from pathlib import Path
 
 import pytest
 
-from bodyschema.datagen import outputs
+from bodyschema.base import outputs
+from bodyschema.base.locks import Locked, lock_path
 from bodyschema.datagen.config import DatagenConfig
-from bodyschema.datagen.export import export_dataset
+from bodyschema.datagen.exchange.export import export_dataset
+from bodyschema.datagen.exchange.importers.config import ImportConfig
+from bodyschema.datagen.exchange.importers.run import import_recording
 from bodyschema.datagen.generate import generate
-from bodyschema.datagen.importers.config import ImportConfig
-from bodyschema.datagen.importers.run import import_recording
-from bodyschema.datagen.locks import StoreLocked, lock_path
-from bodyschema.datagen.store import open_store
-from bodyschema.datagen.validate import validate_store
+from bodyschema.datagen.store.schema import open_store
+from bodyschema.datagen.store.validate import validate_store
 from tests.datagen.import_sources import planar2_frames, write_folder
 
 KINEMATIC = dict(robot="planar2", n=48, shard_size=16, images=False, seed=3)  # no rendering: ~1 s
@@ -89,7 +89,7 @@ class Held:
 
 def _loser(error: BaseException) -> None:
     """The second writer's error is the house one: OUT is locked by a writer, or already there."""
-    assert isinstance(error, (StoreLocked, FileExistsError)), repr(error)
+    assert isinstance(error, (Locked, FileExistsError)), repr(error)
     assert " must be " in str(error), str(error)
 
 
@@ -103,7 +103,7 @@ def test_two_imports_to_one_new_out_the_second_is_refused_and_the_first_kept(sou
     """Old: both returned and the later import silently replaced the earlier (2/2)."""
     out, held = tmp_path / "new.zarr", Held(monkeypatch)
     thread, first = held.run_first(lambda: _import(sources / "rec_a", out))
-    with pytest.raises((StoreLocked, FileExistsError)) as second:
+    with pytest.raises((Locked, FileExistsError)) as second:
         _import(sources / "rec_b", out)
     _loser(second.value)
     held.release(thread)
@@ -132,7 +132,7 @@ def test_a_rename_into_place_fails_when_out_appeared_meanwhile(sources, tmp_path
 def test_two_exports_to_one_target_the_second_is_refused(sources, tmp_path, monkeypatch):
     out, held = tmp_path / "out.h5", Held(monkeypatch)
     thread, first = held.run_first(lambda: export_dataset(sources / "store.zarr", out, "hdf5"))
-    with pytest.raises((StoreLocked, FileExistsError)) as second:
+    with pytest.raises((Locked, FileExistsError)) as second:
         export_dataset(sources / "store.zarr", out, "hdf5")
     _loser(second.value)
     held.release(thread)
@@ -146,7 +146,7 @@ def test_datagen_into_an_out_an_import_is_writing_is_refused(sources, tmp_path, 
     deleted it (both exit 0), or a store validate rejects was left."""
     out, held = tmp_path / "new.zarr", Held(monkeypatch)
     thread, first = held.run_first(lambda: _import(sources / "rec_a", out))
-    with pytest.raises(StoreLocked, match=r"must be free .* Got 'locked by pid"):
+    with pytest.raises(Locked, match=r"must be free .* Got 'locked by pid"):
         generate(DatagenConfig(**KINEMATIC, out=out), progress=False)
     held.release(thread)
     assert "error" not in first, first
@@ -173,7 +173,7 @@ def test_an_import_into_an_out_datagen_is_writing_is_refused(sources, tmp_path, 
     thread.start()
     assert built.wait(60)
     try:
-        with pytest.raises((StoreLocked, FileExistsError)) as refused:   # OUT exists already, or is locked
+        with pytest.raises((Locked, FileExistsError)) as refused:   # OUT exists already, or is locked
             _import(sources / "rec_a", out)
         _loser(refused.value)
     finally:
@@ -206,9 +206,9 @@ def test_three_import_processes_to_one_out_exactly_one_wins(sources, tmp_path):
 KILLED_CHILD = """
 import sys, time
 from pathlib import Path
-import bodyschema.datagen.importers.writer as writer
-from bodyschema.datagen.importers.config import ImportConfig
-from bodyschema.datagen.importers.run import import_recording
+import bodyschema.datagen.exchange.importers.writer as writer
+from bodyschema.datagen.exchange.importers.config import ImportConfig
+from bodyschema.datagen.exchange.importers.run import import_recording
 writer.mark_complete = lambda root: time.sleep(600)          # killed here: every shard written, no marker yet
 import_recording(ImportConfig(source=Path(sys.argv[1]), out=Path(sys.argv[2]), angles="deg", robot="planar2"))
 """

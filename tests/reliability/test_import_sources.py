@@ -104,7 +104,7 @@ def _empty(obs) -> None:
 
 def _own(w: Path) -> None:
     from bodyschema.datagen.config import DatagenConfig
-    from bodyschema.datagen.export import export_dataset
+    from bodyschema.datagen.exchange.export import export_dataset
     from bodyschema.datagen.generate import generate
 
     store = generate(DatagenConfig(robot="planar2", n=8, images=False, out=w / "tmp_store.zarr"), progress=False)
@@ -149,7 +149,7 @@ def _lerobot(w: Path) -> None:
     import pyarrow.parquet as pq
 
     from bodyschema.datagen.config import DatagenConfig
-    from bodyschema.datagen.export import export_dataset
+    from bodyschema.datagen.exchange.export import export_dataset
     from bodyschema.datagen.generate import generate
 
     store = generate(DatagenConfig(robot="planar2", n=6, image_size=(16, 16), out=w / "tmp_img.zarr"),

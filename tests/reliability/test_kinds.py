@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import torch
 
-from bodyschema.datagen import modalities
+from bodyschema.base import modalities
 from bodyschema.models import kinds
 from bodyschema.models.scaling import BodySpec
 
@@ -60,7 +60,7 @@ def test_a_model_that_does_not_declare_export_is_refused_by_name(name):
 
 @pytest.mark.parametrize("name", modalities.KINEMATIC)
 def test_the_table_shapes_are_what_the_sensors_and_the_exact_kinematics_produce(name):
-    from bodyschema.datagen.robot import Robot
+    from bodyschema.datagen.body.robot import Robot
     from bodyschema.evaluation.core.sensing import sense
     from bodyschema.models.analytic import AnalyticModel
 

@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 import torch
 
-from bodyschema.datagen.reach import arm_reach
-from bodyschema.datagen.robot import Robot
+from bodyschema.datagen.body.reach import arm_reach
+from bodyschema.datagen.body.robot import Robot
 from bodyschema.datagen.samplers import uniform
 from bodyschema.evaluation.core.seeds import EVAL_STREAM, PURPOSE, REACHING, eval_rng
 from bodyschema.evaluation.reaching.benchmark import check_goal

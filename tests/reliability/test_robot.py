@@ -4,7 +4,7 @@ under 20 % of poses, an unsupported mesh. Each case: the house line, exit 2, no 
 
 import pytest
 
-from bodyschema.datagen.robot_record import dumps_toml
+from bodyschema.datagen.body.record import dumps_toml
 from tests.test_cli_fuzz import run_and_check, run_in_process
 
 ARM = """<mujoco model="arm"><compiler angle="radian"/><worldbody>

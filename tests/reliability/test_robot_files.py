@@ -13,9 +13,9 @@ import sys
 
 import pytest
 
-from bodyschema.datagen import model_files
-from bodyschema.datagen.robot_build import read_source
-from bodyschema.datagen.robot_infer import infer_record
+from bodyschema.datagen.body import model_files
+from bodyschema.datagen.body.build import read_source
+from bodyschema.datagen.body.infer import infer_record
 from tests.reliability.test_robot import ARM
 from tests.test_cli_fuzz import check_clear_failure, run_and_check, snapshot
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from bodyschema.datagen.robot_record import read_record, shipped_dir
+from bodyschema.datagen.body.record import read_record, shipped_dir
 from tests.test_cli_fuzz import run_and_check
 
 GOOD = """name = "{name}"
@@ -134,7 +134,7 @@ def test_a_robot_id_refuses_another_robot():
 def test_a_file_named_like_a_shipped_robot_gets_a_name_of_its_own(tmp_path):
     """example-robot-data's Panda URDF says <robot name="panda">: `robot init` must not call it the shipped panda,
     whose model its stores would be validated against (they failed `validate` after a whole datagen run)."""
-    from bodyschema.datagen.robot_infer import file_name
+    from bodyschema.datagen.body.infer import file_name
 
     urdf = '<robot name="panda"><link name="base"/></robot>'
     assert file_name(urdf, tmp_path / "panda.urdf") == "panda_urdf"

@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 import zarr
 
-from bodyschema.datagen import store_reader
-from bodyschema.datagen.export import export_dataset
-from bodyschema.datagen.outputs import marker_path
-from bodyschema.datagen.store import DONE, open_store
+from bodyschema.base.outputs import marker_path
+from bodyschema.datagen.exchange.export import export_dataset
+from bodyschema.datagen.store import reader as store_reader
+from bodyschema.datagen.store.schema import DONE, open_store
 from bodyschema.training.data import load_dataset
 from tests.test_cli_fuzz import build_world, run_and_check
 

@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 
 from bodyschema.control.sim import ArmBatch
-from bodyschema.datagen.robot import Robot
-from bodyschema.datagen.robot_record import dumps_toml
+from bodyschema.datagen.body.record import dumps_toml
+from bodyschema.datagen.body.robot import Robot
 from tests.evaluation.test_file_robot import ARM, RECORD
 
 

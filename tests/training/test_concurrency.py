@@ -17,8 +17,8 @@ from pathlib import Path
 import pytest
 from mlflow import MlflowClient
 
+from bodyschema.base.locks import Locked
 from bodyschema.training.digest import DIGEST_TAG
-from bodyschema.training.locks import Locked
 from bodyschema.training.registry import load, update_champion
 from bodyschema.training.train import train
 from tests.training.tiny_model import tiny_config

@@ -50,8 +50,8 @@ def test_digest_changes_with_content_and_max_train_caps(kin_store, tmp_path):
     assert len(base.train) == 50
     root = zarr.open_group(str(copy), mode="r+")
     root["q"][7] = root["q"][7] * np.float32(0.999)       # q in range, pixels consistent
-    from bodyschema.datagen.integrity import shard_digest
-    from bodyschema.datagen.store import mark_shard_done
+    from bodyschema.datagen.store.integrity import shard_digest
+    from bodyschema.datagen.store.schema import mark_shard_done
 
     mark_shard_done(root, 0, shard_digest(root, 0, 100))   # re-recorded as datagen would: still a valid store
     changed = load_dataset(copy, "ee_xyz", max_train=50)

@@ -1,0 +1,97 @@
+"""`choose_camera`: the camera pose and image size of a record under which every chosen joint is seen, or the
+joints that cannot be and why (`bodyschema robot camera`).
+
+Candidates, each framing the ee over the workspace (`robot_infer.place_camera`): the principal-axes view it always
+placed, and views from AZIMUTHS around the ee's workspace at ELEVATIONS above it, each framing all the ee positions
+or COVER_TIGHT of them (closer; the ee must stay in view in ≥ GOOD_VIEW of the poses). Each is scored by its
+observability (`observability.py`, SEARCH_POSES poses at the record's image size): first how many joints reach
+MIN_PX_PER_DEG, then Σ log min(px/°, MIN_PX_PER_DEG) (a weak joint made less weak counts, a strong one made
+stronger does not). The best view then gets the smallest image size, up to `max_side` px a side, that sees more
+joints; a size that sees no more is not taken (a roll of a round tool is not seen at any size, and a larger image
+costs every later render and model). Joints left under the threshold are named with why (`JointView.why`).
+Cost: 1 + len(AZIMUTHS)·len(ELEVATIONS)·2 candidates × SEARCH_POSES·(1 + 2·Dq) renders, then a few sizes
+(README's UR5, 5 joints, 64×64, 2 shared cores: ≈ 10 s).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from bodyschema.datagen.body.infer import GOOD_VIEW, ee_samples, place_camera, view_fraction
+from bodyschema.datagen.body.observability import MIN_PX_PER_DEG, Observability, observability
+from bodyschema.errors import must_be
+
+AZIMUTHS = np.deg2rad(np.arange(0, 360, 60))   # views around the workspace's vertical axis (6)
+ELEVATIONS = np.deg2rad([20.0, 55.0])           # above the horizontal: from the side, and from above
+COVER_TIGHT = 0.95                              # a tighter framing: 95 % of the ee positions inside the margin
+SEARCH_POSES = 8                                # poses per candidate while searching (the result is re-measured)
+SCALES = (1.25, 1.5, 2.0, 3.0, 4.0)             # image sizes tried, × the record's, up to max_side
+MAX_SIDE = 128                                  # px: the default bound on the image's longer side
+
+
+@dataclass(frozen=True)
+class Choice:
+    camera: dict                    # the record's [camera] values
+    image_size: tuple[int, int]
+    seen: Observability             # re-measured at POSES poses
+    before: Observability           # the record's own camera, measured the same way
+    tried: int                      # candidates scored
+
+    max_side: int                   # px: the bound the image grew within
+
+    def warnings(self) -> list[str]:
+        """The house warning per joint still under the threshold: its figure, what was tried, and why."""
+        tried = (f"Not seen at the best of {self.tried} views and framings, with images up to {self.max_side} px a "
+                 "side")
+        return [warning.replace("Not seen", tried, 1) for warning in self.seen.warnings()]
+
+
+def choose_camera(record, box: np.ndarray, max_side: int = MAX_SIDE) -> Choice:
+    """The camera (and image size) of `record` (a RobotRecord) that sees its chosen joints best over the joint box
+    `box` (Dq, 2) rad; the image grows only up to `max_side` px a side, and only where it sees more joints."""
+    from bodyschema.datagen.body.robot import Robot
+
+    def measure(camera: dict, size: tuple[int, int], n: int) -> Observability | None:
+        placed = dataclasses.replace(record, camera=camera, image_size=size)
+        with Robot.load(placed) as robot:
+            if view_fraction(robot, box) < GOOD_VIEW:
+                return None
+            return observability(robot, box, np.random.default_rng(0), n=n)
+
+    with Robot.load(record) as robot:
+        points = ee_samples(robot, box)
+        before = observability(robot, box, np.random.default_rng(0))
+    size = tuple(record.image_size)
+    framings = [{}] + [{"view": _direction(az, el), "cover": cover}
+                       for az in AZIMUTHS for el in ELEVATIONS for cover in (1.0, COVER_TIGHT)]
+    scored = [(framing, seen) for framing in framings
+              if (seen := measure(place_camera(points, size, **framing), size, SEARCH_POSES)) is not None]
+    if not scored:
+        raise ValueError(must_be(f"a camera framing the ee of robot {record.name!r}",
+                                 f"able to see it in at least {GOOD_VIEW:.0%} of the poses", "none of "
+                                 f"{len(framings)} views and framings", "Narrow the workspace to where the arm works."))
+    framing, seen = max(scored, key=lambda pair: _score(pair[1]))
+    for scale in SCALES:                       # the smallest larger image that sees more joints, if any does
+        bigger = (round(record.image_size[0] * scale), round(record.image_size[1] * scale))
+        if max(bigger) > max_side:
+            break
+        larger = measure(place_camera(points, bigger, **framing), bigger, SEARCH_POSES)
+        if larger is not None and len(larger.weak) < len(seen.weak):
+            size, seen = bigger, larger
+            if not seen.weak:
+                break
+    camera = place_camera(points, size, **framing)
+    return Choice(camera, size, measure(camera, size, before.poses) or seen, before, len(scored), max_side)
+
+
+def _direction(azimuth: float, elevation: float) -> np.ndarray:
+    """(3,) unit vector from the workspace toward the camera."""
+    return np.array([np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth), np.sin(elevation)])
+
+
+def _score(seen: Observability) -> tuple[int, float]:
+    capped = np.minimum([j.px_per_deg for j in seen.joints], MIN_PX_PER_DEG)
+    return -len(seen.weak), float(np.log(capped + 0.01).sum())

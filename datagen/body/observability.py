@@ -1,0 +1,148 @@
+"""`observability(robot)`: how much the camera image changes per degree of each chosen joint, at typical poses.
+
+A pixel decoder can only perceive a joint whose motion changes its image: on a 7-joint arm the pixel floors were
+1.6, 0.8, 4.9, 4.2, 44 and 52° per joint, the two wrists unseen because the arm covered 4 % of the image at the
+inferred framing. The camera, not the network, is the lever there, and this is the figure that says so before any
+data is made or any model trained.
+
+At `n` poses uniform in the camera workspace (seeded, the generator passed in), each chosen joint is moved by ±δ
+and the images are compared with the pose's own (same size and colour as the record's images, grey by BT.601):
+- px/°: pixels whose grey value changes by more than CHANGED_GREY, per degree (the mean over poses and signs);
+- mm/°: how far the ee moves per degree (forward kinematics);
+- the fraction of the image the moving arm covers (segmentation render), and of poses whose ee is in the image.
+A joint under MIN_PX_PER_DEG is flagged (`weak`); see the constants for why those values.
+Cost: n·(1 + 2·Dq) renders at the record's image size (16 poses, 6 joints, 64×64: 208 renders, ≈ 0.2-0.5 s).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+DELTA_DEG = 2.0          # the perturbation: the 2° a perceived joint should be resolved to
+POSES = 16               # typical poses sampled (uniform in the camera workspace)
+CHANGED_GREY = 8         # grey levels (of 255): a change below this is within a trained pixel decoder's error
+                         # (held-out RMSE 0.037 ≈ 9.4 levels on a UR5, README "Your own robot"), so it is not counted
+MIN_PX_PER_DEG = 10.0    # px/°: below, a joint is flagged as not seen. Measured on the README's UR5 (64×64, its
+                         # placed camera, 5 joints): 40.9, 50.4, 30.1, 5.2 and 2.2 px/° at pixel-decoder floors of
+                         # 1.2, 0.9, 2.3, 15.7 and 55°: floor × px/° = 49-121 °, so under 10 px/° the floor is ≥ 5°
+                         # (2° needs ≈ 35 px/°); a joint flagged cannot be perceived to 2°, and those between 10 and
+                         # 35 px/° may not be either on that decoder recipe
+ROLL_MM = 10.0           # mm: an ee this close to a joint's axis is on it (a roll about the tool's own axis)
+_BT601 = np.array([0.299, 0.587, 0.114])
+
+
+@dataclass(frozen=True)
+class JointView:
+    name: str
+    px_per_deg: float       # pixels changed (> CHANGED_GREY) per degree, mean over poses and ±δ
+    mm_per_deg: float       # ee displacement per degree, mm, mean over poses
+    axis_mm: float          # the ee's mean distance from the joint's axis, mm (≈ mm/° · 180/π)
+
+    @property
+    def weak(self) -> bool:
+        return self.px_per_deg < MIN_PX_PER_DEG
+
+    def why(self) -> str:
+        """Why a weak joint is not seen, from its geometry."""
+        if self.axis_mm < ROLL_MM:
+            return (f"the ee lies on its axis ({self.axis_mm:.1f} mm off, {self.mm_per_deg:.2f} mm/°): a roll about "
+                    "the tool's own axis, seen only through bodies beyond it that are not round about that axis")
+        return (f"it moves the ee {self.mm_per_deg:.2f} mm/°, but the bodies it moves cover too few pixels or are "
+                "hidden behind the arm at this framing: move the camera closer (a narrower workspace, `robot "
+                "camera`) or raise image_size")
+
+
+@dataclass(frozen=True)
+class Observability:
+    joints: tuple[JointView, ...]
+    arm_fraction: float         # mean fraction of the image's pixels showing the moving arm
+    in_view: float              # fraction of poses whose ee projects inside the image
+    image_size: tuple[int, int]
+    camera: str
+    poses: int
+
+    @property
+    def weak(self) -> tuple[JointView, ...]:
+        return tuple(j for j in self.joints if j.weak)
+
+    @property
+    def weakest(self) -> JointView:
+        return min(self.joints, key=lambda j: j.px_per_deg)
+
+    def table(self) -> str:
+        h, w = self.image_size
+        width = max(len(j.name) for j in self.joints)
+        lines = [f"observability: camera {self.camera!r}, {h}×{w} px, {self.poses} poses, ±{DELTA_DEG:g}°: the arm "
+                 f"covers {self.arm_fraction:.1%} of the image, ee in view {self.in_view:.1%}",
+                 f"  {'joint':<{width}}   px/°    mm/°",
+                 *(f"  {j.name:<{width}} {j.px_per_deg:7.1f} {j.mm_per_deg:7.2f}"
+                   f"{'   < ' + format(MIN_PX_PER_DEG, 'g') + ' px/°: not seen' if j.weak else ''}"
+                   for j in self.joints),
+                 f"  (px/°: pixels whose grey value changes by > {CHANGED_GREY}/255 per degree; a joint under "
+                 f"{MIN_PX_PER_DEG:g} px/° cannot be perceived to 2° from this camera)"]
+        return "\n".join(lines)
+
+    def warnings(self) -> list[str]:
+        """The house warning per weak joint: the joint, its figure and why."""
+        from bodyschema.errors import must_be
+        return [must_be(f"joint {j.name!r} seen by camera {self.camera!r}",
+                        f"at least {MIN_PX_PER_DEG:g} pixels changed per degree to be perceived to 2°",
+                        f"{j.px_per_deg:.2f} px/°", f"Not seen: {j.why()}.") for j in self.weak]
+
+
+def observability(robot, ranges: np.ndarray | None = None, rng: np.random.Generator | None = None,
+                  n: int = POSES, delta_deg: float = DELTA_DEG) -> Observability:
+    """Per chosen joint of `robot` (its camera, image size and colour), the image change and ee motion per degree
+    at n poses uniform in `ranges` (Dq, 2) rad (None: its sampling ranges), seed from `rng` (None: seed 0)."""
+    from bodyschema.datagen.body.infer import view_fraction
+
+    ranges = np.asarray(robot.sampling_ranges if ranges is None else ranges, dtype=np.float64)   # (Dq, 2) rad
+    rng = np.random.default_rng(0) if rng is None else rng
+    delta = np.deg2rad(delta_deg)
+    inner = np.stack([ranges[:, 0] + delta, ranges[:, 1] - delta], axis=1)      # ±δ stays in the box
+    inner = np.where(inner[:, :1] <= inner[:, 1:], inner, ranges.mean(axis=1, keepdims=True))
+    q = rng.uniform(inner[:, 0], inner[:, 1], (n, robot.dq))                     # (n, Dq) rad
+    steps = np.concatenate([np.eye(robot.dq), -np.eye(robot.dq)]) * delta        # (2Dq, Dq)
+    moved = (q[:, None, :] + steps[None]).reshape(-1, robot.dq)                  # (n·2Dq, Dq)
+    base = _grey(robot.render(q, check=False))                                   # (n, H, W)
+    other = _grey(robot.render(moved, check=False)).reshape(n, 2, robot.dq, *base.shape[1:])  # (n, ±, Dq, H, W)
+    changed = (np.abs(other - base[:, None, None]) > CHANGED_GREY).sum(axis=(-2, -1))         # (n, ±, Dq)
+    px = changed.mean(axis=(0, 1)) / delta_deg                                                # (Dq,)
+    jac = robot.jacobian(q, check=False)                                          # (n, 3, Dq) m/rad
+    arm = np.linalg.norm(jac, axis=1)                                             # (n, Dq) m/rad: the lever
+    mm = arm.mean(axis=0) * 1e3 * np.pi / 180                                     # (Dq,) mm/°
+    joints = tuple(JointView(name, float(p), float(m), float(a)) for name, p, m, a
+                   in zip(robot.joint_names, px, mm, arm.mean(axis=0) * 1e3))
+    return Observability(joints, arm_fraction(robot, q), view_fraction(robot, ranges), tuple(robot.image_size),
+                         robot.camera_name, n)
+
+
+def arm_fraction(robot, q: np.ndarray) -> float:
+    """The mean fraction of image pixels that show a body moved by a chosen joint, at poses q (n, Dq) rad."""
+    renderer, camera, _ = robot._ensure_renderer()
+    model = robot.model
+    moving = model.body_weldid[model.geom_bodyid] != 0                 # (ngeom,): held bodies are welded to world
+    data = mujoco.MjData(model)
+    covered = []
+    renderer.enable_segmentation_rendering()
+    try:
+        for q_i in q:
+            data.qpos[:] = q_i
+            mujoco.mj_kinematics(model, data)
+            mujoco.mj_camlight(model, data)
+            renderer.update_scene(data, camera)
+            seg = renderer.render()                                     # (H, W, 2): object id, object type
+            geom = (seg[..., 1] == mujoco.mjtObj.mjOBJ_GEOM) & (seg[..., 0] >= 0)
+            ids = np.where(geom, seg[..., 0], 0)
+            covered.append(float((geom & moving[ids]).mean()))
+    finally:
+        renderer.disable_segmentation_rendering()
+    return float(np.mean(covered))
+
+
+def _grey(images: np.ndarray) -> np.ndarray:
+    """(N, H, W[, 3]) uint8 → (N, H, W) float grey levels (BT.601 for colour, as datagen renders grey)."""
+    return images @ _BT601 if images.ndim == 4 else images.astype(np.float64)

@@ -1,0 +1,1 @@
+"""Datasets to and from other tools: export (HDF5, LeRobot) and import (recordings)."""
