@@ -29,8 +29,8 @@ DEMO = ["demo", "--n-nao", "600", "--n-small", "100", "--pixel-epochs", "2", "--
 BENCHMARKS = [["robustness", "--trials", "5", "--runs", "1"], ["loop-robustness", "--trials", "2"],
               ["adaptation", "marker-shift", "--trials", "2"], ["adaptation", "jupiter", "--trials", "2"],
               ["rubber-hand", "--trials", "2"], ["agency", "--trials", "8"]]
-VOLATILE = re.compile(r"run_id|wall|time_s$|seconds|created|duration|_s_per|per_s|fps|ms$|^run$", re.I)
-RUN_ID = re.compile(r"\b[0-9a-f]{32}\b|\d{8}-\d{6}[-\w]*")
+VOLATILE = re.compile(r"run_id|wall|fit_s$|time_s$|seconds|created|duration|_s_per|per_s|fps|ms$|^run$", re.I)
+RUN_ID = re.compile(r"\b[0-9a-f]{32}\b|\d{8}T\d{6}(\.\d+)?Z-[0-9a-f]+|\d{8}-\d{6}[-\w]*")
 
 
 def run(folder: Path) -> None:
