@@ -57,8 +57,8 @@ class ImageEncoder(NetHolder, Estimator):
     kind = "encoder"
     exports_onnx = convolutional = encodes = True
 
-    def __init__(self, body: BodySpec, modality: str = "image", image_shape: tuple[int, ...] = (56, 80), *,
-                 channels: tuple[int, ...] = (16, 32, 64),   # 56×80 → 28×40×16 → 14×20×32 → 7×10×64
+    def __init__(self, body: BodySpec, modality: str, image_shape: tuple[int, ...], *,   # the data's (H, W[, C])
+                 channels: tuple[int, ...] = (16, 32, 64),   # e.g. nao_arm's 56×80 → 28×40×16 → 14×20×32 → 7×10×64
                  fc_hidden: int = 128,
                  epochs: int = 100, batch_size: int = 64, lr: float = 2e-3, patience: int = 10,
                  weight_decay: float = 0.0):

@@ -146,7 +146,7 @@ class PixelDecoder(NetModel, BaseSensoryModel):
     kind = "pixel"
     exports_onnx = convolutional = True
 
-    def __init__(self, body: BodySpec, modality: str = "image", output_shape: tuple[int, ...] = (56, 80), *,
+    def __init__(self, body: BodySpec, modality: str, output_shape: tuple[int, ...], *,   # the data's (H, W[, C])
                  size: str = "lean",                        # a capacity preset of SIZES
                  fc_hidden: int | None = None,              # None: the preset's
                  channels: tuple[int, ...] | None = None,   # one ×2 upsampling per entry; None: the preset's

@@ -156,7 +156,7 @@ def _encoder(robot_name: str, image_size, tmp_path):
     robot = Robot.load(robot_name, image_size=image_size)
     q = np.random.default_rng(0).uniform(*robot.sampling_ranges.T, size=(32, robot.dq))
     body = BodySpec(robot.name, robot.joint_names, *map(tuple, robot.sampling_ranges.T))
-    encoder = ImageEncoder(body, image_shape=image_size, channels=(4, 8), fc_hidden=8, epochs=1)
+    encoder = ImageEncoder(body, "image", image_size, channels=(4, 8), fc_hidden=8, epochs=1)
     encoder.fit(q, robot.render(q), progress=False)
     encoder.save(tmp_path / robot_name)
     return f"trusted:{tmp_path / robot_name}"      # a local directory, loaded unchecked on purpose
