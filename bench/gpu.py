@@ -25,7 +25,8 @@ import torch
 from bodyschema.aif import descent
 from bodyschema.aif.perception import Perception
 from bodyschema.aif.perception_config import AdamSettings, PerceptionConfig
-from bodyschema.aif.tracker import Tracker, TrackerConfig
+from bodyschema.aif.tracker import Tracker
+from bodyschema.aif.tracker_config import TrackerConfig
 from bodyschema.datagen.body.robot import Robot
 from bodyschema.models.pixel import PixelDecoder
 from bodyschema.models.scaling import BodySpec

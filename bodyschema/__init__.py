@@ -43,7 +43,7 @@ _EXPORTS = {   # public name → module defining it (imported on first access)
     "AnalyticModel": "bodyschema.models.analytic", "export_onnx": "bodyschema.models.onnx_export",
     "Perception": "bodyschema.aif.perception", "PerceptionConfig": "bodyschema.aif.perception",
     "PerceptionResult": "bodyschema.aif.perception", "infer_multistart": "bodyschema.aif.multistart",
-    "Tracker": "bodyschema.aif.tracker", "TrackerConfig": "bodyschema.aif.tracker",
+    "Tracker": "bodyschema.aif.tracker", "TrackerConfig": "bodyschema.aif.tracker_config",
 }
 _RENAMED = {"load_registered": ("bodyschema.training.registry", "load")}   # registry.load: models:/<name>@<alias>
 

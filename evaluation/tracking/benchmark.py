@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from bodyschema.aif.tracker import TrackerConfig
+from bodyschema.aif.tracker_config import TrackerConfig
 from bodyschema.errors import must_be
 from bodyschema.evaluation.core.config import TrialsConfig, check_names, within
 from bodyschema.evaluation.core.mlflow_log import table_metrics

@@ -24,7 +24,8 @@ import torch
 from bodyschema.aif.free_energy import sensory_terms
 from bodyschema.aif.perception import Perception
 from bodyschema.aif.perception_config import FlowSettings, PerceptionConfig
-from bodyschema.aif.tracker import Tracker, TrackerConfig
+from bodyschema.aif.tracker import Tracker
+from bodyschema.aif.tracker_config import TrackerConfig
 from bodyschema.base.modalities import is_image
 from bodyschema.models.contract import FUSED_CALLS
 

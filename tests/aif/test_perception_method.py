@@ -10,7 +10,8 @@ import pytest
 from bodyschema.aif.action import ActionConfig, VelocityController
 from bodyschema.aif.perception import Perception
 from bodyschema.aif.perception_config import DEFAULTS, PerceptionConfig, is_image, resolve
-from bodyschema.aif.tracker import Tracker, TrackerConfig
+from bodyschema.aif.tracker import Tracker
+from bodyschema.aif.tracker_config import TrackerConfig
 from bodyschema.base import modalities
 from tests.aif.toys import ToyBlobImage, ToyJoints
 from tests.toy_models import ToyPlanarArm

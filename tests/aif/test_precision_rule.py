@@ -13,7 +13,8 @@ import torch
 from bodyschema.aif.goal_inference import goal_precision
 from bodyschema.aif.perception import Perception
 from bodyschema.aif.precisions import perceived_precisions
-from bodyschema.aif.tracker import Tracker, TrackerConfig
+from bodyschema.aif.tracker import Tracker
+from bodyschema.aif.tracker_config import TrackerConfig
 from bodyschema.base import modalities
 from bodyschema.evaluation.levels.benchmark import LevelsConfig
 from bodyschema.evaluation.reaching.benchmark import ReachingConfig, aif_policy

@@ -11,7 +11,8 @@ import torch
 
 from bodyschema.aif.perception import Perception
 from bodyschema.aif.perception_config import PerceptionConfig
-from bodyschema.aif.tracker import Tracker, TrackerConfig
+from bodyschema.aif.tracker import Tracker
+from bodyschema.aif.tracker_config import TrackerConfig
 from tests.aif.toys import ToyBlobImage, ToyJoints
 from tests.threads import one_thread
 from tests.toy_models import ToyPlanarArm
