@@ -108,7 +108,7 @@ class GPRModel(_gp_data.SavedGPState, BaseSensoryModel):
         seed: the random subsets (max_points, hyper_points). val = (q_val, x_val): evaluated once after fitting.
         on_epoch(step, metrics): every marginal-likelihood evaluation {"train_neg_mll"} (−MLL per point, summed
         over outputs, each at its latest evaluation), then {"val_mean_error", "val_rmse"} (output units: mean
-        per-sample Euclidean error, RMSE over all output elements, as training.train.score) when val is given.
+        per-sample Euclidean error, RMSE over all output elements, as training.scoring.score) when val is given.
         """
         u, y, val, gen = _gp_data.training_subset(self, q, x, val, seed)              # (n, Dz), (n, O)
         ys, y_mean, y_std = _gp_data.standardize(y)                                  # (O, n), (O,), (O,)

@@ -81,7 +81,7 @@ class SklearnGPRModel(_gp_data.SavedGPState, BaseSensoryModel):
         seed: the random subsets. val = (q_val, x_val): evaluated once after fitting. on_epoch(step, metrics):
         every log-marginal-likelihood evaluation {"train_neg_lml"} (total, scikit-learn's objective), then
         {"val_mean_error", "val_rmse"} (output units: mean per-sample Euclidean error, RMSE over all
-        output elements, as training.train.score) when val is given.
+        output elements, as training.scoring.score) when val is given.
         """
         u, y, val, gen = _gp_data.training_subset(self, q, x, val, seed)              # (n, Dz), (n, O)
         sub = _gp_data.random_subset(u.shape[0], self.hyper_points, gen)

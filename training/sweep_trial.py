@@ -26,7 +26,7 @@ from bodyschema.training.data import as_float, load_dataset, validation_digest
 from bodyschema.training.digest import DIGEST_TAG
 from bodyschema.training.pyfunc_loader import log_sensory_model
 from bodyschema.training.registry import METRIC, use_tracking
-from bodyschema.training.train import predict_batched, score
+from bodyschema.training.scoring import predict_batched, score
 
 SWEEP_TAG = "bodyschema.sweep"           # on the parent and its children: the sweep folder's name
 FINAL = "val_rmse_final"                 # only a trial that ran to its end reports it (ASHA stops the others)

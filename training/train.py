@@ -14,32 +14,23 @@ MLflow quiet).
 from __future__ import annotations
 
 import dataclasses
-import importlib.metadata
 import inspect
 import json
 import logging
-import math
-import platform
 import shutil
 import time
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import mlflow
-import numpy as np
-import torch
-from mlflow.data.dataset_source_registry import resolve_dataset_source
-from mlflow.data.meta_dataset import MetaDataset
 from mlflow.exceptions import MlflowException
-from tqdm.auto import tqdm
 
 from bodyschema import log
 from bodyschema.base import modalities
 from bodyschema.errors import must_be
-from bodyschema.training import guards, plots, runs
-from bodyschema.training.config import NON_IDENTITY_FIELDS, TrainConfig, build_model
-from bodyschema.training.data import Dataset, Split, as_float, load_dataset, validation_digest
+from bodyschema.training import guards, plots, run_record, runs, scoring
+from bodyschema.training.config import TrainConfig, build_model
+from bodyschema.training.data import Dataset, load_dataset, validation_digest
 from bodyschema.training.digest import DIGEST_TAG
 from bodyschema.training.model_card import card_markdown
 from bodyschema.training.pyfunc_loader import log_sensory_model
@@ -54,9 +45,7 @@ from bodyschema.training.registry import (
     use_tracking,
 )
 
-PREDICT_BATCH = 256       # validation prediction batch: bounded memory for image decoders
 FINAL_METRICS = ("val_rmse", "val_mean_error", "train_rmse", "train_mean_error", "fit_seconds")
-LIBRARIES = ("bodyschema", "torch", "numpy", "mlflow", "zarr", "gpytorch", "scikit-learn", "mujoco")
 _log = logging.getLogger(__name__)
 
 
@@ -164,19 +153,19 @@ def _train_owned(config: TrainConfig, client, data: Dataset, model, members: dic
         return dataclasses.replace(_reused(client, *done, run_dir, multi), units=units)
     runs.reap_dead_runs(client, experiment_id)      # RUNNING runs whose process died (kill -9) become KILLED
     resume_id = runs.resumable_run(client, run_dir)
-    history = _History(run_dir / "history.jsonl")
+    history = run_record.History(run_dir / "history.jsonl")
 
     start = dict(run_id=resume_id) if resume_id else dict(experiment_id=experiment_id, run_name=run_dir.name)
     with mlflow.start_run(**start, tags=runs.owner_tags(identity)) as run:   # an exception inside ends it FAILED
         (run_dir / "mlflow_run_id").write_text(run.info.run_id)
-        params = _log_inputs(config, data, run_dir.name)
+        params = run_record.log_inputs(config, data, run_dir.name)
 
         def on_epoch(epoch: int, metrics: dict[str, float]) -> None:
             history.add(epoch, metrics)
             if _log.isEnabledFor(logging.DEBUG):
                 _log.debug("epoch %d at %.2f s: %s", epoch, time.perf_counter() - t0,
                            ", ".join(f"{k}={v:.4g}" for k, v in metrics.items()))
-            # One name, one meaning: val_rmse & co. are logged once, by `score` after the fit (the champion's
+            # One name, one meaning: val_rmse & co. are logged once, by `scoring.score` after the fit (the champion's
             # criterion); a model's own report of them during the fit stays in history.jsonl (the loss curves).
             during = {k: float(v) for k, v in metrics.items() if k.split("/")[-1] not in FINAL_METRICS}
             if during:
@@ -208,7 +197,7 @@ def _train_owned(config: TrainConfig, client, data: Dataset, model, members: dic
         for m, member in members.items():
             prefix = f"{m}/" if multi else ""
             with log.timed(_log, f"{m}: scored and plotted"):
-                scores, plot = _score_and_plot(member, data, m, config.seed, run_dir / "plots", prefix,
+                scores, plot = scoring.score_and_plot(member, data, m, config.seed, run_dir / "plots", prefix,
                                                config.progress, plots.run_title(config.kind, m, data.body.robot))
             metrics.update({prefix + k: v for k, v in scores.items()})
             made.update(plot)
@@ -219,7 +208,7 @@ def _train_owned(config: TrainConfig, client, data: Dataset, model, members: dic
             mlflow.log_metrics(metrics)
             for path in made.values():
                 mlflow.log_artifact(str(path), artifact_path="plots")
-            _log_run_files(data, history, run_dir)
+            run_record.log_run_files(data, history, run_dir)
 
         registered = []                                  # registration last: a failure above registers nothing
         for m, member in members.items():
@@ -232,47 +221,6 @@ def _train_owned(config: TrainConfig, client, data: Dataset, model, members: dic
         mlflow.set_tag("bodyschema.champion", ",".join(r.name for r in registered if r.champion) or "none")
     return TrainResult(run.info.run_id, tuple(registered), {**history.last(), **metrics}, made, model_dirs, run_dir,
                        units=units)
-
-
-def _score_and_plot(member, data: Dataset, modality: str, seed: int, out: Path, prefix: str,
-                    progress: bool, title: str) -> tuple[dict[str, float], dict[str, Path]]:
-    """Held-out and (a subset of) training scores of one member, and its prediction plot."""
-    if member.encodes:
-        return _score_encoder(member, data, modality, seed, out, title)
-    image = data.is_image(modality)
-    dtype = torch.float32 if image else torch.float64       # GP means in float64; images: float32 is plenty
-    val_pred = predict_batched(member, data.val.q, dtype=dtype, progress=progress and image, desc="scoring val")
-    sub = _subset(data.train, 2000, seed)
-    train_pred = predict_batched(member, sub.q, dtype=dtype, progress=progress and image, desc="scoring train")
-    scores = {**score(val_pred, as_float(data.val.xs[modality]).numpy(), "val"),
-              **score(train_pred, as_float(sub.xs[modality]).numpy(), "train")}
-    if not math.isfinite(scores[METRIC]):
-        raise FloatingPointError(f"{prefix}{METRIC} is {scores[METRIC]}: the fit diverged; nothing is registered.")
-    target, stem = as_float(data.val.xs[modality]).numpy(), prefix.replace("/", "_")
-    title = f"Held-out predictions: {title}"
-    if image:
-        plot = {f"{prefix}val_images": plots.image_grid(target, val_pred, out / f"{stem}val_images.png", title)}
-    else:
-        plot = {f"{prefix}val_scatter": plots.prediction_scatter(target, val_pred, out / f"{stem}val_scatter.png",
-                                                                 modalities.unit(modality, "?"), title,
-                                                                 plots.component_names(modality, target[0].size,
-                                                                                       data.body.joint_names))}
-    return scores, plot
-
-
-def _score_encoder(encoder, data: Dataset, modality: str, seed: int, out: Path, title: str):
-    """An encoder (image → q) is scored on the joint angles, in deg: val_rmse over all joints decides its champion."""
-    sub = _subset(data.train, 2000, seed)
-    splits = {"val": data.val, "train": sub}
-    pred = {k: np.degrees(encoder.encode(split.xs[modality]).numpy()) for k, split in splits.items()}   # (N, Dz)
-    target = {k: np.degrees(split.q) for k, split in splits.items()}
-    scores = {**score(pred["val"], target["val"], "val"), **score(pred["train"], target["train"], "train")}
-    if not math.isfinite(scores[METRIC]):
-        raise FloatingPointError(f"{METRIC} is {scores[METRIC]}: the fit diverged; nothing is registered.")
-    path = out / "val_joints.png"
-    return scores, {"val_joints": plots.prediction_scatter(target["val"], pred["val"], path, "deg",
-                                                           f"Joint angles from {modality}: {title}",
-                                                           names=data.body.joint_names)}
 
 
 def _log_and_register(client, member, model_dir: Path, config: TrainConfig, data: Dataset, metrics: dict[str, float],
@@ -306,93 +254,7 @@ def _reused(client, run, versions: dict, run_dir: Path, multi: bool) -> TrainRes
         except MlflowException:
             champion = False
         registered.append(Registered(m, v.name, str(v.version), champion, v.tags[DIGEST_TAG]))
-    metrics = {**_History(run_dir / "history.jsonl").last(), **run.data.metrics}
+    metrics = {**run_record.History(run_dir / "history.jsonl").last(), **run.data.metrics}
     model_dirs = {m: run_dir / (f"model-{m}" if multi else "model") for m in versions}
     made = {p.stem: p for p in sorted((run_dir / "plots").glob("*.png"))}
     return TrainResult(run.info.run_id, tuple(registered), metrics, made, model_dirs, run_dir, reused=True)
-
-
-def predict_batched(model, q: np.ndarray, batch: int = PREDICT_BATCH, dtype=torch.float32, progress: bool = False,
-                    desc: str = "predicting") -> np.ndarray:
-    """g(q) for a whole split, in batches, as numpy (a bar over the batches when asked: seconds of images).
-    # (N, Dz) → (N, *out)"""
-    z = torch.as_tensor(q, dtype=dtype)
-    starts = tqdm(range(0, len(z), batch), desc=desc, unit="batch", disable=not progress, leave=False)
-    with torch.no_grad():
-        return torch.cat([model.predict(z[i:i + batch]) for i in starts]).numpy()
-
-
-def score(pred: np.ndarray, target: np.ndarray, prefix: str) -> dict[str, float]:
-    """RMSE over all output elements and mean per-sample Euclidean error, both in output units."""
-    err = (pred.astype(np.float64) - target).reshape(len(target), -1)            # (N, O)
-    return {f"{prefix}_rmse": float(np.sqrt(np.mean(err ** 2))),
-            f"{prefix}_mean_error": float(np.linalg.norm(err, axis=1).mean())}
-
-
-def _subset(split: Split, n: int, seed: int) -> Split:
-    """At most `n` rows of a split (seeded), for the training-set score."""
-    if len(split) <= n:
-        return split
-    return split.take(np.sort(np.random.default_rng(seed).choice(len(split), n, replace=False)))
-
-
-def _log_run_files(data: Dataset, history: "_History", run_dir: Path) -> None:
-    """The dataset summary (`dataset_summary.txt`, as `bodyschema show` prints it) and the loss curves' numbers
-    (`loss_curves.csv`: one row per epoch, beside plots/loss_curves.png) as artifacts of the run."""
-    from bodyschema.datagen.store.validate import summarize_store
-
-    mlflow.log_text(summarize_store(data.path, check=False) + "\n", "dataset_summary.txt")
-    if history.epochs:
-        keys = sorted({k for row in history.epochs.values() for k in row})
-        rows = [",".join(["epoch", *keys])]
-        for epoch in sorted(history.epochs):
-            row = history.epochs[epoch]
-            rows.append(",".join([str(epoch), *(repr(row[k]) if k in row else "" for k in keys)]))
-        mlflow.log_text("\n".join(rows) + "\n", "loss_curves.csv")
-
-
-def _log_inputs(config: TrainConfig, data: Dataset, run_name: str) -> dict:
-    """Params (the run identity), tags (robot, MJCF, versions), and the dataset as an MLflow input. → the params"""
-    identity = config.identity(data.sha256)
-    params = {k: v for k, v in identity.items() if k not in ("hyper", "dataset_sha256")}
-    params.update({f"hyper.{k}": v for k, v in identity["hyper"].items()})
-    params.update(data=str(Path(data.path).resolve()), n_train=len(data.train), n_val=len(data.val),
-                  split_by=data.split_by, output_shape={m: list(data.output_shape(m)) for m in data.modalities},
-                  joint_names=",".join(data.body.joint_names))
-    mlflow.log_params({k: str(v) for k, v in params.items()})
-    tags = {"robot": data.body.robot, "mjcf_sha256": str(data.attrs.get("mjcf_sha256", "")),
-            "dataset_sha256": data.sha256, "modality": config.modality, "kind": config.kind,
-            "config_hash": run_name.rsplit("-", 1)[-1], "python": platform.python_version(),
-            **{f"config.{k}": str(getattr(config, k)) for k in NON_IDENTITY_FIELDS}}
-    for lib in LIBRARIES:
-        try:
-            tags[f"version.{lib}"] = importlib.metadata.version(lib)
-        except importlib.metadata.PackageNotFoundError:
-            pass
-    mlflow.set_tags(tags)
-    with warnings.catch_warnings():   # "can be interpreted in multiple ways": both are the local-file source
-        warnings.filterwarnings("ignore", message=".*interpreted in multiple ways.*", category=UserWarning)
-        source = resolve_dataset_source(str(Path(data.path).resolve()))
-    dataset = MetaDataset(source, name=Path(data.path).name, digest=data.sha256[:32])
-    mlflow.log_input(dataset, context="training", tags={"robot": tags["robot"], "mjcf_sha256": tags["mjcf_sha256"],
-                                                         "modality": config.modality})
-    return params
-
-
-class _History:
-    """Per-epoch metrics, appended to a JSONL file so a resumed run's curves include the epochs before the kill."""
-
-    def __init__(self, path: Path):
-        self.path, self.epochs = path, {}
-        if path.is_file():
-            for line in path.read_text().splitlines():
-                row = json.loads(line)
-                self.epochs[int(row["epoch"])] = row["metrics"]
-
-    def add(self, epoch: int, metrics: dict[str, float]) -> None:
-        self.epochs[int(epoch)] = {k: float(v) for k, v in metrics.items()}
-        with self.path.open("a") as f:
-            f.write(json.dumps({"epoch": int(epoch), "metrics": self.epochs[int(epoch)]}) + "\n")
-
-    def last(self) -> dict[str, float]:
-        return self.epochs[max(self.epochs)] if self.epochs else {}

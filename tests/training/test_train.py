@@ -11,7 +11,8 @@ from mlflow import MlflowClient
 from bodyschema.training.data import load_dataset
 from bodyschema.training.digest import DIGEST_TAG, directory_sha256
 from bodyschema.training.registry import load
-from bodyschema.training.train import _subset, train
+from bodyschema.training.scoring import _subset
+from bodyschema.training.train import train
 from tests.training.tiny_model import Boom, tiny_config
 
 
@@ -173,7 +174,7 @@ def test_val_rmse_has_one_name_and_one_meaning(workdir, kin_store, tiny_kind):
     """MLflow holds one `val_rmse` (the held-out score after the fit, no `fit_val_rmse` beside it), and a GP's own
     report of it during the fit means the same: RMSE over all output elements, as `score` computes it."""
     from bodyschema.models.gpr import GPRModel
-    from bodyschema.training.train import score
+    from bodyschema.training.scoring import score
 
     result = train(tiny_config(kin_store, epochs=5))                 # the tiny kind reports val_rmse every epoch
     client = _client(workdir)
