@@ -1,4 +1,4 @@
-"""Adaptation (b), "Jupiter": gravity jumps from 9.81 to 24.79 m/s² mid-task on the torque-driven panda.
+"""Adaptation (b), "Jupiter": gravity jumps from 9.81 to 24.79 m/s² mid-task on a torque-driven arm (the panda).
 
 As in the AIC paper's experiment (Pezzato, Ferrari & Hernández Corbato 2020, §VI), the same joint goals are held
 by three controllers from the same start poses: the PD baseline with Earth-gravity compensation
@@ -34,7 +34,7 @@ from bodyschema.evaluation.core.sensing import sense_all
 from bodyschema.evaluation.core.specs import check_models_match, models_field, resolve_models
 from bodyschema.threads import pinned
 
-TIMESTEP = 0.002                   # s, the panda MJCF's MuJoCo step
+TIMESTEP = 0.002                   # s, the default robot's (panda MJCF's) MuJoCo step
 READY = (0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785)   # rad, Franka's "ready" pose: goals and starts around it
 MIN_EE_HEIGHT = 0.15               # m; the fingertip collides with the floor, keep goals and starts above it
 SENSED = ("ee_xyz", "ee_pixel", "image")   # extra modalities the loop simulates
@@ -42,16 +42,17 @@ SENSED = ("ee_xyz", "ee_pixel", "image")   # extra modalities the loop simulates
 
 @dataclass(frozen=True)
 class JupiterConfig(TrialsConfig):
-    """PD vs unimodal vs multimodal AIC on the panda while gravity jumps to Jupiter's mid-task."""
+    """PD vs unimodal vs multimodal AIC on `robot` while gravity jumps to Jupiter's mid-task."""
 
     out: Path = Path("results/adaptation/jupiter")   # runs go to <out>/<run-id>/, <out>/latest
     experiment: str = "bodyschema-adaptation"        # the MLflow experiment
+    robot: str = "panda"               # the arm whose gravity changes: torque-controlled, its record has a [pd] table
     trials: int = 10                   # random reachable joint goals (and start poses) around the ready pose
     duration: float = 12.0             # s of simulated time per episode
     switch_time: float = 6.0           # s; gravity 9.81 → jupiter_gravity here
     jupiter_gravity: float = 24.79     # m/s²
     control_rate: float = 500.0        # Hz; 1 / (rate · 0.002 s) must be a whole number of MuJoCo steps
-    models: models_field("analytic:panda:ee_xyz (the multimodal AIC's extra sensor)") = ()
+    models: models_field("analytic:<robot>:ee_xyz (the multimodal AIC's extra sensor)") = ()
     aic: AICConfig = AICConfig()       # the active inference controller's gains and precisions
     pd: PDConfig = PDConfig()          # the baseline's gains and the gravity its compensation was identified under
     spread: float = 0.4                # rad; goals and starts uniform in READY ± spread (inside the joint ranges)
@@ -81,8 +82,8 @@ def sample_poses(robot: Robot, n: int, spread: float, rng: np.random.Generator) 
     return np.array(out[:n])
 
 
-def load_torque_panda(models: Sequence) -> Robot:
-    """The panda on motors, with the camera the image / pixel models (if any) were made for; checks the models."""
+def load_torque_robot(name: str, models: Sequence) -> Robot:
+    """Robot `name` on motors, with the camera the image / pixel models (if any) were made for; checks the models."""
     for m in models:
         if m.modality not in SENSED:
             raise ValueError(must_be(f"{m.modality} model", f"of a simulated extra modality {SENSED}", m.modality,
@@ -91,7 +92,7 @@ def load_torque_panda(models: Sequence) -> Robot:
     pixel = next((m for m in models if getattr(m, "image_size", None)), None)
     size = tuple(image.output_shape[:2]) if image else (tuple(pixel.image_size) if pixel else None)
     rgb = image is not None and len(image.output_shape) == 3
-    robot = Robot.load("panda", image_size=size, rgb=rgb, actuators="torque")
+    robot = Robot.load(name, image_size=size, rgb=rgb, actuators="torque")
     check_models_match(models, robot)
     return robot
 
@@ -160,14 +161,14 @@ def episode_metrics(t: np.ndarray, joint: np.ndarray, ee: np.ndarray, config: Ju
 # ---- the benchmark ---------------------------------------------------------------------------------------
 def run_jupiter(config: JupiterConfig = JupiterConfig(), models: Sequence | None = None) -> dict[str, Path]:
     """PD, AIC-unimodal and AIC-multimodal on the same goals and starts; writes tables and plots to config.out."""
-    models = resolve_models(config.models, ("analytic:panda:ee_xyz",), config.tracking_uri, models)
-    robot = load_torque_panda(models)
+    models = resolve_models(config.models, (f"analytic:{config.robot}:ee_xyz",), config.tracking_uri, models)
+    robot = load_torque_robot(config.robot, models)
     control_substeps(config.control_rate, robot.model.opt.timestep, "control_rate")
     goals = sample_poses(robot, config.trials, config.spread, eval_rng(config.seed, 0, "targets"))
     starts = sample_poses(robot, config.trials, config.spread, eval_rng(config.seed, 0, "starts"))
     limits = robot.model.actuator_ctrlrange.copy()                          # (Dq, 2) N·m
     multimodal = "AIC " + " + ".join(["joints", *(m.modality for m in models)])
-    controllers = {"PD + g(q) on Earth": (PDController("panda", config.pd), []),
+    controllers = {"PD + g(q) on Earth": (PDController(config.robot, config.pd), []),
                    "AIC joints": (AICController([], config.aic, limits), [])}
     if models:
         controllers[multimodal] = (AICController(models, config.aic, limits), models)

@@ -44,9 +44,10 @@ def summarize(runs: Sequence[ControllerRun]) -> list[dict]:
 def markdown(table: Sequence[dict], config) -> str:
     lines = markdown_table(table, (*SUMMARY_COLUMNS, "settled", "failed"), "controller", digits=3).splitlines()
     aic, pd = config.aic, config.pd
-    kp = pd.kp if pd.kp is not None else load_record("panda").pd["kp"]   # None: the Panda record's [pd]
+    kp = pd.kp if pd.kp is not None else load_record(config.robot).pd["kp"]   # None: the robot record's [pd]
     return "\n".join([
-        f"# Jupiter: gravity {GRAVITY} → {config.jupiter_gravity} m/s² at t = {config.switch_time} s (torque panda)",
+        f"# Jupiter: gravity {GRAVITY} → {config.jupiter_gravity} m/s² at t = {config.switch_time} s "
+        f"(torque {config.robot})",
         "", *lines, "",
         f"{config.trials} episodes hold random joint goals (ready pose ± {config.spread} rad) at "
         f"{config.control_rate:g} Hz; joint error = mean |q − q_d| over joints. before / after: mean error over the "
