@@ -15,7 +15,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
 
-from bodyschema.datagen.body.record import REQUIRED_WORKSPACES, check_robot_ref, robot_label
+from bodyschema.datagen.body.record import check_robot_ref, robot_label
+from bodyschema.datagen.body.record_checks import REQUIRED_WORKSPACES
 from bodyschema.errors import must_be
 from bodyschema.log import Progress
 

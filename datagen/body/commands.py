@@ -69,7 +69,8 @@ class RobotCameraArgs:
 
 def run_init(args: RobotInitArgs) -> int:
     from bodyschema.datagen.body.infer import infer_record
-    from bodyschema.datagen.body.record import MODEL_SUFFIXES, dumps_toml, write_record
+    from bodyschema.datagen.body.record import dumps_toml, write_record
+    from bodyschema.datagen.body.record_checks import MODEL_SUFFIXES
 
     if args.model.suffix.lower() not in MODEL_SUFFIXES or not args.model.is_file():
         raise ValueError(must_be("FILE", "an existing MJCF (.xml) or URDF (.urdf) file", str(args.model)))

@@ -74,7 +74,7 @@ def infer_record(path: Path, mesh_dir: Path | None = None, visual: str = "mesh",
 
 
 def safe_name(stem: str) -> str:
-    """A record name (`robot_record.NAME_PATTERN`) from a file's name or stem: other characters become '_'."""
+    """A record name (`record_checks.NAME_PATTERN`) from a file's name or stem: other characters become '_'."""
     name = re.sub(r"[^A-Za-z0-9_.-]", "_", stem).lstrip(".-")[:64]
     return name or "robot"
 

@@ -4,7 +4,9 @@ A record names the model file (MJCF .xml or URDF .urdf, relative to the record) 
 or a body plus an offset), the joints used (hinges; every other joint is held at `hold` or its reference pose), the
 camera (one of the model's, or a pose placed to frame the ee workspace), the image size, named joint boxes
 (`workspaces`, rad), the actuators (the model's own, or position servos with the gains given), the PD baseline's
-gains and the reaching defaults. The shipped robots are records beside their MJCF (datagen/robots/<name>.toml).
+gains, and the tables benchmarks read ([reaching], held as given: its keys are the reaching benchmark's to check).
+The shipped robots are the records beside their MJCF (datagen/robots/<name>.toml). What each value may be:
+`record_checks`.
 
     bodyschema datagen --robot planar2 | --robot arm.xml | --robot arm.urdf | --robot arm.toml
 
@@ -16,32 +18,22 @@ A model file with a record of the same stem beside it uses that record; without 
 from __future__ import annotations
 
 import math
-import re
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from bodyschema.datagen.body.record_checks import BENCHMARK_SECTIONS, MODEL_SUFFIXES, record_problems
 from bodyschema.errors import must_be
 
-SHIPPED = ("planar2", "nao_arm", "panda")    # datagen/robots/<name>.toml beside <name>.xml
-MODEL_SUFFIXES = (".xml", ".urdf")
 RECORD_SUFFIX = ".toml"
 AUTO_CAMERA = "auto"                         # the name of a camera placed by the record (not in the model file)
 EE_SITE = "bodyschema_ee"                    # the site added for an ee given as a body plus an offset
-ACTUATORS = ("model", "servos")              # the model's own actuators | position servos added with [actuators] gains
-VISUALS = ("mesh", "collision", "primitives")   # URDF: render the visual meshes | the collision geometry instead |
-                                                # capsules and boxes from the links (no mesh read; datagen/primitives)
-COLLISIONS = ("model", "none")               # contacts as the file has them | the arm's geoms collide with nothing
-REQUIRED_WORKSPACES = ("full", "camera")     # every record names these two (datagen picks one by --images)
 SECTIONS = {"ee": ("site", "body", "offset"), "camera": ("name", "pos", "xyaxes", "fovy"),
-            "actuators": ("kind", "kp", "kv"), "pd": ("kp", "kd"),
-            "reaching": ("models", "control_hz", "duration_s", "actuators", "action")}
-NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}")   # a file name everywhere: stores, models, runs
+            "actuators": ("kind", "kp", "kv"), "pd": ("kp", "kd")}
 TOP_KEYS = ("name", "model", "joints", "image_size", "mesh_dir", "visual", "collisions", "hold", "workspaces",
-            *SECTIONS)
-
+            *SECTIONS, *BENCHMARK_SECTIONS)
 
 @dataclass(frozen=True)
 class RobotRecord:
@@ -57,7 +49,8 @@ class RobotRecord:
     camera: dict[str, Any] = field(default_factory=dict)   # {name} of the model's | {name="auto", pos, xyaxes, fovy}
     actuators: dict[str, Any] = field(default_factory=lambda: {"kind": "model"})   # {kind, kp, kv (servos)}
     pd: dict[str, Any] = field(default_factory=dict)   # {kp, kd}: the torque PD baseline's gains per joint
-    reaching: dict[str, Any] = field(default_factory=dict)   # models, control_hz, duration_s, actuators, action
+    reaching: dict[str, Any] = field(default_factory=dict)   # the reaching benchmark's table, as given (its keys:
+                                                             # control/robot_defaults.py)
     mesh_dir: str = ""                                 # URDF: where package:// meshes are found besides the file's
     visual: str = "mesh"                               # URDF: "collision" | "primitives" (see VISUALS)
     # "none": no geom of the arm collides (as the shipped arms are built). A file's collision meshes often touch
@@ -66,7 +59,7 @@ class RobotRecord:
     base: Path = Path(".")                             # the folder `model` and `mesh_dir` are relative to
 
     def __post_init__(self):
-        problems = _problems(self)
+        problems = record_problems(self)
         if problems:
             raise ValueError("\n".join(problems))
 
@@ -98,7 +91,7 @@ class RobotRecord:
             out["visual"] = self.visual
         if self.collisions != "model":
             out["collisions"] = self.collisions
-        for key in ("ee", "camera", "hold", "actuators", "pd", "reaching"):
+        for key in ("ee", "camera", "hold", "actuators", "pd", *BENCHMARK_SECTIONS):
             if getattr(self, key):
                 out[key] = _plain(getattr(self, key))
         out["workspaces"] = _plain(self.workspaces)
@@ -108,6 +101,18 @@ class RobotRecord:
 # ---- reading ----------------------------------------------------------------------------------------------
 def shipped_dir() -> Path:
     return Path(str(resources.files("bodyschema.datagen").joinpath("robots")))
+
+
+def _shipped_names() -> tuple[str, ...]:
+    """The robots whose records ship as datagen/robots/<name>.toml, fewest joints (rows of the `full` workspace)
+    first, then by name: the 2-joint toy arm leads every list shown to a user."""
+    robots = resources.files("bodyschema.datagen").joinpath("robots")
+    joints = {Path(f.name).stem: len(tomllib.loads(f.read_text())["workspaces"]["full"])
+              for f in robots.iterdir() if f.name.endswith(RECORD_SUFFIX)}
+    return tuple(sorted(joints, key=lambda name: (joints[name], name)))
+
+
+SHIPPED = _shipped_names()
 
 
 def is_robot_file(ref: str) -> bool:
@@ -182,7 +187,7 @@ def record_from_dict(values: dict[str, Any], base: Path, where: str = "robot rec
     for key in ("name", "model", "image_size", "workspaces"):
         if key not in values:
             raise ValueError(must_be(where, f"a record with a `{key}` key", sorted(values)))
-    for key in ("hold", "workspaces", *SECTIONS):
+    for key in ("hold", "workspaces", *SECTIONS, *BENCHMARK_SECTIONS):
         if key in values and not isinstance(values[key], dict):
             raise ValueError(must_be(f"`{key}` of {where}", f"a table ([{key}] with its keys)", values[key]))
     kwargs = dict(values)
@@ -247,114 +252,3 @@ def _plain(v: Any) -> Any:
     if isinstance(v, (list, tuple)):
         return [_plain(x) for x in v]
     return float(v) if hasattr(v, "dtype") else v
-
-
-# ---- checks -----------------------------------------------------------------------------------------------
-def _problems(r: RobotRecord) -> list[str]:
-    p = []
-    if not (isinstance(r.name, str) and NAME_PATTERN.fullmatch(r.name)):
-        p.append(must_be("record `name`", "1-64 letters, digits, '_', '-' or '.', not starting with '.' or '-'",
-                         r.name, "It names stores, models and runs: e.g. my_arm."))
-    for key in ("ee", "hold", "camera", "actuators", "pd", "reaching", "workspaces"):
-        if not isinstance(getattr(r, key), dict):
-            return [*p, must_be(f"record `{key}`", f"a table ([{key}] with its keys)", getattr(r, key))]
-    if not isinstance(r.mesh_dir, str):
-        p.append(must_be("record `mesh_dir`", "a folder path (text), relative to the record", r.mesh_dir))
-    if not (isinstance(r.model, str) and Path(r.model).suffix.lower() in MODEL_SUFFIXES):
-        p.append(must_be("record `model`", "a path to an MJCF (.xml) or URDF (.urdf) file", r.model,
-                         "Other formats: convert them to MJCF or URDF first."))
-    size = r.image_size
-    if not (isinstance(size, tuple) and len(size) == 2 and all(isinstance(s, int) and 8 <= s <= 1024 for s in size)):
-        p.append(must_be("record `image_size`", "[H, W] with integers in [8, 1024] px", size))
-    p += _ee_problems(r.ee)
-    if not isinstance(r.joints, tuple) or not all(isinstance(j, str) and j for j in r.joints) or \
-            len(set(r.joints)) != len(r.joints):
-        p.append(must_be("record `joints`", "a list of distinct joint names, e.g. [\"shoulder\", \"elbow\"]",
-                         r.joints))
-    if not (all(isinstance(k, str) for k in r.hold) and _finite(r.hold.values())):
-        p.append(must_be("record [hold]", "joint = finite value (rad or m)", r.hold))
-    p += _camera_problems(r.camera)
-    p += _workspace_problems(r.workspaces)
-    if r.actuators.get("kind") not in ACTUATORS:
-        p.append(must_be("record [actuators] kind", f"one of {ACTUATORS}", r.actuators.get("kind")))
-    elif r.actuators["kind"] == "servos" and not all(_gains(r.actuators.get(k)) for k in ("kp", "kv")):
-        p.append(must_be("record [actuators] kp and kv", "lists of finite gains >= 0, one per joint", r.actuators))
-    if r.pd and not all(_gains(r.pd.get(k)) for k in ("kp", "kd")):
-        p.append(must_be("record [pd] kp and kd", "lists of finite gains >= 0, one per joint", r.pd))
-    elif r.pd and isinstance(r.joints, tuple) and not len(r.pd["kp"]) == len(r.pd["kd"]) == (len(r.joints) or
-                                                                                             len(r.pd["kp"])):
-        p.append(must_be("record [pd] kp and kd", f"{len(r.joints) or len(r.pd['kp'])} gains each, one per joint",
-                         (len(r.pd["kp"]), len(r.pd["kd"]))))
-    p += _reaching_problems(r.reaching)
-    if r.visual not in VISUALS:
-        p.append(must_be("record `visual`", f"one of {VISUALS}", r.visual))
-    if r.collisions not in COLLISIONS:
-        p.append(must_be("record `collisions`", f"one of {COLLISIONS}", r.collisions,
-                         '"none": the arm collides with nothing; "model": as the model file says.'))
-    return p
-
-
-def _reaching_problems(reaching: dict) -> list[str]:
-    p = []
-    for key, unit in (("control_hz", "Hz"), ("duration_s", "s")):
-        value = reaching.get(key, 1.0)
-        if not (_finite([value]) and value > 0):
-            p.append(must_be(f"record [reaching] {key}", f"a finite number > 0 ({unit})", value))
-    models = reaching.get("models", [])
-    if not (isinstance(models, list) and all(isinstance(m, str) and m for m in models)):
-        p.append(must_be("record [reaching] models", "a list of modalities, e.g. [\"ee_xyz\", \"joints\"]", models))
-    if reaching.get("actuators", "position") not in ("position", "torque"):
-        p.append(must_be("record [reaching] actuators", "'position' or 'torque'", reaching.get("actuators")))
-    if not isinstance(reaching.get("action", {}), dict):
-        p.append(must_be("record [reaching] action", "a table of velocity controller settings", reaching["action"]))
-    return p
-
-
-def _ee_problems(ee: dict) -> list[str]:
-    if ("site" in ee) == ("body" in ee) or not all(isinstance(ee.get(k, "x"), str) and ee.get(k, "x")
-                                                   for k in ("site", "body")):
-        return [must_be("record [ee]", "either site = NAME or body = NAME (with offset = [x, y, z] m)", ee)]
-    if ee.get("body") == "world":
-        return [must_be("record [ee] body", "a body the joints move", "world",
-                        "Name the arm's last body (or a site on it).")]
-    if "site" in ee and "offset" in ee:
-        return [must_be("record [ee] offset", "given with a body only (a site is its own point)", ee)]
-    offset = ee.get("offset", [0.0, 0.0, 0.0])
-    if not (isinstance(offset, (list, tuple)) and len(offset) == 3 and _finite(offset)):
-        return [must_be("record [ee] offset", "[x, y, z] in m in the body's frame", offset)]
-    return []
-
-
-def _camera_problems(camera: dict) -> list[str]:
-    if not isinstance(camera, dict) or not isinstance(camera.get("name"), str) or not camera.get("name"):
-        return [must_be("record [camera]", "name = a camera of the model, or name, pos, xyaxes, fovy", camera)]
-    if "pos" not in camera:
-        extra = sorted(set(camera) - {"name"})
-        return [must_be("record [camera]", "name alone for a camera of the model", extra)] if extra else []
-    pos, axes, fovy = camera.get("pos"), camera.get("xyaxes"), camera.get("fovy")
-    if not (_vector(pos, 3) and _vector(axes, 6) and isinstance(fovy, (int, float)) and 0 < fovy < 180):
-        return [must_be("record [camera]", "pos = [x, y, z] m, xyaxes = [6 numbers], fovy in (0, 180) deg", camera)]
-    return []
-
-
-def _workspace_problems(workspaces: dict) -> list[str]:
-    if not isinstance(workspaces, dict) or not all(w in workspaces for w in REQUIRED_WORKSPACES):
-        return [must_be("record [workspaces]", f"named joint boxes including {REQUIRED_WORKSPACES}",
-                        sorted(workspaces) if isinstance(workspaces, dict) else workspaces)]
-    for name, box in workspaces.items():
-        if not (isinstance(box, tuple) and box and all(isinstance(r, tuple) and len(r) == 2 and _finite(r)
-                                                       and r[0] < r[1] for r in box)):
-            return [must_be(f"record workspace {name!r}", "[[lo, hi], ...] rad per joint with lo < hi", box)]
-    return []
-
-
-def _finite(values) -> bool:
-    return all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in values)
-
-
-def _vector(v, n: int) -> bool:
-    return isinstance(v, (list, tuple)) and len(v) == n and _finite(v)
-
-
-def _gains(v) -> bool:
-    return isinstance(v, (list, tuple)) and len(v) > 0 and _finite(v) and min(v) >= 0

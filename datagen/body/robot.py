@@ -24,11 +24,10 @@ import numpy as np
 from bodyschema.datagen.body.build import ACTUATOR_KINDS, Built, build_model
 from bodyschema.datagen.body.camera import project
 from bodyschema.datagen.body.chain import HingeChain
-from bodyschema.datagen.body.record import SHIPPED, RobotRecord, load_record, shipped_dir
+from bodyschema.datagen.body.record import RobotRecord, load_record, shipped_dir
 from bodyschema.datagen.body.render_scope import render_model
 from bodyschema.errors import must_be
 
-ROBOT_NAMES = SHIPPED          # the shipped robots (datagen/robots/<name>.toml); any other is a file path
 IMAGE_SIZE_RANGE = (8, 1024)   # px, per side; the MJCF offscreen buffers are 1024 × 1024
 LIMIT_TOLERANCE = 0.05         # rad; the simulator's soft joint limits let recorded q overshoot a little
 GRAVITY = 9.81                 # m/s², default magnitude (downward, −z)

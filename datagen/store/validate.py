@@ -11,7 +11,7 @@ Checks, all reported together:
   recorded ranges and the joint limits, ee_xyz within the arm's reach of its base, |each Jacobian column| <= the
   reach (m/rad), ee_pixel equal to ee_xyz projected through the stored camera, touch and t >= 0, episode >= 0,
   |qvel| <= MAX_JOINT_SPEED, the babbling targets inside the joint limits (a store made before datagen recorded
-  them has no `target` and no feature of it: nothing is missing).
+  them has no `target` and no feature of it: nothing is missing) (`row_checks`).
 Arrays are read one chunk of rows at a time, so memory stays small for image datasets.
 """
 
@@ -25,26 +25,14 @@ import numpy as np
 import zarr
 
 from bodyschema.base.modalities import images_in
-from bodyschema.datagen.body.camera import project
+from bodyschema.datagen.body.record import SHIPPED
 from bodyschema.datagen.store.integrity import block_digest, data_arrays, missing_chunks
-from bodyschema.datagen.store.schema import DONE, MAX_JOINT_SPEED, REQUIRED_ATTRS, features, has_checksums, open_store
+from bodyschema.datagen.store.remedies import EDITED_HINT, REPAIR_HINT, RESUME_HINT
+from bodyschema.datagen.store.row_checks import RANGE_TOL, RowTally, check_rows, report_rows
+from bodyschema.datagen.store.schema import DONE, REQUIRED_ATTRS, features, has_checksums, open_store
 from bodyschema.errors import must_be
 
-PIXEL_TOL = 0.05  # px; float32 storage of ee_xyz/ee_pixel gives ~1e-4 px, a real shift is >= 0.1 px
-RANGE_TOL = 1e-5  # rad; float32 rounding of the range ends
-REACH_TOL = 1e-4  # m (and m/rad); float32 rounding is ~1e-7 m, while the reach bound is reached only at full stretch
-RESUME_HINT = "Rerun the same `bodyschema datagen` command to resume it."
-REPAIR_HINT = "Rerun the same `bodyschema datagen` command: it rewrites the damaged shards."
-REGENERATE_HINT = "The generator wrote impossible values; regenerate with --overwrite and report it."
-EDITED_HINT = "The store's attrs were edited or come from another robot; regenerate it with `bodyschema datagen`."
 ROBOT_NAME = re.compile(r"[^/\\:\x00-\x1f]{1,100}")  # a name (models, runs, files use it), never a path
-
-
-def shipped_names() -> tuple[str, ...]:
-    """The shipped robots' names (importing the robot module: mujoco, with a known MUJOCO_GL)."""
-    from bodyschema.datagen.body.robot import ROBOT_NAMES
-
-    return tuple(ROBOT_NAMES)
 
 
 @functools.lru_cache(maxsize=None)
@@ -83,7 +71,7 @@ def _short(value):
 def _check_attrs(attrs: dict, dq: int | None, problems: list[str]) -> np.ndarray | None:
     """The attrs' types and shapes, and their agreement with the shipped robot they name; returns the (Dq, 2) joint
     limits q must lie in (the shipped robot's, else the store's own when well-formed), or None."""
-    robot, shipped = attrs.get("robot"), shipped_names()
+    robot, shipped = attrs.get("robot"), SHIPPED
     if "robot" in attrs and not (isinstance(robot, str) and ROBOT_NAME.fullmatch(robot) and robot not in (".", "..")):
         problems.append(must_be("attrs robot", f"one of {shipped} or a robot record's name (no '/', '\\', ':')",
                                 _short(robot), EDITED_HINT))
@@ -171,115 +159,6 @@ def _check_layout(root: zarr.Group, attrs: dict, problems: list[str]) -> dict[st
     return usable
 
 
-class _Tally:
-    """Rows failing one check: count, first row and worst value, summed over the chunks of rows."""
-
-    def __init__(self) -> None:
-        self.rows: dict[str, list] = {}
-
-    def add(self, key: str, bad: np.ndarray, start: int, worst: np.ndarray | None = None) -> None:
-        if not bad.any():
-            return
-        entry = self.rows.setdefault(key, [0, start + int(np.argmax(bad)), 0.0])
-        entry[0] += int(bad.sum())
-        if worst is not None:
-            entry[2] = max(entry[2], float(np.max(worst[bad])))
-
-
-def _check_values(block: dict[str, np.ndarray], attrs: dict, limits: np.ndarray | None, start: int,
-                  tally: _Tally) -> None:
-    """Finiteness and physical range of one chunk of rows; NaN/inf rows are counted once, as not finite."""
-    finite = {}
-    for name, values in block.items():
-        if values.dtype.kind == "f":
-            finite[name] = np.isfinite(values.reshape(len(values), -1)).all(axis=1)
-            tally.add(f"finite:{name}", ~finite[name], start)
-    ok = {name: finite.get(name, np.ones(len(v), bool)) for name, v in block.items()}
-    if "episode" in block:
-        tally.add("episode", block["episode"] < 0, start)
-    for name in ("touch", "t"):
-        if name in block:
-            tally.add(f"nonneg:{name}", (block[name].reshape(len(block[name]), -1) < 0).any(axis=1) & ok[name], start)
-    q_range = _q_range(attrs)
-    if "q" in block and q_range is not None and q_range.shape == (block["q"].shape[1], 2):
-        tally.add("q", _outside(block["q"], q_range) & ok["q"], start)
-    if ("q" in block and limits is not None and limits.shape == (block["q"].shape[1], 2)
-            and not (q_range is not None and np.array_equal(q_range, limits))):  # the same box: reported once
-        tally.add("limits:q", _outside(block["q"], limits) & ok["q"], start)
-    if "target" in block and limits is not None and limits.shape == (block["target"].shape[1], 2):
-        tally.add("limits:target", _outside(block["target"], limits) & ok["target"], start)
-    if "qvel" in block:
-        with np.errstate(invalid="ignore"):
-            speed = np.abs(block["qvel"].astype(float)).max(axis=1)  # (B,) rad/s
-        tally.add("speed:qvel", ~(speed <= MAX_JOINT_SPEED) & ok["qvel"], start, speed)
-    reach, base = attrs.get("reach_m"), attrs.get("base_m")
-    if reach is not None and base is not None:
-        if "ee_xyz" in block:
-            dist = np.linalg.norm(block["ee_xyz"].astype(float) - np.asarray(base, float), axis=1)  # (B,) m
-            tally.add("reach:ee_xyz", ~(dist <= reach + REACH_TOL) & ok["ee_xyz"], start, dist)
-        if "jacobian" in block:
-            with np.errstate(over="ignore", invalid="ignore"):
-                norms = np.linalg.norm(block["jacobian"].astype(float), axis=1).max(axis=1)  # (B,) m/rad
-            tally.add("reach:jacobian", ~(norms <= reach + REACH_TOL) & ok["jacobian"], start, norms)
-    K, E = attrs.get("intrinsics"), attrs.get("extrinsics")
-    if "ee_xyz" in block and "ee_pixel" in block and K is not None and E is not None:
-        with np.errstate(all="ignore"):
-            err = np.abs(project(np.asarray(K, float), np.asarray(E, float), block["ee_xyz"].astype(float))
-                         - block["ee_pixel"]).max(axis=1)
-        tally.add("pixel", ~(err <= PIXEL_TOL) & ok["ee_xyz"] & ok["ee_pixel"], start, np.nan_to_num(err))
-
-
-def _outside(q: np.ndarray, box: np.ndarray) -> np.ndarray:
-    """(B,) rows of q (B, Dq) with a joint outside box (Dq, 2) by more than RANGE_TOL."""
-    return ((q < box[:, 0] - RANGE_TOL) | (q > box[:, 1] + RANGE_TOL)).any(axis=1)
-
-
-def _q_range(attrs: dict) -> np.ndarray | None:
-    key = "sampling_ranges" if attrs.get("sampler") in ("uniform", "gaussian") else "joint_limits"
-    try:
-        return np.asarray(attrs[key], float) if key in attrs else None
-    except (TypeError, ValueError):  # not numbers: reported by _check_attrs
-        return None
-
-
-def _report_values(tally: _Tally, attrs: dict, problems: list[str]) -> None:
-    ranges_key = "sampling_ranges" if attrs.get("sampler") in ("uniform", "gaussian") else "joint_limits"
-    reach, base = attrs.get("reach_m"), attrs.get("base_m")
-    for key, (count, row, worst) in tally.rows.items():
-        kind, _, name = key.partition(":")
-        where = f"{count} rows, first at row {row}"
-        if kind == "finite":
-            problems.append(must_be(name, "finite", f"{count} rows with NaN/inf, first at row {row}",
-                                    "NaN marks samples never written: " + RESUME_HINT))
-        elif kind == "episode":
-            problems.append(must_be("episode", ">= 0", f"negative values, first at row {row}", RESUME_HINT))
-        elif kind == "nonneg":
-            problems.append(must_be(name, ">= 0", f"negative values in {where}", REGENERATE_HINT))
-        elif kind == "q":
-            problems.append(must_be("q", f"inside the recorded {ranges_key} (+-{RANGE_TOL} rad)",
-                                    f"{count} rows outside, first at row {row}"))
-        elif key == "limits:q":
-            problems.append(must_be("q", f"inside the {attrs.get('robot')} joint limits (+-{RANGE_TOL} rad)",
-                                    f"{count} rows outside, first at row {row}", EDITED_HINT))
-        elif key == "limits:target":
-            problems.append(must_be("target", f"inside the {attrs.get('robot')} joint limits (+-{RANGE_TOL} rad): "
-                                    "servo targets a babbling robot can be given", f"{where} outside",
-                                    REGENERATE_HINT))
-        elif key == "speed:qvel":
-            problems.append(must_be("qvel", f"|qvel| <= {MAX_JOINT_SPEED:g} rad/s (a stable simulation)",
-                                    f"{where}, up to {worst:.4g} rad/s", REGENERATE_HINT))
-        elif key == "reach:ee_xyz":
-            problems.append(must_be("ee_xyz", f"within the arm's reach, {reach:.4f} m of its base {base} m",
-                                    f"{where}, up to {worst:.4g} m away", REGENERATE_HINT))
-        elif key == "reach:jacobian":
-            problems.append(must_be("jacobian", f"columns of norm <= the arm's reach {reach:.4f} m/rad",
-                                    f"{where}, up to {worst:.4g} m/rad", REGENERATE_HINT))
-        elif kind == "pixel":
-            problems.append(must_be("ee_pixel", f"ee_xyz projected through attrs intrinsics/extrinsics "
-                                    f"(+-{PIXEL_TOL} px)",
-                                    f"{count} rows off by up to {worst:.3g} px, first at row {row}"))
-
-
 def _done_digests(root: zarr.Group, n_shards, problems: list[str]) -> np.ndarray | None:
     """(n_shards,) uint64 recorded checksums (0: not done), reporting shards not done; None if unreadable."""
     if DONE not in root.array_keys():
@@ -323,7 +202,7 @@ def _check_content(path: Path, root: zarr.Group, usable: dict[str, zarr.Array], 
                                     f"shards {rows[:20]}", "Zarr reads them as fill values: " + REPAIR_HINT))
             skip.update(rows)
     checksum = digests is not None and set(usable) == set(data_arrays(root)) | set(_expected_features(attrs))
-    tally, mismatched = _Tally(), []
+    tally, mismatched = RowTally(), []
     for shard, start in enumerate(range(0, n, step)):
         if shard in skip:
             continue
@@ -337,12 +216,12 @@ def _check_content(path: Path, root: zarr.Group, usable: dict[str, zarr.Array], 
         if checksum and shard < len(digests) and digests[shard] and len(block) == len(usable):
             if block_digest(block) != int(digests[shard]):
                 mismatched.append(shard)
-        _check_values(block, attrs, limits, start, tally)
+        check_rows(block, attrs, limits, start, tally)
     if mismatched:
         problems.append(must_be("every done shard", f"equal to the checksum in its {DONE} marker",
                                 f"{len(mismatched)} differ, shards {mismatched[:20]}",
                                 "Its chunks changed after they were written: " + REPAIR_HINT))
-    _report_values(tally, attrs, problems)
+    report_rows(tally, attrs, problems)
 
 
 def validate_store(path: str | Path) -> list[str]:

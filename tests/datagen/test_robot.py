@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bodyschema.datagen.body.robot import LIMIT_TOLERANCE, ROBOT_NAMES, VECTORIZE_FROM, Robot
+from bodyschema.datagen.body.record import SHIPPED
+from bodyschema.datagen.body.robot import LIMIT_TOLERANCE, VECTORIZE_FROM, Robot
 
 FD_STEP = 1e-6          # rad
 TEST_SIZES = {"planar2": (128, 128), "nao_arm": (56, 80), "panda": (192, 192)}   # (H, W) px
@@ -44,7 +45,7 @@ def marker_radius_px(r: Robot, name: str, xyz: np.ndarray) -> np.ndarray:
 
 
 # ---- the camera model agrees with the renderer ------------------------------------------------------------
-@pytest.mark.parametrize("name", ROBOT_NAMES)
+@pytest.mark.parametrize("name", SHIPPED)
 def test_projected_ee_lies_on_rendered_marker(name):
     r = robot(name, image_size=TEST_SIZES[name], rgb=True)
     q = random_q(r, 24, seed=1)
@@ -92,7 +93,7 @@ def test_nao_former_wide_camera_sees_every_pose_of_the_full_workspace():
     assert (pixels >= 0).all() and (pixels[:, 0] <= w - 1).all() and (pixels[:, 1] <= h - 1).all()
 
 
-@pytest.mark.parametrize("name", ROBOT_NAMES)
+@pytest.mark.parametrize("name", SHIPPED)
 def test_projection_matches_intrinsics_times_extrinsics_and_its_jacobian(name):
     r = robot(name)
     xyz = r.fk(random_q(r, 6, seed=4))
@@ -106,7 +107,7 @@ def test_projection_matches_intrinsics_times_extrinsics_and_its_jacobian(name):
 
 
 # ---- kinematics ---------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("name", ROBOT_NAMES)
+@pytest.mark.parametrize("name", SHIPPED)
 def test_jacobian_equals_central_finite_differences_of_fk(name):
     r = robot(name)
     q = random_q(r, 5, seed=5)
@@ -118,7 +119,7 @@ def test_jacobian_equals_central_finite_differences_of_fk(name):
     np.testing.assert_allclose(obs["ee_xyz"], r.fk(q), atol=1e-6)
 
 
-@pytest.mark.parametrize("name", ROBOT_NAMES)
+@pytest.mark.parametrize("name", SHIPPED)
 def test_vectorized_chain_equals_the_mujoco_calls(name):
     r = robot(name)
     q = random_q(r, 2 * VECTORIZE_FROM, seed=9)
@@ -268,13 +269,13 @@ def test_check_ranges_rejects_a_range_outside_the_limits():
         r.check_ranges(bad[:3])
     with pytest.raises(ValueError, match=r"sampling ranges must be"):
         r.check_ranges([[0.0, 1.0], [0.0]])                                   # ragged
-    for name in ROBOT_NAMES:
+    for name in SHIPPED:
         other = robot(name) if name != "nao_arm" else r
         assert ((other.sampling_ranges[:, 0] >= other.joint_limits[:, 0])
                 & (other.sampling_ranges[:, 1] <= other.joint_limits[:, 1])).all()
 
 
-@pytest.mark.parametrize("name", ROBOT_NAMES)
+@pytest.mark.parametrize("name", SHIPPED)
 def test_unchecked_kinematics_serve_simulated_states_past_the_limits(name):
     r = robot(name)
     q = random_q(r, 8, seed=3)

@@ -17,7 +17,8 @@ import zarr
 from bodyschema.cli import main
 from bodyschema.datagen.body.attrs import MODEL_KEY
 from bodyschema.datagen.body.infer import infer_record
-from bodyschema.datagen.body.record import NAME_PATTERN, read_record
+from bodyschema.datagen.body.record import read_record
+from bodyschema.datagen.body.record_checks import NAME_PATTERN
 from bodyschema.datagen.body.render_scope import HIDDEN_GROUP, render_model
 from bodyschema.datagen.body.robot import Robot
 from bodyschema.datagen.config import DatagenConfig

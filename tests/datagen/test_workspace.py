@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import zarr
 
-from bodyschema.datagen.body.robot import DEFAULT_WORKSPACE, ROBOT_NAMES, Robot
+from bodyschema.datagen.body.record import SHIPPED
+from bodyschema.datagen.body.robot import DEFAULT_WORKSPACE, Robot
 from bodyschema.datagen.config import WORKSPACES, DatagenConfig
 from bodyschema.datagen.generate import generate
 
@@ -27,7 +28,7 @@ def box_grid(box: np.ndarray, per_side: int) -> np.ndarray:
 
 
 def test_every_robot_names_the_config_workspaces_and_each_box_lies_in_full():
-    for name in ROBOT_NAMES:
+    for name in SHIPPED:
         r = Robot.load(name)
         assert tuple(r.record.workspaces) == WORKSPACES == tuple(r.workspaces)
         full = r.workspaces["full"]
@@ -56,7 +57,7 @@ def test_unknown_workspace_or_camera_is_named_with_the_valid_ones():
         DatagenConfig(workspace="reach")
 
 
-@pytest.mark.parametrize("name", ROBOT_NAMES)
+@pytest.mark.parametrize("name", SHIPPED)
 def test_the_ee_of_the_full_workspace_stays_in_front_of_the_camera(name):
     # ee_pixel is defined only for z > 0 in camera coordinates; corners, edges and interior of the box.
     r = Robot.load(name, workspace="full")

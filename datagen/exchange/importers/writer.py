@@ -71,8 +71,8 @@ def _write(path: Path, arrays: dict[str, np.ndarray], attrs: dict[str, Any]) -> 
 
 def _about_the_recording(problem: str) -> str:
     """A validate line without its datagen hint (rerun or regenerate): for an import the recording is at fault."""
-    from bodyschema.datagen.store import validate
+    from bodyschema.datagen.store import remedies
 
-    for hint in (validate.RESUME_HINT, validate.REPAIR_HINT, validate.REGENERATE_HINT, validate.EDITED_HINT):
+    for hint in (remedies.RESUME_HINT, remedies.REPAIR_HINT, remedies.REGENERATE_HINT, remedies.EDITED_HINT):
         problem = problem.replace(" " + hint, "").replace(hint, "")
     return problem

@@ -1,0 +1,122 @@
+"""What a valid robot record holds: the values each key may take, and the house line for each one that is wrong.
+
+`RobotRecord` runs `record_problems` as it is built, so a record that exists is valid. The tables a benchmark reads
+(`BENCHMARK_SECTIONS`, e.g. [reaching]) are only checked to be tables here: their keys are the
+benchmark's vocabulary, checked by the benchmark's reader (control/robot_defaults.py for [reaching]).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from bodyschema.errors import must_be
+
+if TYPE_CHECKING:
+    from bodyschema.datagen.body.record import RobotRecord
+
+MODEL_SUFFIXES = (".xml", ".urdf")
+ACTUATORS = ("model", "servos")              # the model's own actuators | position servos added with [actuators] gains
+VISUALS = ("mesh", "collision", "primitives")   # URDF: render the visual meshes | the collision geometry instead |
+                                                # capsules and boxes from the links (no mesh read; datagen/primitives)
+COLLISIONS = ("model", "none")               # contacts as the file has them | the arm's geoms collide with nothing
+REQUIRED_WORKSPACES = ("full", "camera")     # every record names these two (datagen picks one by --images)
+NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}")   # a file name everywhere: stores, models, runs
+# tables a benchmark reads from a record, held as given: their keys are the benchmark's to check, not datagen's
+BENCHMARK_SECTIONS = ("reaching",)
+
+
+def record_problems(r: RobotRecord) -> list[str]:
+    """Every problem of a record's values, as house lines naming the key; [] for a valid record."""
+    p = []
+    if not (isinstance(r.name, str) and NAME_PATTERN.fullmatch(r.name)):
+        p.append(must_be("record `name`", "1-64 letters, digits, '_', '-' or '.', not starting with '.' or '-'",
+                         r.name, "It names stores, models and runs: e.g. my_arm."))
+    for key in ("ee", "hold", "camera", "actuators", "pd", *BENCHMARK_SECTIONS, "workspaces"):
+        if not isinstance(getattr(r, key), dict):
+            return [*p, must_be(f"record `{key}`", f"a table ([{key}] with its keys)", getattr(r, key))]
+    if not isinstance(r.mesh_dir, str):
+        p.append(must_be("record `mesh_dir`", "a folder path (text), relative to the record", r.mesh_dir))
+    if not (isinstance(r.model, str) and Path(r.model).suffix.lower() in MODEL_SUFFIXES):
+        p.append(must_be("record `model`", "a path to an MJCF (.xml) or URDF (.urdf) file", r.model,
+                         "Other formats: convert them to MJCF or URDF first."))
+    size = r.image_size
+    if not (isinstance(size, tuple) and len(size) == 2 and all(isinstance(s, int) and 8 <= s <= 1024 for s in size)):
+        p.append(must_be("record `image_size`", "[H, W] with integers in [8, 1024] px", size))
+    p += _ee_problems(r.ee)
+    if not isinstance(r.joints, tuple) or not all(isinstance(j, str) and j for j in r.joints) or \
+            len(set(r.joints)) != len(r.joints):
+        p.append(must_be("record `joints`", "a list of distinct joint names, e.g. [\"shoulder\", \"elbow\"]",
+                         r.joints))
+    if not (all(isinstance(k, str) for k in r.hold) and _finite(r.hold.values())):
+        p.append(must_be("record [hold]", "joint = finite value (rad or m)", r.hold))
+    p += _camera_problems(r.camera)
+    p += _workspace_problems(r.workspaces)
+    if r.actuators.get("kind") not in ACTUATORS:
+        p.append(must_be("record [actuators] kind", f"one of {ACTUATORS}", r.actuators.get("kind")))
+    elif r.actuators["kind"] == "servos" and not all(_gains(r.actuators.get(k)) for k in ("kp", "kv")):
+        p.append(must_be("record [actuators] kp and kv", "lists of finite gains >= 0, one per joint", r.actuators))
+    if r.pd and not all(_gains(r.pd.get(k)) for k in ("kp", "kd")):
+        p.append(must_be("record [pd] kp and kd", "lists of finite gains >= 0, one per joint", r.pd))
+    elif r.pd and isinstance(r.joints, tuple) and not len(r.pd["kp"]) == len(r.pd["kd"]) == (len(r.joints) or
+                                                                                             len(r.pd["kp"])):
+        p.append(must_be("record [pd] kp and kd", f"{len(r.joints) or len(r.pd['kp'])} gains each, one per joint",
+                         (len(r.pd["kp"]), len(r.pd["kd"]))))
+    if r.visual not in VISUALS:
+        p.append(must_be("record `visual`", f"one of {VISUALS}", r.visual))
+    if r.collisions not in COLLISIONS:
+        p.append(must_be("record `collisions`", f"one of {COLLISIONS}", r.collisions,
+                         '"none": the arm collides with nothing; "model": as the model file says.'))
+    return p
+
+
+def _ee_problems(ee: dict) -> list[str]:
+    if ("site" in ee) == ("body" in ee) or not all(isinstance(ee.get(k, "x"), str) and ee.get(k, "x")
+                                                   for k in ("site", "body")):
+        return [must_be("record [ee]", "either site = NAME or body = NAME (with offset = [x, y, z] m)", ee)]
+    if ee.get("body") == "world":
+        return [must_be("record [ee] body", "a body the joints move", "world",
+                        "Name the arm's last body (or a site on it).")]
+    if "site" in ee and "offset" in ee:
+        return [must_be("record [ee] offset", "given with a body only (a site is its own point)", ee)]
+    offset = ee.get("offset", [0.0, 0.0, 0.0])
+    if not (isinstance(offset, (list, tuple)) and len(offset) == 3 and _finite(offset)):
+        return [must_be("record [ee] offset", "[x, y, z] in m in the body's frame", offset)]
+    return []
+
+
+def _camera_problems(camera: dict) -> list[str]:
+    if not isinstance(camera, dict) or not isinstance(camera.get("name"), str) or not camera.get("name"):
+        return [must_be("record [camera]", "name = a camera of the model, or name, pos, xyaxes, fovy", camera)]
+    if "pos" not in camera:
+        extra = sorted(set(camera) - {"name"})
+        return [must_be("record [camera]", "name alone for a camera of the model", extra)] if extra else []
+    pos, axes, fovy = camera.get("pos"), camera.get("xyaxes"), camera.get("fovy")
+    if not (_vector(pos, 3) and _vector(axes, 6) and isinstance(fovy, (int, float)) and 0 < fovy < 180):
+        return [must_be("record [camera]", "pos = [x, y, z] m, xyaxes = [6 numbers], fovy in (0, 180) deg", camera)]
+    return []
+
+
+def _workspace_problems(workspaces: dict) -> list[str]:
+    if not isinstance(workspaces, dict) or not all(w in workspaces for w in REQUIRED_WORKSPACES):
+        return [must_be("record [workspaces]", f"named joint boxes including {REQUIRED_WORKSPACES}",
+                        sorted(workspaces) if isinstance(workspaces, dict) else workspaces)]
+    for name, box in workspaces.items():
+        if not (isinstance(box, tuple) and box and all(isinstance(r, tuple) and len(r) == 2 and _finite(r)
+                                                       and r[0] < r[1] for r in box)):
+            return [must_be(f"record workspace {name!r}", "[[lo, hi], ...] rad per joint with lo < hi", box)]
+    return []
+
+
+def _finite(values) -> bool:
+    return all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in values)
+
+
+def _vector(v, n: int) -> bool:
+    return isinstance(v, (list, tuple)) and len(v) == n and _finite(v)
+
+
+def _gains(v) -> bool:
+    return isinstance(v, (list, tuple)) and len(v) > 0 and _finite(v) and min(v) >= 0
