@@ -23,7 +23,7 @@ from bodyschema import export_commands as export, runners
 from bodyschema.datagen.body import commands as robot
 from bodyschema.datagen.config import DatagenConfig
 from bodyschema.datagen.exchange.importers.config import ImportConfig
-from bodyschema.demo import DemoConfig
+from bodyschema.demo_config import DemoConfig
 from bodyschema.evaluation import registry
 from bodyschema.evaluation.report import ReportConfig
 from bodyschema.reproduce.config import ReproduceConfig

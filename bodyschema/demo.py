@@ -15,43 +15,24 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, replace
 from pathlib import Path
 
+from bodyschema.demo_config import (
+    DemoConfig,
+    act_configs,
+    body_and_agency_configs,
+    check_demo,
+    datagen_jobs,
+    levels_config,
+    tracking_config,
+    train_jobs,
+)
 from bodyschema.log import progress_bars, progress_of
 
 logger = logging.getLogger(__name__)   # the section headers (info); tables and paths written are printed
 # What the README's levels table was measured with (`make reproduce ONLY=levels`), for the line beside the demo's.
 RECIPE = ("the README's recipe (`make reproduce ONLY=levels`: 18 000 images, decoder 60 epochs, encoder 40) "
           "reaches 0.65° at every level with the encoder")
-
-
-@dataclass(frozen=True)
-class DemoConfig:
-    """Run the whole pipeline small; every artefact lands under `out`, models in the MLflow registry."""
-
-    out: Path = Path("outputs/demo")   # datasets, run directories, level results, contact sheets
-    n_nao: int = 2048                  # nao_arm samples: enough for a GPR at < 0.1 mm and a rough pixel decoder
-    n_small: int = 512                 # planar2 and panda samples: shows they work, kept cheap
-    workers: int = 2                   # one per core of the reference machine
-    pixel_epochs: int = 30             # pixel decoder epochs: a recognisable arm, not a converged decoder
-    # Measured on the demo's 2048 images (the pixel decoder's floor 6.6°): encoder guesses 14° off (10 epochs) left
-    # the +enc levels 0.8° above it, 10° off (20 epochs) put every level on it.
-    encoder_epochs: int = 20           # image encoder epochs: its guess starts the +enc levels and tracking's restarts
-    trials: int = 100                  # per level and run with the GPR (the full benchmark uses 500 × 5 runs)
-    # The pixel decoder costs ~100 evaluations per trial and row and the encoder doubles the rows; its time went to
-    # the encoder and tracking (measured at 50: every +enc row within 0.02° of the floor, the floor's own spread).
-    pixel_trials: int = 30             # per level and run with the pixel decoder (and its +enc rows)
-    runs: int = 1                      # level runs with different targets (the full benchmark uses 5)
-    streams: int = 2                   # tracking: babbling streams followed from the camera at 30 Hz
-    stream_seconds: float = 5.0        # tracking: s per stream (~150 frames each)
-    # Reaching keeps 20 nao_arm and 10 panda goals: 10 and 5 saved ~2 and ~5 s of ~100 (imagination and the panda's
-    # setup are per run, not per goal).
-    reach_targets: int = 20            # closed-loop reaching episodes (the benchmark default is 100)
-    # 15 episodes, not 25: their time went to the encoder and tracking (25 gave AUC 1 at every imitator delay ≥ 50 ms).
-    episodes: int = 15                 # self-recognition episodes per condition (self, 6 imitator delays, 2nd arm)
-    seed: int = 0                      # every stage's seed: the same flags give the same datasets, models and tables
-    tracking_uri: str | None = None    # None: $MLFLOW_TRACKING_URI, else sqlite:///<cwd>/mlflow.db
 
 
 def run_demo(config: DemoConfig) -> None:
@@ -88,47 +69,13 @@ class _Stages:
         return f"demo stages (wall s): {parts} · total {sum(self.seconds.values()):.0f}"
 
 
-def check_demo(config: DemoConfig) -> None:
-    """Build the config of every stage now, each checking its own flags: a bad flag fails before the first dataset
-    is made, not minutes in, naming the demo's flag behind the stage's. The models the benchmarks use are registered
-    on the way; a spec stands in for them."""
-    stand_in = "models:/bodyschema-nao_arm-ee_xyz-gpr@champion"
-    stages = (   # (stage, the demo's flags it takes, build its configs)
-        ("datagen", "--n-nao, --n-small, --workers, --seed", lambda: _datagen_jobs(config)),
-        ("train", "--pixel-epochs (the pixel decoder's --epochs), --encoder-epochs (the encoder's --epochs), --seed",
-         lambda: _train_jobs(config, config.out / "data" / "nao_arm.zarr")),
-        ("levels", "--trials, --pixel-trials (the pixel decoder's --trials), --runs, --seed",
-         lambda: [_levels_config(config, stand_in, k) for k in ("gpr", "pixel")]),
-        ("tracking", "--streams (tracking's --trials), --stream-seconds (its --duration), --seed",
-         lambda: _tracking_config(config, stand_in)),
-        ("reaching and self-recognition", "--reach-targets (reaching's --trials), --episodes (self-recognition's "
-         "--trials), --seed", lambda: _act_configs(config, stand_in)),
-        ("rubber-hand and agency", "--seed", lambda: _body_and_agency_configs(config, stand_in)),
-    )
-    for stage, flags, build in stages:
-        try:
-            build()
-        except ValueError as error:
-            raise ValueError(f"the demo's {stage} stage (set by {flags}): {error}") from None
-
-
-def _datagen_jobs(config: DemoConfig) -> dict:
-    from bodyschema.datagen.config import DatagenConfig
-
-    jobs = {"planar2": DatagenConfig(robot="planar2", n=config.n_small, sampler="uniform"),
-            "nao_arm": DatagenConfig(robot="nao_arm", n=config.n_nao, sampler="uniform"),
-            "panda": DatagenConfig(robot="panda", n=config.n_small, sampler="babble", shard_size=200)}
-    return {robot: replace(job, workers=config.workers, seed=config.seed, overwrite=True,
-                           out=config.out / "data" / f"{robot}.zarr") for robot, job in jobs.items()}
-
-
 def _datagen(config: DemoConfig) -> dict[str, Path]:
     from bodyschema.datagen.generate import generate
     from bodyschema.datagen.store.contact_sheet import write_contact_sheet
     from bodyschema.datagen.store.validate import summarize_store, validate_store
 
     stores = {}
-    for robot, job in _datagen_jobs(config).items():
+    for robot, job in datagen_jobs(config).items():
         logger.info(f"== datagen {robot}: {job.n} samples, sampler {job.sampler}")
         stores[robot] = generate(job, progress=progress_bars())    # no progress flag of its own
         problems = validate_store(stores[robot])
@@ -140,28 +87,12 @@ def _datagen(config: DemoConfig) -> dict[str, Path]:
     return stores
 
 
-def _train_jobs(config: DemoConfig, nao_store: Path) -> dict:
-    from bodyschema.models.configs import EncoderConfig, GPRConfig, MDNConfig, PixelConfig
-    from bodyschema.training.config import TrainConfig
-
-    jobs = {"gpr": TrainConfig(model=GPRConfig(), data=nao_store, modality="ee_xyz", max_train=1500),
-            "mdn": TrainConfig(model=MDNConfig(epochs=60), data=nao_store, modality="ee_xyz"),
-            # batches of 16, not 64: 4× the steps per epoch at about the same cost per epoch on a CPU; measured on the
-            # demo's images at 30 epochs: floor 2.7° instead of 6.6° (held-out MSE 0.0044 vs 0.0101)
-            "pixel": TrainConfig(model=PixelConfig(epochs=config.pixel_epochs, batch_size=16), data=nao_store,
-                                 modality="image"),
-            "encoder": TrainConfig(model=EncoderConfig(epochs=config.encoder_epochs), data=nao_store,
-                                   modality="image")}
-    return {kind: replace(job, seed=config.seed, run_root=config.out / "runs", tracking_uri=config.tracking_uri)
-            for kind, job in jobs.items()}
-
-
 def _train(config: DemoConfig, nao_store: Path) -> dict:
     """kind → its TrainResult (registered; the champion alias moved only by a better version)."""
     from bodyschema.training.train import train
 
     results = {}
-    for kind, job in _train_jobs(config, nao_store).items():
+    for kind, job in train_jobs(config, nao_store).items():
         logger.info(f"== train {kind} on nao_arm {job.modality}")
         result = train(progress_of(job))
         shown = ", ".join(f"{k}={v:.4g}" for k, v in result.metrics.items() if k.startswith("val_"))
@@ -177,24 +108,12 @@ def _version_uri(result) -> str:
     return f"models:/{result.registered_name}/{result.model_version}"
 
 
-def _levels_config(config: DemoConfig, uri: str, kind: str, encoder: str | None = None):
-    from bodyschema.evaluation.levels import LevelsConfig
-
-    # The pixel decoder's level-3 remedy is the encoder (one start from its guess), not 8 multi-starts at ~3× the cost
-    # of the level; the GPR keeps the multi-start row.
-    pixel = kind == "pixel"
-    return LevelsConfig(models=(uri,), trials=config.pixel_trials if pixel else config.trials, runs=config.runs,
-                        seed=config.seed, out=config.out / "results" / f"levels_{kind}",
-                        tracking_uri=config.tracking_uri, encoder=encoder,
-                        multistart=0 if pixel else LevelsConfig.multistart)
-
-
 def _evaluate(config: DemoConfig, uri: str, kind: str, models=None, encoder: str | None = None):
     from bodyschema.evaluation.levels import run_levels
 
     logger.info(f"== AIF perception, levels 1–3, with {uri} loaded from the registry"
                 f"{f' (+enc rows: starts from {encoder})' if encoder else ''}")
-    summary = run_levels(progress_of(_levels_config(config, uri, kind, encoder)), models)
+    summary = run_levels(progress_of(levels_config(config, uri, kind, encoder)), models)
     print(summary.paths["summary_md"].read_text())
     print("plots:", ", ".join(str(p) for k, p in summary.paths.items() if str(p).endswith(".png")))
     return summary
@@ -243,18 +162,6 @@ def _history(result) -> list[str]:
     return (result.run_dir / "history.jsonl").read_text().splitlines()
 
 
-def _tracking_config(config: DemoConfig, decoder_uri: str, encoder_uri: str | None = None):
-    from bodyschema.evaluation.tracking import TrackingConfig
-
-    # One rate and the image alone: the camera story of issue 21 (10–60 Hz, the joint-fused rows and the tracker moved
-    # by the motor command, which matched the tracker on the demo's models, are `bodyschema evaluate tracking`'s);
-    # 50 calibration frames set the lost-track threshold (200 by default).
-    return TrackingConfig(models=(decoder_uri,), encoder=encoder_uri, trials=config.streams,
-                          duration=config.stream_seconds, rates=(30.0,), fuse_joints=(False,),
-                          methods=("encoder", "flow", "tracker"), calibration_frames=50,
-                          seed=config.seed, out=config.out / "results" / "tracking", tracking_uri=config.tracking_uri)
-
-
 def _track(config: DemoConfig, decoder, encoder_uri: str) -> None:
     from bodyschema.evaluation.tracking import run_tracking
 
@@ -262,33 +169,16 @@ def _track(config: DemoConfig, decoder, encoder_uri: str) -> None:
     logger.info(f"== tracking: {config.streams} babbling streams of {config.stream_seconds:g} s at 30 Hz, followed "
                 f"frame by frame from the camera image ({spec} + {encoder_uri}): the encoder alone, a same-budget "
                 "gradient flow and the tracker")
-    paths = run_tracking(progress_of(_tracking_config(config, spec, encoder_uri)), [decoder])
+    paths = run_tracking(progress_of(tracking_config(config, spec, encoder_uri)), [decoder])
     print(paths["summary_md"].read_text())
     print(f"plot: {paths.get('error_vs_time', '(none)')}")
-
-
-def _act_configs(config: DemoConfig, gpr_uri: str) -> tuple:
-    """(nao_arm reaching with the GPR, panda reaching, self-recognition)."""
-    from bodyschema.evaluation.reaching import ReachingConfig
-    from bodyschema.evaluation.self_recognition import SelfRecognitionConfig
-
-    results = config.out / "results"
-    reaching = ReachingConfig(robot="nao_arm", models=(gpr_uri, "analytic:nao_arm:joints"), goal="ee_xyz",
-                              trials=config.reach_targets, seed=config.seed, out=results / "reaching",
-                              tracking_uri=config.tracking_uri)
-    panda = ReachingConfig(robot="panda", trials=10, seed=config.seed, out=results / "reaching_panda",
-                           tracking_uri=config.tracking_uri)
-    recognition = SelfRecognitionConfig(robot="nao_arm", models=(gpr_uri,), trials=config.episodes,
-                                        seed=config.seed, out=results / "self_recognition",
-                                        tracking_uri=config.tracking_uri)
-    return reaching, panda, recognition
 
 
 def _act(config: DemoConfig, gpr_uri: str) -> None:
     from bodyschema.evaluation.reaching import run_reaching
     from bodyschema.evaluation.self_recognition import run_self_recognition
 
-    reaching, panda, recognition = _act_configs(config, gpr_uri)
+    reaching, panda, recognition = act_configs(config, gpr_uri)
     logger.info(f"== closed-loop reaching on nao_arm: {config.reach_targets} ee_xyz goals, {gpr_uri} + joint "
                 "encoder")
     print(run_reaching(progress_of(reaching))["summary_md"].read_text())
@@ -298,21 +188,6 @@ def _act(config: DemoConfig, gpr_uri: str) -> None:
     logger.info(f"== self-recognition: {config.episodes} babbling episodes per condition, is the ee stream mine "
                 f"or an imitator's? ({gpr_uri})")
     print(run_self_recognition(progress_of(recognition))["summary_md"].read_text())
-
-
-def _body_and_agency_configs(config: DemoConfig, gpr_uri: str) -> tuple:
-    """(rubber hand, agency): seconds-long runs with the registered GPR (nao_arm's camera keeps a hand moved ≤ 10 cm
-    in view)."""
-    from bodyschema.evaluation.agency import AgencyConfig
-    from bodyschema.evaluation.rubber_hand import RubberHandConfig
-
-    results = config.out / "results"
-    rubber = RubberHandConfig(robot="nao_arm", models=(gpr_uri,), trials=4, displacements=(0.05, 0.10),
-                              visual_sigmas=(0.005, 0.01, 0.02), duration=20.0, seed=config.seed,
-                              out=results / "rubber_hand", tracking_uri=config.tracking_uri)
-    agency = AgencyConfig(robot="nao_arm", models=(gpr_uri,), trials=100, seed=config.seed, out=results / "agency",
-                          tracking_uri=config.tracking_uri)
-    return rubber, agency
 
 
 def _report(config: DemoConfig) -> None:
@@ -330,7 +205,7 @@ def _body_and_agency(config: DemoConfig, gpr_uri: str) -> None:
     from bodyschema.evaluation.agency import run_agency
     from bodyschema.evaluation.rubber_hand import run_rubber_hand
 
-    rubber, agency = _body_and_agency_configs(config, gpr_uri)
+    rubber, agency = body_and_agency_configs(config, gpr_uri)
     logger.info(f"== rubber hand: a seen hand 5–10 cm away, stroked in and out of sync; drift of the belief "
                 f"({gpr_uri})")
     print(run_rubber_hand(progress_of(rubber))["summary"].read_text())

@@ -7,7 +7,7 @@ import types
 
 import pytest
 
-from bodyschema import demo
+from bodyschema import demo, demo_config
 
 
 def test_the_stage_clock_keeps_every_stage_a_failing_one_too():
@@ -22,19 +22,19 @@ def test_the_stage_clock_keeps_every_stage_a_failing_one_too():
 @pytest.mark.parametrize("flag, value", [("pixel_trials", 0), ("encoder_epochs", 0), ("streams", 0),
                                          ("stream_seconds", 0.0)])
 def test_the_new_demo_flags_are_checked_before_any_work_naming_the_flag(flag, value, tmp_path):
-    config = dataclasses.replace(demo.DemoConfig(out=tmp_path / "demo"), **{flag: value})
+    config = dataclasses.replace(demo_config.DemoConfig(out=tmp_path / "demo"), **{flag: value})
     with pytest.raises(ValueError, match=" must be ") as error:
-        demo.check_demo(config)
+        demo_config.check_demo(config)
     assert f"--{flag.replace('_', '-')}" in str(error.value)
 
 
 def test_the_pixel_levels_use_the_encoder_not_multistart_and_the_tracking_episode_the_demos_models(tmp_path):
-    config = demo.DemoConfig(out=tmp_path)
-    pixel = demo._levels_config(config, "models:/dec/1", "pixel", "models:/enc/1")
-    gpr = demo._levels_config(config, "models:/gpr@champion", "gpr")
+    config = demo_config.DemoConfig(out=tmp_path)
+    pixel = demo_config.levels_config(config, "models:/dec/1", "pixel", "models:/enc/1")
+    gpr = demo_config.levels_config(config, "models:/gpr@champion", "gpr")
     assert (pixel.trials, pixel.multistart, pixel.encoder) == (config.pixel_trials, 0, "models:/enc/1")
     assert (gpr.trials, gpr.encoder) == (config.trials, None) and gpr.multistart > 0
-    tracking = demo._tracking_config(config, "models:/dec/1", "models:/enc/1")
+    tracking = demo_config.tracking_config(config, "models:/dec/1", "models:/enc/1")
     assert (tracking.models, tracking.encoder, tracking.trials, tracking.duration) == (
         ("models:/dec/1",), "models:/enc/1", config.streams, config.stream_seconds)
     assert tracking.out == tmp_path / "results" / "tracking", "its section in the demo's report"
@@ -53,7 +53,7 @@ def test_the_models_section_says_what_each_trained_model_is_and_the_decoders_flo
     runs = {"gpr": types.SimpleNamespace(data=types.SimpleNamespace(params={"n_train": "1500"}))}
     runs["pixel"] = runs["encoder"] = types.SimpleNamespace(data=types.SimpleNamespace(params={"n_train": "1638"}))
     monkeypatch.setattr(registry, "use_tracking", lambda uri: types.SimpleNamespace(get_run=runs.__getitem__))
-    config = demo.DemoConfig(out=tmp_path / "demo")
+    config = demo_config.DemoConfig(out=tmp_path / "demo")
     note = demo._models_section(config, {"gpr": trained("gpr", 0), "pixel": trained("pixel", 30),
                                          "encoder": trained("encoder", 20)}, 2.345)
     assert "30 epochs on 1638 images in 12 s" in note and "2.35°" in note and "20-epoch encoder" in note

@@ -131,6 +131,7 @@ def test_the_floor_goes_to_mlflow_and_the_threshold_is_a_setting(tmp_path, monke
 
 def test_the_demo_reads_the_pixel_decoders_floor_from_its_levels_run(tmp_path, monkeypatch):
     from bodyschema import demo
+    from bodyschema.demo_config import DemoConfig
     from bodyschema.evaluation.core import specs
 
     assert not hasattr(demo, "decoder_floor"), "computed once, by the levels"
@@ -139,5 +140,5 @@ def test_the_demo_reads_the_pixel_decoders_floor_from_its_levels_run(tmp_path, m
     monkeypatch.setattr(demo, "_evaluate", lambda *a: types.SimpleNamespace(floor={"joint_err_deg": 1.25}))
     monkeypatch.setattr(demo, "_models_section", lambda config, trained, floor: seen.setdefault("floor", floor))
     result = types.SimpleNamespace(registered_name="dec", model_version="1")
-    assert demo._evaluate_pixel(demo.DemoConfig(out=tmp_path), {"pixel": result, "encoder": result}) == "decoder"
+    assert demo._evaluate_pixel(DemoConfig(out=tmp_path), {"pixel": result, "encoder": result}) == "decoder"
     assert seen["floor"] == 1.25

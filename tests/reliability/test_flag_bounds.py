@@ -189,10 +189,11 @@ def test_every_demo_flag_is_checked_before_any_work_naming_the_demo_flag(flag, v
     import importlib
 
     from bodyschema import demo
+    from bodyschema.demo_config import DemoConfig
 
     generate = importlib.import_module("bodyschema.datagen.generate")
     monkeypatch.setattr(generate, "generate", lambda *a, **k: pytest.fail("datagen started before the check"))
-    config = dataclasses.replace(demo.DemoConfig(out=tmp_path / "demo"), **{flag: value})
+    config = dataclasses.replace(DemoConfig(out=tmp_path / "demo"), **{flag: value})
     with pytest.raises(ValueError, match=" must be ") as error:
         demo.run_demo(config)
     assert f"--{flag.replace('_', '-')}" in str(error.value)
@@ -200,6 +201,6 @@ def test_every_demo_flag_is_checked_before_any_work_naming_the_demo_flag(flag, v
 
 
 def test_the_default_demo_passes_its_check(tmp_path):
-    from bodyschema import demo
+    from bodyschema.demo_config import DemoConfig, check_demo
 
-    demo.check_demo(demo.DemoConfig(out=tmp_path))
+    check_demo(DemoConfig(out=tmp_path))
