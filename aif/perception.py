@@ -2,12 +2,12 @@
 
     F = Σ_m ½ ε_mᵀ Π_m ε_m + ½ ε_zᵀ Π_z ε_z − ½ ln|Π|      (free_energy.py, priors.py)
 
-`Perception.infer` checks the inputs, resolves the sensors once (precisions, broken sensors, goals) and runs the
-update of its config, "auto" resolved from its models (perception_config.py): generalized filtering (flow.py, any
-order) or, at order 0, Levenberg–Marquardt or Adam (descent.py), all on the same F, gradient and Gauss–Newton
-curvature (`_terms`). Every trial stops on its own, converged or diverged. Batched and per-trial runs perform the
-same arithmetic row by row (bit-equal for float64 models; a float32 network may round differently at another batch
-size).
+`Perception.infer` checks the inputs, resolves the sensors once (precisions, broken sensors, goals:
+attractor_goals.py) and runs the update of its config, "auto" resolved from its models (perception_config.py):
+generalized filtering (flow.py, any order) or, at order 0, Levenberg–Marquardt or Adam (descent.py), all on the same
+F, gradient and Gauss–Newton curvature (`_terms`). Every trial stops on its own, converged or diverged. Batched and
+per-trial runs perform the same arithmetic row by row (bit-equal for float64 models; a float32 network may round
+differently at another batch size).
 """
 
 from __future__ import annotations
@@ -18,14 +18,9 @@ from dataclasses import dataclass
 import torch
 
 from bodyschema.aif import descent
+from bodyschema.aif.attractor_goals import checked_goals, fuse_image_goals
 from bodyschema.aif.flow import FlowRun
-from bodyschema.aif.free_energy import (
-    JACOBIAN_MAX_OUTPUTS,
-    check_models,
-    check_observations,
-    model_input,
-    sensory_terms,
-)
+from bodyschema.aif.free_energy import check_models, check_observations, sensory_terms
 from bodyschema.aif.perception_config import DEFAULTS, PerceptionConfig, resolve
 from bodyschema.aif.precisions import perceived_precisions
 from bodyschema.aif.priors import attractor, prior_terms
@@ -229,24 +224,10 @@ class Perception:
         obs = {name: x.to(torch.float64) for name, x in observations.items() if name not in broken}
         sensors = _Sensors(obs, fixed)
         if self.config.prior == "attractor":
-            sensors.goal = self._check_goal(goal, b)
+            sensors.goal = checked_goals(self.models, goal, b, self.config)
         elif goal is not None:
             raise ValueError(must_be("goal", "None unless config.prior is 'attractor'", sorted(goal)))
         return sensors
-
-    def _check_goal(self, goal, b):
-        if not isinstance(goal, Mapping) or len(goal) < 1:
-            raise ValueError(must_be("goal", "a dict modality → (B, *out) target", goal,
-                                     "The attractor prior needs a goal x_d."))
-        gains = dict(self.config.goal_precisions)
-        out = []
-        for name, x_d in goal.items():
-            model = next((m for m in self.models if m.modality == name), None)
-            if model is None or not isinstance(x_d, torch.Tensor) or tuple(x_d.shape) != (b, *model.output_shape):
-                raise ValueError(must_be("goal", "one of the models' modalities with a (B, *out) tensor",
-                                         {name: tuple(getattr(x_d, "shape", ()))}))
-            out.append((model, x_d.to(torch.float64), float(gains.get(name, self.config.attractor_gain))))
-        return out
 
     def _terms(self, sensors: _Sensors, u: torch.Tensor, rows: torch.Tensor, need_h: bool, need_grad: bool = True):
         """F (b,), ∂F/∂μ̃ (b, K, Dz), Gauss–Newton H (b, K·Dz, K·Dz) or None, prediction errors, at beliefs u."""
@@ -256,7 +237,7 @@ class Perception:
         obs = {name: x[rows] for name, x in sensors.observations.items()}
         pis = {m.modality: sensors.fixed[m.modality][rows] if m.modality in sensors.fixed else None
                for m in self.models}
-        goals, offset = _fuse_image_goal(sensors.goal, rows, mu, obs, pis, cfg.prior_precision) if k == 1 \
+        goals, offset = fuse_image_goals(sensors.goal, rows, mu, obs, pis, cfg.prior_precision) if k == 1 \
             else (sensors.goal, torch.zeros(b, dtype=u.dtype))
         s = sensory_terms(self.models, obs, pis, mu, need_h, need_grad=need_grad)
         free = s.free_energy + offset
@@ -289,30 +270,3 @@ class Perception:
             weighted["prior"] = prior.energy if prior.energy is not None else \
                 0.5 * cfg.prior_precision * prior.error.pow(2).sum(dim=(1, 2))
         return free, grad, hess, weighted
-
-
-def _fuse_image_goal(goals, rows, mu: torch.Tensor, obs: dict, pis: dict, prior_precision: float):
-    """Order 0, an image goal whose model is also observed: the attractor's Π_z V = ½ β |x_d − g|² (β = Π_z · its
-    Π_goal) and the sensory ½ |x − g|²_Π are one Gaussian term ½ |x̄ − g|²_(Π+β), x̄ = (Π x + β x_d)/(Π + β), up
-    to a constant in μ. Fused, the goal costs no model call: its gradient and Gauss–Newton curvature come with the
-    sensor's (priors.py: image goals never build their own Jacobian). Rewrites obs/pis in place.
-    → the goals left to the prior (None if there were none) and the constant (b,) to add to F."""
-    offset = torch.zeros(len(rows), dtype=mu.dtype)
-    if goals is None:
-        return None, offset
-    left = []
-    for model, x_d, gain in goals:
-        name = model.modality
-        if x_d[0].numel() <= JACOBIAN_MAX_OUTPUTS or name not in obs or getattr(model, "precision_varies", False):
-            left.append((model, x_d, gain))
-            continue
-        b = len(rows)
-        pi = pis[name] if pis[name] is not None else model.precision(model_input(model, mu)).to(mu.dtype)  # (b, *out)
-        beta = torch.as_tensor(gain * prior_precision, dtype=mu.dtype)
-        x, goal = obs[name].to(mu.dtype), x_d[rows].to(mu.dtype)
-        total = pi + beta
-        obs[name], pis[name] = (pi * x + beta * goal) / total, total
-        constant = 0.5 * (pi * beta / total * (x - goal).pow(2)).reshape(b, -1).sum(-1)
-        logdet = 0.5 * (torch.log(total) - torch.where(pi > 0, pi.clamp_min(1e-300).log(), 0.0)).reshape(b, -1).sum(-1)
-        offset = offset + constant + logdet                                # F_x(Π) + Π_z V = F_fused + this
-    return left, offset
