@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from bodyschema.aif.aic import AICConfig, AICController
+from bodyschema.aif.aic import AICController
+from bodyschema.aif.aic_config import AICConfig
 from bodyschema.base.modalities import is_image
 from bodyschema.control.pd import PDConfig, PDController
 from bodyschema.control.sim import ArmBatch, control_substeps

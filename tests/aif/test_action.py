@@ -253,7 +253,7 @@ def test_image_goals_use_vjps_only():
 
 
 def test_geometry_names_are_checked():
-    from bodyschema.aif.aic import AICConfig
+    from bodyschema.aif.aic_config import AICConfig
     with pytest.raises(ValueError, match="goal_geometry"):
         AICConfig(goal_geometry="newton")
     arm, mu, goal, _ = attractor_case(seed=51)

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from bodyschema.aif.aic import AICConfig, AICController
+from bodyschema.aif.aic import AICController
+from bodyschema.aif.aic_config import AICConfig
 from bodyschema.models.contract import BaseSensoryModel
 from tests.aif.toys import ToyJoints
 from tests.threads import one_thread

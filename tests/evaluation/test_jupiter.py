@@ -7,7 +7,8 @@ import csv
 import numpy as np
 import pytest
 
-from bodyschema.aif.aic import AICConfig, AICController
+from bodyschema.aif.aic import AICController
+from bodyschema.aif.aic_config import AICConfig
 from bodyschema.control.pd import PDController
 from bodyschema.datagen.body.robot import Robot
 from bodyschema.evaluation.adaptation.jupiter import (
@@ -19,6 +20,7 @@ from bodyschema.evaluation.adaptation.jupiter import (
     sample_poses,
     simulate,
 )
+from bodyschema.evaluation.core.runs import read_run_record
 from bodyschema.evaluation.core.seeds import eval_rng
 from bodyschema.models.analytic import AnalyticModel
 
@@ -125,7 +127,8 @@ def test_run_jupiter_writes_reproducible_tables_plots_and_an_mlflow_run(tmp_path
     with open(paths["summary_csv"]) as f:
         rows = list(csv.DictReader(f))
     assert [r["controller"] for r in rows] == ["PD + g(q) on Earth", "AIC joints", "AIC joints + ee_xyz"]
-    assert "24.79" in paths["summary_md"].read_text()
+    assert "24.79" in paths["summary_md"].read_text() and "(torque panda)" in paths["summary_md"].read_text()
+    assert read_run_record(paths["summary_csv"].parent)["robot"] == JupiterConfig.robot == "panda"
     import mlflow
     runs = mlflow.search_runs(experiment_names=["bodyschema-adaptation"])
     assert len(runs) == 1 and "metrics.AIC joints.joint_err_after_deg" in runs.columns
