@@ -91,7 +91,7 @@ def run_registry_list(config: RegistryList) -> None:
 
 
 def run_registry_promote(config: RegistryPromote) -> None:
-    from bodyschema.training.registry import promote
+    from bodyschema.training.champion import promote
 
     promote(config.name, config.version, tracking=config.tracking_uri)
     print(f"{config.name} v{config.version} is now @champion")

@@ -60,7 +60,7 @@ _RUN_URI = re.compile(r"^runs:/(?P<run_id>[^/]+)/(?P<name>[^/]+?)/?$")
 def log_sensory_model(model_dir: str | Path, model, *, name: str = "model"):
     """Log the saved model directory as a pyfunc in the active run, its digest as a tag in the tracking database and
     what it maps as its description (`model_card`). → (ModelInfo, directory sha256). Registration is separate
-    (`registry.register_version`)."""
+    (`champion.register_version`)."""
     digest = directory_sha256(model_dir)
     given = ("images (B, H, W[, C]) uint8" if model.encodes else f"z (B, {model.latent_dim}) rad")
     metadata = {"bodyschema": {"input": given, "kind": model.kind, "version": _installed("bodyschema"),

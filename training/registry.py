@@ -1,13 +1,9 @@
-"""The MLflow side of training: tracking URI and experiment, registration, the `champion` alias, and loading.
+"""The MLflow side of training: tracking URI and experiment, the registered versions' tags, listing, and loading.
 
 Tracking defaults to an embedded sqlite file, `sqlite:///<cwd>/mlflow.db` (no server); `MLFLOW_TRACKING_URI`
-is honoured (a `mlflow server` on 127.0.0.1, say). Models register as `bodyschema-{robot}-{modality}-{kind}`;
-the `champion` alias moves only when a new version's validation metric (`val_rmse`, lower is better) beats
-the current champion's *on the same validation data* (tag `val_sha256`: the store's digest and its held-out rows;
-a version registered before that tag is compared by its `dataset_sha256`), or when a user `promote`s a version by
-hand. A version scored on another store (an imported one beside a simulated one) never moves `champion` by itself.
-Experiments carry a description and `mlflow.experimentKind` = `custom_model_development`, which opens MLflow's UI
-in its classic ML mode (not the GenAI one).
+is honoured (a `mlflow server` on 127.0.0.1, say). Models register as `bodyschema-{robot}-{modality}-{kind}`
+(registration and the `champion` rule: `champion.py`). Experiments carry a description and `mlflow.experimentKind`
+= `custom_model_development`, which opens MLflow's UI in its classic ML mode (not the GenAI one).
 
 Consumers call `load("models:/<name>@champion")` (or `models:/<name>/<version>`) and get the SensoryModel
 itself. Trust boundary: the artifacts are downloaded, their sha256 is compared with the digest recorded on the
@@ -15,18 +11,15 @@ registered version named by the URI (and on its logged model, which must agree; 
 file beside the weights or an id in the MLmodel file), and only then are the tensors read
 (`torch.load(weights_only=True)`); the MLmodel file is parsed as YAML data, no code it names is imported.
 
-Concurrency: with the default sqlite store, creating its tables, registering a version (with its tags, in one
-transaction) and moving `champion` (a compare-and-set) happen under an flock on `<db>.lock`, so two `train`
-processes finishing together neither lose a run nor leave the worse model as champion. With a tracking server
-the same lock is a file in the temp directory: it serializes the processes of one machine only.
+Concurrency: with the default sqlite store, creating its tables, registering a version and moving `champion` happen
+under an flock on `<db>.lock` (`registry_lock`), so two `train` processes finishing together neither lose a run nor
+leave the worse model as champion. With a tracking server the same lock is a file in the temp directory: it serializes
+the processes of one machine only.
 """
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
-import io
-import logging
 import os
 import re
 import tempfile
@@ -42,9 +35,9 @@ from bodyschema import log
 from bodyschema.base.locks import exclusive
 from bodyschema.errors import must_be
 from bodyschema.models.scaling import BodySpec
-from bodyschema.training.digest import DIGEST_TAG, verify_directory, version_digest
+from bodyschema.training.digest import verify_directory, version_digest
 from bodyschema.training.mlmodel_file import artifact_dir as _artifact_dir
-from bodyschema.training.model_card import NOTE, describe_registration
+from bodyschema.training.model_card import NOTE
 from bodyschema.training.tracking_store import (  # noqa: F401 — TrackingUnreachable: importers name it here
     TrackingUnreachable,
     check_database_driver,
@@ -54,7 +47,6 @@ from bodyschema.training.tracking_store import (  # noqa: F401 — TrackingUnrea
     create_sqlite,
 )
 
-CHAMPION = "champion"
 METRIC = "val_rmse"          # decides the champion; lower is better
 VAL_TAG = "val_sha256"       # the validation data METRIC was measured on (`data.validation_digest`)
 DATASET_TAG = "dataset"      # the store a version was trained on (its path); its digest: `dataset_sha256`
@@ -64,7 +56,6 @@ _URI = re.compile(r"^models:/(?P<name>[^/@]+)(?:@(?P<alias>[^/]+)|/(?P<version>\
 # Schemes MLflow can track to ("mysql+pymysql" counts as "mysql"); anything else is a typo, refused up front.
 SCHEMES = ("", "file", "sqlite", "postgresql", "mysql", "mssql", "http", "https", "databricks", "databricks-uc", "uc")
 _initialized: set[str] = set()         # sqlite URIs whose tables this process created or checked under the lock
-_log = logging.getLogger(__name__)
 
 
 def tracking_uri(explicit: str | None = None) -> str:
@@ -164,102 +155,6 @@ def experiment_description(name: str) -> str:
 
 def registered_name(robot: str, modality: str, kind: str) -> str:
     return f"{PREFIX}{robot}-{modality}-{kind}"
-
-
-def register_version(client: MlflowClient, name: str, model_uri: str, tags: dict[str, str],
-                     metric: float) -> tuple[str, bool]:
-    """Register logged model `model_uri` as a version of `name`, its tags set in the same transaction, describe the
-    version and `name` (kind, body, modality, data digest: `model_card`), then move `champion` if `metric` is
-    better — all under the registry lock. → (version, now champion?)
-
-    Idempotent, so a command started again after a kill (or after it finished) converges: a version of `name`
-    that already holds these very weights (same DIGEST_TAG) is reused, never duplicated; a version of the same
-    run without a digest (left by a kill between creating and tagging, before tags moved into the creation)
-    could never load and is deleted."""
-    digest = tags[DIGEST_TAG]
-    with exclusive(registry_lock()):
-        run_id = client.get_logged_model(model_uri.removeprefix("models:/")).source_run_id
-        if _registered_model_exists(client, name):
-            for stale in client.search_model_versions(f"name = '{name}' and run_id = '{run_id}'"):
-                if DIGEST_TAG not in stale.tags:
-                    client.delete_model_version(name, stale.version)
-            same = client.search_model_versions(f"name = '{name}' and tags.`{DIGEST_TAG}` = '{digest}'")
-        else:
-            same = []
-        if same:
-            version = str(min(int(v.version) for v in same))
-        else:
-            version = _register_quietly(model_uri, name, tags)
-        describe_registration(client, name, version, tags, model_uri.removeprefix("models:/"))
-        return version, _champion_if_better(client, name, version, metric, tags)
-
-
-def _register_quietly(model_uri: str, name: str, tags: dict[str, str]) -> str:
-    """`mlflow.register_model`, whose own prints on stderr ("Created version '1' of model ...") become DEBUG lines
-    of our logger, shown with --verbose only: `train` prints the version it registered itself. → the new version"""
-    printed = io.StringIO()
-    with contextlib.redirect_stderr(printed):            # MLflow's eprint writes to the current sys.stderr
-        version = mlflow.register_model(model_uri, name, tags=tags, await_registration_for=60).version
-    for line in filter(str.strip, printed.getvalue().splitlines()):
-        _log.debug(line)
-    return str(version)
-
-
-def update_champion(client: MlflowClient, name: str, version: str, metric: float) -> bool:
-    """Move `champion` to `version` when its metric beats the current champion's (or there is none): a
-    compare-and-set under the registry lock, so of two runs finishing together the better one ends champion."""
-    with exclusive(registry_lock()):
-        return _champion_if_better(client, name, version, metric, client.get_model_version(name, version).tags)
-
-
-def same_validation_data(a: dict[str, str], b: dict[str, str]) -> bool:
-    """Two versions' val_rmse compare only when measured on the same validation data: the same `val_sha256`; a
-    version registered before that tag counts by its `dataset_sha256` (same store, same split settings assumed)."""
-    if VAL_TAG in a and VAL_TAG in b:
-        return a[VAL_TAG] == b[VAL_TAG]
-    return bool(a.get("dataset_sha256")) and a.get("dataset_sha256") == b.get("dataset_sha256")
-
-
-def _champion_if_better(client: MlflowClient, name: str, version: str, metric: float, tags: dict[str, str]) -> bool:
-    # Caller holds the registry lock: the read and the write below are one step for every bodyschema process.
-    try:
-        current = client.get_model_version_by_alias(name, CHAMPION)
-    except MlflowException:
-        current = None
-    if current is not None:
-        if str(current.version) == str(version):
-            return True
-        if not same_validation_data(current.tags, tags):
-            _log.info("%s: @champion stays v%s, scored on other validation data (dataset %s…, v%s's %s…): the "
-                      "scores do not compare. Move it by hand with `bodyschema registry promote %s %s`.", name,
-                      current.version, str(current.tags.get("dataset_sha256", "?"))[:12], version,
-                      str(tags.get("dataset_sha256", "?"))[:12], name, version)
-            return False
-        best = float(current.tags.get(METRIC, "inf"))
-        if not metric < best:
-            return False
-    client.set_registered_model_alias(name, CHAMPION, version)
-    return True
-
-
-def _registered_model_exists(client: MlflowClient, name: str) -> bool:
-    try:
-        client.get_registered_model(name)
-        return True
-    except MlflowException:
-        return False
-
-
-def promote(name: str, version: str | int, *, tracking: str | None = None) -> None:
-    """Point `champion` at `version` by hand (`bodyschema registry promote NAME VERSION`)."""
-    client = use_tracking(tracking)
-    try:
-        client.get_model_version(name, str(version))
-    except MlflowException as error:
-        raise ValueError(must_be("NAME VERSION", "a registered model version (see `bodyschema registry list`)",
-                                 f"{name} {version}")) from error
-    with exclusive(registry_lock()):
-        client.set_registered_model_alias(name, CHAMPION, str(version))
 
 
 @dataclass(frozen=True)

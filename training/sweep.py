@@ -4,7 +4,7 @@ One sweep is one MLflow parent run, `sweep · KIND · robot`, with one nested ch
 per-epoch metrics, sweep_trial.py); the parent logs the table of trials. Networks report every epoch and ASHA stops
 the bad ones early; a GP reports once, at the end, so it runs to completion (no early stop). The best finished trial
 (lowest `val_rmse`, the champion's criterion) is registered as a new version; `@champion` moves only if it beats the
-current one (`registry.register_version`, the very comparison `train` makes).
+current one (`champion.register_version`, the very comparison `train` makes).
 
 Ray is the datagen backend's (`ray_session`): a local loopback-only Ray, or the cluster RAY_ADDRESS names (checked
 within a timeout). Trials get 1 CPU each, and 1 GPU each when the cluster has GPUs. The sweep folder

@@ -12,8 +12,9 @@ from typing import Any
 import mlflow
 
 from bodyschema.errors import must_be
+from bodyschema.training.champion import register_version
 from bodyschema.training.digest import DIGEST_TAG
-from bodyschema.training.registry import METRIC, register_version, registered_name
+from bodyschema.training.registry import METRIC, registered_name
 from bodyschema.training.sweep_trial import EPOCH, FINAL
 from bodyschema.training.train import Registered
 

@@ -29,18 +29,17 @@ from bodyschema import log
 from bodyschema.base import modalities
 from bodyschema.errors import must_be
 from bodyschema.training import guards, plots, run_record, runs, scoring
+from bodyschema.training.champion import CHAMPION, register_version
 from bodyschema.training.config import TrainConfig, build_model
 from bodyschema.training.data import Dataset, load_dataset, validation_digest
 from bodyschema.training.digest import DIGEST_TAG
 from bodyschema.training.model_card import card_markdown
 from bodyschema.training.pyfunc_loader import log_sensory_model
 from bodyschema.training.registry import (
-    CHAMPION,
     DATASET_TAG,
     METRIC,
     VAL_TAG,
     ensure_experiment,
-    register_version,
     registered_name,
     use_tracking,
 )

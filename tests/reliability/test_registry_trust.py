@@ -28,7 +28,8 @@ from mlflow import MlflowClient
 from bodyschema import log
 from bodyschema.errors import explain
 from bodyschema.models import BodySpec, load_model
-from bodyschema.training.registry import load, promote, use_tracking
+from bodyschema.training.champion import promote
+from bodyschema.training.registry import load, use_tracking
 from bodyschema.training.train import train
 from tests.limits import file_size_limit
 from tests.test_cli_fuzz import build_world, run_and_check, run_in_process

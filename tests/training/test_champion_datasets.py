@@ -6,8 +6,9 @@ from __future__ import annotations
 
 import pytest
 
+from bodyschema.training.champion import same_validation_data
 from bodyschema.training.data import load_dataset, validation_digest
-from bodyschema.training.registry import list_models, same_validation_data, use_tracking
+from bodyschema.training.registry import list_models, use_tracking
 from bodyschema.training.train import train
 from tests.training.tiny_model import tiny_config
 

@@ -18,8 +18,9 @@ import pytest
 from mlflow import MlflowClient
 
 from bodyschema.base.locks import Locked
+from bodyschema.training.champion import update_champion
 from bodyschema.training.digest import DIGEST_TAG
-from bodyschema.training.registry import load, update_champion
+from bodyschema.training.registry import load
 from bodyschema.training.train import train
 from tests.training.tiny_model import tiny_config
 

@@ -10,8 +10,9 @@ import torch
 from mlflow import MlflowClient
 
 from bodyschema.models import BodySpec
+from bodyschema.training.champion import promote
 from bodyschema.training.digest import DIGEST_TAG
-from bodyschema.training.registry import _artifact_dir, list_models, load, promote, tracking_uri
+from bodyschema.training.registry import _artifact_dir, list_models, load, tracking_uri
 from bodyschema.training.train import train
 from tests.training.tiny_model import tiny_config
 

@@ -97,7 +97,7 @@ def test_a_tiny_grid_on_local_ray(kin_store, workdir):
     continues the same sweep (no new run, same version); a worse grid moves champion only if its best is better."""
     from mlflow import MlflowClient
 
-    from bodyschema.training.registry import CHAMPION
+    from bodyschema.training.champion import CHAMPION
     from bodyschema.training.sweep import sweep
 
     config = SweepConfig("mdn", kin_store, grid=("lr=3e-3,1e-2", "batch_size=32,64"), epochs_budget=2,
