@@ -32,7 +32,7 @@ class ReachingDefaults:
 @functools.cache
 def reaching_defaults(robot: str) -> ReachingDefaults:
     """The [reaching] values of a robot reference (a shipped name or a file), DEFAULTS where absent."""
-    from bodyschema.datagen.body.robot import robot_record
+    from bodyschema.datagen.body.infer import robot_record
     reaching = robot_record(robot).reaching
     problems = reaching_problems(reaching, robot)
     if problems:

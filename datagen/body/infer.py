@@ -25,7 +25,7 @@ import numpy as np
 from bodyschema.datagen.body.arm_chain import infer_arm
 from bodyschema.datagen.body.build import build_model, compile_spec, read_source
 from bodyschema.datagen.body.model_files import parse_xml
-from bodyschema.datagen.body.record import AUTO_CAMERA, SHIPPED, RobotRecord
+from bodyschema.datagen.body.record import AUTO_CAMERA, SHIPPED, RobotRecord, load_record
 from bodyschema.errors import must_be
 
 IMAGE_SIZE = (64, 64)       # px: the default image of an inferred robot (small, quick to render and learn from)
@@ -193,3 +193,13 @@ def place_camera(points: np.ndarray, image_size: tuple[int, int], fovy: float = 
 
 def _rounded(v: np.ndarray) -> list[float]:
     return [float(round(x, 6)) for x in v]
+
+
+def robot_record(robot: str | Path | RobotRecord) -> RobotRecord:
+    """The record of a robot reference: a record as is, a shipped name or file with its record, else inferred."""
+    if isinstance(robot, RobotRecord):
+        return robot
+    record = load_record(robot)
+    if record is None:
+        record = infer_record(Path(robot))
+    return record

@@ -122,7 +122,8 @@ def observability(robot, ranges: np.ndarray | None = None, rng: np.random.Genera
 
 def arm_fraction(robot, q: np.ndarray) -> float:
     """The mean fraction of image pixels that show a body moved by a chosen joint, at poses q (n, Dq) rad."""
-    renderer, camera, _ = robot._ensure_renderer()
+    view = robot._ensure_renderer()
+    renderer, camera = view.renderer, view.camera
     model = robot.model
     moving = model.body_weldid[model.geom_bodyid] != 0                 # (ngeom,): held bodies are welded to world
     data = mujoco.MjData(model)

@@ -3,12 +3,12 @@
 All arrays are numpy float64 and batched over N poses; q is in rad, positions in m, pixels in px as
 (u = column, v = row) with pixel centres at integer coordinates and the origin at the top-left pixel.
 Kinematic queries (fk, jacobian, render, observe, touch) run on a private MjData, so a caller stepping
-dynamics on `robot.data` keeps its state. The renderer is created lazily (first render), so a `Robot` is
-cheap to build in a worker process and its GL context belongs to the process that renders.
+dynamics on `robot.data` keeps its state. Images: `robot_render` (a renderer made on the first render, in the
+process that renders); the camera's geometry: `camera.FixedCamera`; argument checks: `robot_checks`.
 `fk`/`jacobian` call MuJoCo per pose (the reference); `observe` and the analytic model use the same hinge
 recursion vectorized over the batch (`chain.HingeChain`, equal to 1e-12) when the batch is large.
 What the model file does not say (ee, joints used, camera, image size, workspaces, actuators, gains) comes from
-the robot's record (`robot_record.RobotRecord`); `robot_build.build_model` compiles the arm it describes. Each
+the robot's record (`record.RobotRecord`, `infer.robot_record`); `build.build_model` compiles the arm. Each
 robot names its workspaces (joint boxes, `robot.workspaces`); `sampling_ranges` is the one it was loaded with.
 """
 
@@ -17,36 +17,23 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-import cv2
 import mujoco
 import numpy as np
 
 from bodyschema.datagen.body.build import ACTUATOR_KINDS, Built, build_model
-from bodyschema.datagen.body.camera import project
+from bodyschema.datagen.body.camera import FixedCamera
 from bodyschema.datagen.body.chain import HingeChain
-from bodyschema.datagen.body.record import RobotRecord, load_record, shipped_dir
-from bodyschema.datagen.body.render_scope import render_model
+from bodyschema.datagen.body.infer import robot_record
+from bodyschema.datagen.body.record import RobotRecord, shipped_dir
+from bodyschema.datagen.body.robot_checks import check_ranges, checked_image_size, checked_points, finite_float
+from bodyschema.datagen.body.robot_render import CameraRenderer, fit_offscreen
+from bodyschema.datagen.body.touch import touch_address, touch_at_rest
 from bodyschema.errors import must_be
 
-IMAGE_SIZE_RANGE = (8, 1024)   # px, per side; the MJCF offscreen buffers are 1024 × 1024
 LIMIT_TOLERANCE = 0.05         # rad; the simulator's soft joint limits let recorded q overshoot a little
 GRAVITY = 9.81                 # m/s², default magnitude (downward, −z)
 VECTORIZE_FROM = 256           # poses; smaller batches call MuJoCo per pose (numpy's per-op cost dominates)
 DEFAULT_WORKSPACE = "camera"   # a Robot renders and projects: by default it samples the poses its camera sees
-OFFSCREEN = 1024               # px: the offscreen buffer a model gets when its file asks for less
-RENDER_POSES = 64              # poses (seed 0) over which the renderer's copy finds the moving meshes' nearest depth
-_OPENCV_FROM_MUJOCO_CAM = np.diag([1.0, -1.0, -1.0])   # MuJoCo camera: x right, y up, looks along −z
-
-
-def robot_record(robot: str | Path | RobotRecord) -> RobotRecord:
-    """The record of a robot reference: a record as is, a shipped name or file with its record, else inferred."""
-    if isinstance(robot, RobotRecord):
-        return robot
-    record = load_record(robot)
-    if record is None:
-        from bodyschema.datagen.body.infer import infer_record
-        record = infer_record(Path(robot))
-    return record
 
 
 class Robot:
@@ -76,8 +63,7 @@ class Robot:
         self._qpos = self._kin.qpos                       # cached views into the private MjData (hot loops)
         self._ee = self._kin.site_xpos[self._site]
         self._cam = model.camera(self.camera_name).id
-        touch = [s for s in range(model.nsensor) if model.sensor_type[s] == mujoco.mjtSensor.mjSENS_TOUCH]
-        self._touch_adr = int(model.sensor_adr[touch[0]]) if touch else None
+        self._touch_adr = touch_address(model)
         self._position_actuated = bool(model.nu) and bool(np.all(model.actuator_biastype ==
                                                                  mujoco.mjtBias.mjBIAS_AFFINE))
         for box in record.workspaces.values():
@@ -85,9 +71,9 @@ class Robot:
         self.workspaces = {k: np.array(box, dtype=np.float64) for k, box in record.workspaces.items()}  # (Dq, 2) rad
         self.workspace = workspace                                                  # the one sampled from
         self.sampling_ranges = self.workspaces[workspace].copy()                    # (Dq, 2) rad
-        self._renderer = None
+        self._renderer: CameraRenderer | None = None
         self._chain = HingeChain(model, self._site)
-        self._camera_pose()
+        self._view = self._fixed_camera()
 
     # ---- pickling (a worker process gets its own copy) ----------------------------------------------------
     def __getstate__(self) -> dict:
@@ -120,10 +106,10 @@ class Robot:
         if workspace not in record.workspaces:
             raise ValueError(must_be("workspace", f"one of {tuple(record.workspaces)} for {record.name}", workspace,
                                      "Pass ranges explicitly for another joint box."))
-        image_size = _check_image_size(record.image_size if image_size is None else image_size)
+        image_size = checked_image_size(record.image_size if image_size is None else image_size)
         if actuators not in ACTUATOR_KINDS:
             raise ValueError(must_be("actuators", f"one of {ACTUATOR_KINDS}", actuators))
-        gravity = GRAVITY if gravity is None else _finite_float(gravity)
+        gravity = GRAVITY if gravity is None else finite_float(gravity)
         if not (gravity is not None and gravity >= 0):
             raise ValueError(must_be("gravity", "a finite magnitude >= 0 in m/s^2", gravity,
                                      "Pass 0 for no gravity; it always points down (-z)."))
@@ -131,7 +117,7 @@ class Robot:
             record = _with_camera(record, camera)
         built = build_model(record, actuators, text)
         built.model.opt.gravity[:] = (0.0, 0.0, -float(gravity))
-        _fit_offscreen(built.model, image_size)
+        fit_offscreen(built.model, image_size)
         return cls(record, built, image_size, rgb, workspace)
 
     @classmethod
@@ -148,64 +134,35 @@ class Robot:
 
     def check_ranges(self, ranges) -> None:
         """Raise the house ValueError unless `ranges` (Dq, 2) rad are ordered and inside the joint limits."""
-        try:
-            r = np.asarray(ranges, dtype=np.float64)
-        except (TypeError, ValueError):
-            r = None
-        if r is None or r.shape != (self.dq, 2) or not np.isfinite(r).all():
-            raise ValueError(must_be("sampling ranges", f"a finite array of shape ({self.dq}, 2) in rad", ranges,
-                                     f"One [low, high] per joint of {list(self.joint_names)}."))
-        for j, (lo, hi) in enumerate(r):
-            jlo, jhi = self.joint_limits[j]
-            if not (jlo <= lo < hi <= jhi):
-                raise ValueError(must_be(f"sampling range of {self.joint_names[j]}",
-                                         f"ordered and inside the joint limits [{jlo:.4f}, {jhi:.4f}] rad",
-                                         [float(lo), float(hi)], f"Fix the range in the record of {self.name}."))
+        check_ranges(ranges, self.joint_names, self.joint_limits, self.name)
 
     # ---- camera --------------------------------------------------------------------------------------
-    def _camera_pose(self) -> None:
+    def _fixed_camera(self) -> FixedCamera:
         # Cameras are fixed in the world: compute the pose once at qpos0 (mj_camlight sets cam_xpos/xmat).
         mujoco.mj_kinematics(self.model, self._kin)
         mujoco.mj_camlight(self.model, self._kin)
-        rot = _OPENCV_FROM_MUJOCO_CAM @ self._kin.cam_xmat[self._cam].reshape(3, 3).T   # world → camera
-        self._rot = rot
-        self._trans = -rot @ self._kin.cam_xpos[self._cam]
-        h, w = self.image_size
-        f = 0.5 * h / np.tan(0.5 * np.deg2rad(self.model.cam_fovy[self._cam]))   # px, square pixels
-        self._K = np.array([[f, 0.0, (w - 1) / 2], [0.0, f, (h - 1) / 2], [0.0, 0.0, 1.0]])
+        return FixedCamera.from_mujoco(self._kin.cam_xpos[self._cam], self._kin.cam_xmat[self._cam],
+                                       self.model.cam_fovy[self._cam], self.image_size)
 
     def intrinsics(self) -> np.ndarray:
         """K (3, 3) in px for the configured image size."""
-        return self._K.copy()
+        return self._view.K.copy()
 
     def extrinsics(self) -> np.ndarray:
         """(4, 4) world → camera, OpenCV convention (x right, y down, z forward)."""
-        t = np.eye(4)
-        t[:3, :3], t[:3, 3] = self._rot, self._trans
-        return t
+        return self._view.extrinsics()
 
     def project(self, xyz) -> np.ndarray:
         """(N, 3) m world → (N, 2) px (u = column, v = row)."""
-        return project(self._K, self.extrinsics(), self._check_points(xyz))
+        return self._view.project(checked_points(xyz))
 
     def in_view(self, q) -> np.ndarray:
         """(N, Dq) rad → (N,) bool: the ee lies in front of the camera and projects inside the image."""
-        xyz = self._fk_and_jacobian(self.check_q(q))[0]                  # (N, 3) m
-        depth = xyz @ self._rot[2] + self._trans[2]                      # (N,) m along the optical axis
-        px = project(self._K, self.extrinsics(), xyz)                    # (N, 2) px
-        h, w = self.image_size
-        return (depth > 0) & (px >= 0).all(axis=1) & (px[:, 0] <= w - 1) & (px[:, 1] <= h - 1)
+        return self._view.sees(self._fk_and_jacobian(self.check_q(q))[0])
 
     def project_jacobian(self, xyz) -> np.ndarray:
         """(N, 3) m → (N, 2, 3) d px / d m of `project`."""
-        xyz = self._check_points(xyz)
-        cam = xyz @ self._rot.T + self._trans                            # (N, 3)
-        f = self._K[0, 0]
-        inv_z = 1.0 / cam[:, 2:3]                                        # (N, 1)
-        # d(X/Z)/dx = (R₀ − (X/Z) R₂) / Z, likewise for Y
-        du = f * (self._rot[0][None] - cam[:, 0:1] * inv_z * self._rot[2][None]) * inv_z   # (N, 3)
-        dv = f * (self._rot[1][None] - cam[:, 1:2] * inv_z * self._rot[2][None]) * inv_z
-        return np.stack([du, dv], axis=1)
+        return self._view.project_jacobian(checked_points(xyz))
 
     # ---- kinematics ----------------------------------------------------------------------------------
     def fk(self, q, check: bool = True) -> np.ndarray:
@@ -266,20 +223,7 @@ class Robot:
         return self._render(self.check_q(q) if check else np.asarray(q, dtype=np.float64))
 
     def _render(self, q: np.ndarray) -> np.ndarray:
-        renderer, camera, rgb_buf = self._ensure_renderer()
-        m, d, qpos = self.model, self._kin, self._qpos
-        h, w = self.image_size
-        images = np.empty((q.shape[0], h, w, 3) if self.channels == 3 else (q.shape[0], h, w), dtype=np.uint8)
-        for q_i, image_i in zip(q, images):
-            qpos[:] = q_i
-            mujoco.mj_kinematics(m, d)
-            mujoco.mj_camlight(m, d)
-            renderer.update_scene(d, camera)
-            if self.channels == 3:
-                renderer.render(out=image_i)
-            else:                                         # ITU-R BT.601 luma, as cv2
-                cv2.cvtColor(renderer.render(out=rgb_buf), cv2.COLOR_RGB2GRAY, dst=image_i)
-        return images
+        return self._ensure_renderer().render(self.model, self._kin, q)
 
     @property
     def sensors(self) -> tuple[str, ...]:
@@ -293,19 +237,7 @@ class Robot:
         return self._touch(self.check_q(q))
 
     def _touch(self, q: np.ndarray) -> np.ndarray:
-        m, d, out = self.model, self._kin, np.empty((q.shape[0], 1))
-        d.qvel[:] = 0.0
-        for i in range(q.shape[0]):
-            d.qpos[:] = q[i]
-            mujoco.mj_kinematics(m, d)
-            mujoco.mj_collision(m, d)                     # cheap pre-check: no contact → no touch
-            if d.ncon == 0:
-                out[i, 0] = 0.0
-                continue
-            d.ctrl[:] = q[i] if self._position_actuated else 0.0    # position servos hold the pose
-            mujoco.mj_forward(m, d)
-            out[i, 0] = d.sensordata[self._touch_adr]
-        return out
+        return touch_at_rest(self.model, self._kin, self._touch_adr, self._position_actuated, q)
 
     def observe(self, q, image: bool = True) -> dict[str, np.ndarray]:
         """All observations of a batch: ee_xyz (N,3) m, ee_pixel (N,2) px, jacobian (N,3,Dq) m/rad as float32,
@@ -320,19 +252,12 @@ class Robot:
             out["touch"] = self._touch(q).astype(np.float32)
         return out
 
-    def _ensure_renderer(self):
+    def _ensure_renderer(self) -> CameraRenderer:
         if self._renderer is None:
-            h, w = self.image_size
-            ranges = self.workspaces["full"]
-            poses = np.random.default_rng(0).uniform(ranges[:, 0], ranges[:, 1], (RENDER_POSES, self.dq))
             shipped = self.record.model_path.parent == shipped_dir().resolve()
-            scene = render_model(self.model, self._cam, self.image_size, poses, simplify=not shipped)
-            self._renderer = mujoco.Renderer(scene, height=h, width=w)
-            self._mjv_camera = mujoco.MjvCamera()
-            self._mjv_camera.type = mujoco.mjtCamera.mjCAMERA_FIXED
-            self._mjv_camera.fixedcamid = self._cam
-            self._rgb_buf = np.empty((h, w, 3), dtype=np.uint8)
-        return self._renderer, self._mjv_camera, self._rgb_buf
+            self._renderer = CameraRenderer(self.model, self._cam, self.image_size, self.channels,
+                                            self.workspaces["full"], simplify=not shipped)
+        return self._renderer
 
     def close(self) -> None:
         """Free the GL context (if one was created)."""
@@ -369,39 +294,7 @@ class Robot:
                                      "Sample inside robot.sampling_ranges."))
         return q
 
-    def _check_points(self, xyz) -> np.ndarray:
-        xyz = np.asarray(xyz, dtype=np.float64)
-        if xyz.ndim != 2 or xyz.shape[1] != 3 or not np.isfinite(xyz).all():
-            raise ValueError(must_be("xyz", "a finite array of shape (N, 3) in m", xyz.shape))
-        return xyz
-
-
-def _finite_float(x) -> float | None:
-    try:
-        x = float(x)
-    except (TypeError, ValueError):
-        return None
-    return x if np.isfinite(x) else None
-
-
-def _check_image_size(size) -> tuple[int, int]:
-    lo, hi = IMAGE_SIZE_RANGE
-    try:
-        h, w = (int(s) for s in size)
-        ok = all(float(s) == int(s) for s in size) and lo <= h <= hi and lo <= w <= hi
-    except (TypeError, ValueError):
-        ok = False
-    if not ok:
-        raise ValueError(must_be("image_size", f"(H, W) with each side an integer in [{lo}, {hi}] px", size))
-    return h, w
-
 
 def _with_camera(record: RobotRecord, camera: str) -> RobotRecord:
     """The record looking through another camera of the model file."""
     return dataclasses.replace(record, camera={"name": camera})
-
-
-def _fit_offscreen(model: mujoco.MjModel, image_size: tuple[int, int]) -> None:
-    """A model file that asks for a small offscreen buffer (URDF: none) gets one the image fits in."""
-    model.vis.global_.offwidth = max(int(model.vis.global_.offwidth), OFFSCREEN, image_size[1])
-    model.vis.global_.offheight = max(int(model.vis.global_.offheight), OFFSCREEN, image_size[0])

@@ -184,7 +184,7 @@ def check_models_match(models: Sequence, robot) -> None:
 
 def robot_name(ref: str) -> str:
     """The name a robot reference (a shipped name, an MJCF/URDF/record path) gives its models' bodies."""
-    from bodyschema.datagen.body.robot import robot_record
+    from bodyschema.datagen.body.infer import robot_record
     return robot_record(ref).name
 
 
