@@ -122,8 +122,8 @@ def _debug_datagen(config) -> None:
     """--verbose: how the job is cut and where it runs (the shard plan depends on the config only)."""
     if not logger.isEnabledFor(logging.DEBUG):
         return
-    from bodyschema.datagen.generate import chunk_len
     from bodyschema.datagen.guards import n_shards
+    from bodyschema.datagen.shards import chunk_len
 
     where = os.environ.get("RAY_ADDRESS", "a local cluster") if config.backend == "ray" else "local processes"
     logger.debug("datagen: %d samples in %d shards of %d rows; backend %s, %d workers on %s", config.n,

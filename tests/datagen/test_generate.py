@@ -13,8 +13,10 @@ import pytest
 import zarr
 
 import bodyschema.datagen.generate as gen
+import bodyschema.datagen.shards as shard_job
 from bodyschema.datagen.config import DatagenConfig
-from bodyschema.datagen.generate import generate, plan_shards
+from bodyschema.datagen.generate import generate
+from bodyschema.datagen.shards import plan_shards
 from bodyschema.datagen.store.schema import DONE, is_complete
 from bodyschema.datagen.store.validate import validate_store
 from tests.datagen.export_stores import without_targets
@@ -66,7 +68,7 @@ def test_shards_tile_the_samples_on_chunk_boundaries_whatever_the_workers():
         assert shards == plan_shards(DatagenConfig(**{**cfg.to_dict(), "workers": 2}))
         assert shards[0].start == 0 and shards[-1].stop == 1000
         assert all(a.stop == b.start for a, b in zip(shards, shards[1:]))
-        assert all(s.start % gen.chunk_len(cfg) == 0 for s in shards)
+        assert all(s.start % shard_job.chunk_len(cfg) == 0 for s in shards)
     babble = plan_shards(DatagenConfig(n=1000, sampler="babble", shard_size=450))  # 200-sample episodes
     assert [s.episode_lengths for s in babble] == [(200, 200), (200, 200), (200,)]
 
@@ -204,7 +206,7 @@ def test_full_disk_fails_before_any_work(tmp_path, monkeypatch):
 def test_disk_full_midway_leaves_an_incomplete_store_that_resumes(tmp_path, monkeypatch):
     out = tmp_path / "d.zarr"
     cfg = DatagenConfig(n=64, shard_size=16, images=False, out=out)
-    real, calls = gen.write_shard, []
+    real, calls = shard_job.write_shard, []
 
     def write_then_fail(root, start, arrays):
         calls.append(start)
@@ -212,11 +214,11 @@ def test_disk_full_midway_leaves_an_incomplete_store_that_resumes(tmp_path, monk
             raise OSError(errno.ENOSPC, "No space left on device")
         real(root, start, arrays)
 
-    monkeypatch.setattr(gen, "write_shard", write_then_fail)
+    monkeypatch.setattr(shard_job, "write_shard", write_then_fail)
     with pytest.raises(OSError, match="output location must be writable.*No space left"):
         generate(cfg, progress=False)
     assert not is_complete(out) and any("complete" in p for p in validate_store(out))
-    monkeypatch.setattr(gen, "write_shard", real)
+    monkeypatch.setattr(shard_job, "write_shard", real)
     generate(cfg, progress=False)
     assert validate_store(out) == []
 
