@@ -19,7 +19,8 @@ import argparse
 import torch
 from jacobian import interleaved_medians  # bench/jacobian.py: this folder is on sys.path when run as a script
 
-from bodyschema.models._nn_fit import NetModel, build
+from bodyschema.models._nn_fit import build
+from bodyschema.models._nn_model import NetModel
 from bodyschema.models.contract import load_model
 from bodyschema.models.pixel import PixelDecoder, fast_layout
 from bodyschema.models.scaling import BodySpec

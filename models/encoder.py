@@ -17,7 +17,8 @@ import torch
 from torch import nn
 
 from bodyschema.errors import must_be
-from bodyschema.models._nn_fit import NetHolder, TrainSettings, build, check_fit_data, check_val, train
+from bodyschema.models._nn_fit import TrainSettings, build, check_fit_data, check_val, train
+from bodyschema.models._nn_model import NetHolder
 from bodyschema.models.contract import BaseSensoryModel, check_body, register_kind
 from bodyschema.models.estimator import Estimator
 from bodyschema.models.pixel import fast_layout, image_layout

@@ -18,7 +18,6 @@ from torch import nn
 
 from bodyschema.errors import must_be
 from bodyschema.models._nn_fit import (
-    NetModel,
     TrainSettings,
     build,
     check_fit_data,
@@ -26,6 +25,7 @@ from bodyschema.models._nn_fit import (
     output_standardizer,
     train,
 )
+from bodyschema.models._nn_model import NetModel
 from bodyschema.models.contract import BaseSensoryModel, as_input, register_kind
 from bodyschema.models.scaling import BodySpec
 

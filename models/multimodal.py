@@ -23,7 +23,6 @@ from bodyschema.base.modalities import is_image
 from bodyschema.errors import must_be
 from bodyschema.models._nn_fit import (
     LeafParams,
-    NetModel,
     TrainSettings,
     build,
     check_fit_data,
@@ -31,6 +30,7 @@ from bodyschema.models._nn_fit import (
     output_standardizer,
     train,
 )
+from bodyschema.models._nn_model import NetModel
 from bodyschema.models.capabilities import Capabilities
 from bodyschema.models.contract import BaseSensoryModel, load_model, register_kind
 from bodyschema.models.estimator import Estimator

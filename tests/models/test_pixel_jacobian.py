@@ -4,7 +4,7 @@ path) and against central finite differences, for both capacities, grayscale and
 import pytest
 import torch
 
-from bodyschema.models._nn_fit import NetModel
+from bodyschema.models._nn_model import NetModel
 from tests.models.test_pixel import HW, joint_angles, tiny_decoder
 from tests.threads import one_thread
 

@@ -27,7 +27,8 @@ TOY_FILE = textwrap.dedent('''
     import torch
     from torch import nn
 
-    from bodyschema.models._nn_fit import NetModel, TrainSettings, build, check_fit_data, check_val, train
+    from bodyschema.models._nn_fit import TrainSettings, build, check_fit_data, check_val, train
+    from bodyschema.models._nn_model import NetModel
     from bodyschema.models.configs import ModelConfig
     from bodyschema.models.contract import BaseSensoryModel, register_kind
 
