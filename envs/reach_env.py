@@ -4,7 +4,7 @@ The arm is the control layer's simulator (`control.sim.ArmBatch`, a batch of one
 control rate and duration ([reaching] control_hz, duration_s). `reset(seed=...)` draws, from `np_random`, a goal pose
 the camera sees (`control.targets.in_view_targets`) and a start pose uniform in the robot's sampling ranges; the
 arm starts there at rest. The goal is what the goal sensor reads at the goal pose (the env's own sensors, `_SENSORS`,
-as reaching's `benchmark.make_goal` reads it): reachable by construction. `options={"target": q, "start": q}`
+as reaching's `goals.make_goal` reads it): reachable by construction. `options={"target": q, "start": q}`
 (rad, (Dq,)) set either pose instead.
 Actions (`action=`): "position" servo targets (servo robots), "torque" motor torques (torque robots), or "velocity"
 joint velocity commands, integrated into the servo targets (servos) or into the setpoint of the joint impedance

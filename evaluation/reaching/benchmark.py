@@ -36,30 +36,29 @@ import numpy as np
 import torch
 
 from bodyschema.aif.action import ActionConfig, VelocityController
-from bodyschema.aif.aic import AICConfig, AICController
+from bodyschema.aif.aic import AICController
+from bodyschema.aif.aic_config import AICConfig
 from bodyschema.aif.goal_inference import goal_precision
 from bodyschema.aif.perception_config import FlowSettings, PerceptionConfig
-from bodyschema.base import modalities
 from bodyschema.base.modalities import is_image
 from bodyschema.control.loop import ImpedancePolicy, ServoPolicy, TorquePolicy, VelocityPolicy, rollout
 from bodyschema.control.pd import PDController
 from bodyschema.control.robot_defaults import reaching_defaults
 from bodyschema.control.sim import control_substeps
 from bodyschema.control.targets import in_view_targets
-from bodyschema.datagen.body.reach import arm_reach
 from bodyschema.datagen.body.record import check_robot_ref
 from bodyschema.datagen.samplers import uniform
 from bodyschema.errors import must_be
 from bodyschema.evaluation.core.config import TrialsConfig
 from bodyschema.evaluation.core.runs import new_run
 from bodyschema.evaluation.core.seeds import REACHING, eval_rng
-from bodyschema.evaluation.core.sensing import Sensors, sense
+from bodyschema.evaluation.core.sensing import Sensors
 from bodyschema.evaluation.core.specs import load_robot, models_field, resolve_encoder, resolve_models, robot_name
 from bodyschema.evaluation.reaching import goal_pose, report as reaching_report
+from bodyschema.evaluation.reaching.goals import builtin_sensors, check_goal, goal_names, make_goal
 from bodyschema.evaluation.reaching.servo_baseline import servo_targets
 
 PANDA_CONTROLLERS = ("velocity", "aic")
-GOAL_PREFERENCE = ("ee_xyz", "ee_pixel", "joints")   # "auto": the first camera among the models, else of these
 
 
 @dataclass(frozen=True)
@@ -144,12 +143,7 @@ class Episodes:
     extra: dict = field(default_factory=dict)
 
 
-# ---- goals ------------------------------------------------------------------------------------------------
-def builtin_sensors(robot) -> list[str]:
-    """Sensors a controller has without a model: a torque-driven arm's AIC reads its joint encoders itself."""
-    return ["joints"] if robot.actuation == "torque" else []
-
-
+# ---- episodes (what may be a goal and whether it is reachable: goals.py) ------------------------------------
 def goal_modality(config: ReachingRunConfig, models, robot) -> str:
     names = [m.modality for m in models] + builtin_sensors(robot)
     if config.goal != "auto":
@@ -157,44 +151,6 @@ def goal_modality(config: ReachingRunConfig, models, robot) -> str:
             raise ValueError(must_be("goal", f"the modality of one of the models {names}", config.goal))
         return config.goal
     return next(g for g in goal_names() if g in names)
-
-
-def goal_names() -> tuple[str, ...]:
-    """The goal modalities in the order "auto" prefers them: every camera's, then the vector ones."""
-    return (*(m.name for m in modalities.images()), *GOAL_PREFERENCE)
-
-
-def make_goal(robot, modality: str, q: np.ndarray) -> torch.Tensor:
-    """What the goal sensor reads at poses q (N, Dq) rad: joints rad, ee_xyz m, ee_pixel px, image in [0, 1]."""
-    return torch.from_numpy(sense(robot, modality, q))
-
-
-def check_goal(robot, modality: str, goal, output_shape: tuple[int, ...]) -> None:
-    """Raise the house error for a malformed goal or one the arm cannot reach (outside the joint limits, the
-    arm's reach or the image)."""
-    shape = tuple(getattr(goal, "shape", ()))
-    if not isinstance(goal, torch.Tensor) or len(shape) != 1 + len(output_shape) or shape[1:] != tuple(output_shape):
-        raise ValueError(must_be(f"{modality} goal", f"a tensor of shape (N, {', '.join(map(str, output_shape))})",
-                                 shape or type(goal).__name__))
-    x = goal.numpy()
-    if not np.isfinite(x).all():
-        raise ValueError(must_be(f"{modality} goal", "finite", "NaN or inf values"))
-    if modality == "joints":
-        robot.check_q(x)
-    elif modality == "ee_pixel":
-        h, w = robot.image_size
-        outside = (x[:, 0] < 0) | (x[:, 0] > w - 1) | (x[:, 1] < 0) | (x[:, 1] > h - 1)
-        if outside.any():
-            raise ValueError(must_be("ee_pixel goal", f"inside the {w}×{h} px image", x[outside][0].tolist(),
-                                     "A pixel the camera cannot see is not a reachable goal."))
-    elif modality == "ee_xyz":
-        base, reach = arm_reach(robot.model, robot.ee_site)   # a bound: a goal beyond it is unreachable
-        far = np.linalg.norm(x - base, axis=1) > reach
-        if far.any():
-            raise ValueError(must_be("ee_xyz goal", f"within the arm's reach ({reach:.3f} m from {base.round(3)})",
-                                     x[far][0].round(4).tolist(), "Pick a goal inside the workspace."))
-    elif is_image(modality) and ((x < 0) | (x > 1)).any():
-        raise ValueError(must_be("image goal", "intensities in [0, 1] (uint8 / 255)", (x.min(), x.max())))
 
 
 def spread_ranges(robot, spread: float) -> np.ndarray:

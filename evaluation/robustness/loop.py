@@ -22,12 +22,8 @@ from bodyschema.evaluation.core.runs import new_run
 from bodyschema.evaluation.core.specs import resolve_models
 from bodyschema.evaluation.core.tables import markdown_table, write_csv
 from bodyschema.evaluation.reaching import report as reaching_report
-from bodyschema.evaluation.reaching.benchmark import (
-    ReachingConfig,
-    ReachingRunConfig,
-    builtin_sensors,
-    simulate,
-)
+from bodyschema.evaluation.reaching.benchmark import ReachingConfig, ReachingRunConfig, simulate
+from bodyschema.evaluation.reaching.goals import builtin_sensors
 from bodyschema.evaluation.robustness.units import noise_label
 
 COLUMNS = ("success", "goal_success", "ee_err_mm", "ee_err_median_mm", "time_to_reach_s", "failed")

@@ -38,7 +38,7 @@ def test_a_vector_sensor_row_is_in_the_schema_of_robots_that_have_it(rows):
 def test_a_second_camera_row_is_an_image_everywhere(rows, tmp_path):
     from bodyschema.evaluation.levels.targets import add_noise
     from bodyschema.evaluation.reaching import goal_pose
-    from bodyschema.evaluation.reaching.benchmark import goal_names
+    from bodyschema.evaluation.reaching.goals import goal_names
 
     f = features(2, (8, 12), sensors=(), babble=False)
     assert list(f)[-2:] == ["image", "wrist_image"] and f["wrist_image"]["dtype"] == "uint8"

@@ -13,15 +13,8 @@ from bodyschema.control.loop import rollout
 from bodyschema.control.sim import control_substeps
 from bodyschema.evaluation.core.sensing import Sensors
 from bodyschema.evaluation.reaching import goal_pose
-from bodyschema.evaluation.reaching.benchmark import (
-    ReachingConfig,
-    aif_policy,
-    check_goal,
-    make_goal,
-    prepare,
-    run_reaching,
-    simulate,
-)
+from bodyschema.evaluation.reaching.benchmark import ReachingConfig, aif_policy, prepare, run_reaching, simulate
+from bodyschema.evaluation.reaching.goals import check_goal, make_goal
 from bodyschema.evaluation.reaching.report import time_to_reach
 
 SHORT = dict(trials=4, duration=1.5, mlflow=False, progress=False)

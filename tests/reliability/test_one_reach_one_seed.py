@@ -15,7 +15,7 @@ from bodyschema.datagen.body.reach import arm_reach
 from bodyschema.datagen.body.robot import Robot
 from bodyschema.datagen.samplers import uniform
 from bodyschema.evaluation.core.seeds import EVAL_STREAM, PURPOSE, REACHING, eval_rng
-from bodyschema.evaluation.reaching.benchmark import check_goal
+from bodyschema.evaluation.reaching.goals import check_goal
 
 
 @pytest.fixture(scope="module", params=["nao_arm", "planar2", "panda"])
