@@ -10,12 +10,8 @@ from __future__ import annotations
 import math
 import re
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from bodyschema.errors import must_be
-
-if TYPE_CHECKING:
-    from bodyschema.datagen.body.record import RobotRecord
 
 MODEL_SUFFIXES = (".xml", ".urdf")
 ACTUATORS = ("model", "servos")              # the model's own actuators | position servos added with [actuators] gains
@@ -28,8 +24,9 @@ NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}")   # a file name e
 BENCHMARK_SECTIONS = ("reaching",)
 
 
-def record_problems(r: RobotRecord) -> list[str]:
-    """Every problem of a record's values, as house lines naming the key; [] for a valid record."""
+def record_problems(r) -> list[str]:
+    """Every problem of a record's values (`r`: a `record.RobotRecord`, which calls this as it is built, so this
+    module cannot import it), as house lines naming the key; [] for a valid record."""
     p = []
     if not (isinstance(r.name, str) and NAME_PATTERN.fullmatch(r.name)):
         p.append(must_be("record `name`", "1-64 letters, digits, '_', '-' or '.', not starting with '.' or '-'",
