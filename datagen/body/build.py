@@ -1,6 +1,6 @@
 """`build_model`: a robot record → the MuJoCo model the pipeline uses (an arm of the chosen hinges only).
 
-From the model file (MJCF, or URDF through `urdf.load_urdf`) the spec is edited before it is compiled:
+From the model file (read by its format, formats.py: MJCF, URDF, ...) the spec is edited before it is compiled:
 - every joint the record does not use is welded at its held value (`hold`, else its reference pose): its rotation
   (slide: its shift) is folded into its body's frame and the joint removed, with the actuators, sensors, equality
   constraints and keyframes that name it. A humanoid's free root is welded where the model puts it, so the
@@ -17,14 +17,13 @@ from __future__ import annotations
 
 import hashlib
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import mujoco
 import numpy as np
 
-from bodyschema.datagen.body.model_files import Budget, check_spec, decode, mjcf_files, one_line, parse_xml
+from bodyschema.datagen.body import formats
+from bodyschema.datagen.body.model_files import Budget, check_spec, decode, one_line
 from bodyschema.datagen.body.record import AUTO_CAMERA, EE_SITE, RobotRecord
-from bodyschema.datagen.body.urdf import load_urdf
 from bodyschema.errors import must_be
 
 ACTUATOR_KINDS = ("position", "torque")
@@ -64,24 +63,9 @@ def read_source(record: RobotRecord, text: str | None = None) -> tuple[mujoco.Mj
         text = decode(raw, path)
     else:
         raw = text.encode()
-    roots = [path.parent] + ([record.mesh_path] if record.mesh_path else [])
-    replaced = {}
-    if path.suffix.lower() == ".urdf":
-        spec, meshes, replaced = load_urdf(path, text, record.mesh_path, record.visual, budget)
-    else:
-        spec, meshes = _mjcf_spec(path, text, roots, budget)
+    spec, meshes, replaced = formats.of(path).read(path, text, record, budget)
     check_spec(spec, path)
     return spec, Source(str(path), text, hashlib.sha256(raw).hexdigest(), meshes, replaced)
-
-
-def _mjcf_spec(path: Path, text: str, roots: list[Path], budget: Budget) -> tuple[mujoco.MjSpec, dict[str, str]]:
-    includes, meshes = mjcf_files(parse_xml(text, path, "MJCF"), path, roots, budget)
-    try:
-        spec = mujoco.MjSpec.from_string(text, include=includes or None)
-    except (ValueError, RuntimeError) as e:
-        raise ValueError(must_be(f"the MJCF {path}", "a model MuJoCo parses", one_line(e))) from e
-    spec.modelfiledir = str(path.parent)       # meshes and textures resolve as if read from the file
-    return spec, meshes
 
 
 def build_model(record: RobotRecord, actuators: str = "position", text: str | None = None) -> Built:

@@ -68,12 +68,12 @@ class RobotCameraArgs:
 
 
 def run_init(args: RobotInitArgs) -> int:
+    from bodyschema.datagen.body import formats
     from bodyschema.datagen.body.infer import infer_record
     from bodyschema.datagen.body.record import dumps_toml, write_record
-    from bodyschema.datagen.body.record_checks import MODEL_SUFFIXES
 
-    if args.model.suffix.lower() not in MODEL_SUFFIXES or not args.model.is_file():
-        raise ValueError(must_be("FILE", "an existing MJCF (.xml) or URDF (.urdf) file", str(args.model)))
+    if args.model.suffix.lower() not in formats.suffixes() or not args.model.is_file():
+        raise ValueError(must_be("FILE", f"an existing {formats.described()} file", str(args.model)))
     out = args.out or args.model.with_suffix(".toml")
     if out.exists() and not args.overwrite:
         raise FileExistsError(must_be("--out", "a new path", str(out), "Pass --overwrite to replace the record."))

@@ -81,9 +81,14 @@ def safe_name(stem: str) -> str:
 
 # ---- name ------------------------------------------------------------------------------------------------
 def file_name(text: str, path: Path) -> str:
-    """The robot's name as its file gives it (URDF <robot name>, MJCF <mujoco model>), made safe; else the stem."""
-    root = parse_xml(text, path, "model file")
-    name = safe_name(root.get("name" if root.tag == "robot" else "model") or path.stem)
+    """The robot's name as its file gives it (URDF <robot name>, MJCF <mujoco model>), made safe; else the stem
+    (also for a format that is not XML: its reader has parsed the file already, so a parse error here means that)."""
+    try:
+        root = parse_xml(text, path, "model file")
+    except ValueError:
+        root = None
+    given = root.get("name" if root.tag == "robot" else "model") if root is not None else None
+    name = safe_name(given or path.stem)
     # a shipped robot's name would have its stores checked against the shipped model (example-robot-data's Panda)
     return f"{name}_{path.suffix.lstrip('.').lower()}" if name in SHIPPED else name
 

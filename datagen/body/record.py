@@ -24,7 +24,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from bodyschema.datagen.body.record_checks import BENCHMARK_SECTIONS, MODEL_SUFFIXES, record_problems
+from bodyschema.datagen.body import formats
+from bodyschema.datagen.body.record_checks import BENCHMARK_SECTIONS, record_problems
 from bodyschema.errors import must_be
 
 RECORD_SUFFIX = ".toml"
@@ -117,18 +118,18 @@ SHIPPED = _shipped_names()
 
 def is_robot_file(ref: str) -> bool:
     """True when `ref` names a file (a model or record suffix), False for a shipped robot's name."""
-    return Path(str(ref)).suffix.lower() in (*MODEL_SUFFIXES, RECORD_SUFFIX)
+    return Path(str(ref)).suffix.lower() in (*formats.suffixes(), RECORD_SUFFIX)
 
 
 def check_robot_ref(ref: object) -> str | None:
     """The house problem with a robot reference (a shipped name or an existing .xml/.urdf/.toml file), or None."""
-    expected = f"one of {SHIPPED} or a path to an MJCF (.xml), URDF (.urdf) or robot record (.toml)"
+    expected = f"one of {SHIPPED} or a path to an {formats.described()} file or a robot record (.toml)"
     if not isinstance(ref, (str, Path)) or not str(ref):
         return must_be("robot", expected, ref)
     if str(ref) in SHIPPED:
         return None
     if not is_robot_file(str(ref)):
-        return must_be("robot", expected, str(ref), "Other model formats: convert them to MJCF or URDF first.")
+        return must_be("robot", expected, str(ref), "Other model formats: convert them to one of these first.")
     if not Path(ref).is_file():
         return must_be("robot", f"{expected} that exists", str(ref), "Check the path (relative to the cwd).")
     return None
@@ -146,7 +147,7 @@ def load_record(ref: str | Path) -> RobotRecord | None:
     if problem:
         raise ValueError(problem)
     path = shipped_dir() / f"{ref}.toml" if str(ref) in SHIPPED else Path(ref)
-    if path.suffix.lower() in MODEL_SUFFIXES:
+    if path.suffix.lower() in formats.suffixes():
         sibling = path.with_suffix(RECORD_SUFFIX)
         if not sibling.is_file():
             return None

@@ -11,9 +11,9 @@ import math
 import re
 from pathlib import Path
 
+from bodyschema.datagen.body import formats
 from bodyschema.errors import must_be
 
-MODEL_SUFFIXES = (".xml", ".urdf")
 ACTUATORS = ("model", "servos")              # the model's own actuators | position servos added with [actuators] gains
 VISUALS = ("mesh", "collision", "primitives")   # URDF: render the visual meshes | the collision geometry instead |
                                                 # capsules and boxes from the links (no mesh read; datagen/primitives)
@@ -36,9 +36,9 @@ def record_problems(r) -> list[str]:
             return [*p, must_be(f"record `{key}`", f"a table ([{key}] with its keys)", getattr(r, key))]
     if not isinstance(r.mesh_dir, str):
         p.append(must_be("record `mesh_dir`", "a folder path (text), relative to the record", r.mesh_dir))
-    if not (isinstance(r.model, str) and Path(r.model).suffix.lower() in MODEL_SUFFIXES):
-        p.append(must_be("record `model`", "a path to an MJCF (.xml) or URDF (.urdf) file", r.model,
-                         "Other formats: convert them to MJCF or URDF first."))
+    if not (isinstance(r.model, str) and Path(r.model).suffix.lower() in formats.suffixes()):
+        p.append(must_be("record `model`", f"a path to an {formats.described()} file", r.model,
+                         "Other formats: convert them to one of these first (or add a reader: formats.py)."))
     size = r.image_size
     if not (isinstance(size, tuple) and len(size) == 2 and all(isinstance(s, int) and 8 <= s <= 1024 for s in size)):
         p.append(must_be("record `image_size`", "[H, W] with integers in [8, 1024] px", size))

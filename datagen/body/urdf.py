@@ -1,4 +1,4 @@
-"""`load_urdf`: a URDF as a MuJoCo spec, its meshes found and checked first.
+"""`read_urdf` (the URDF row of formats.py): a URDF as a MuJoCo spec, its meshes found and checked first.
 
 MuJoCo compiles URDF itself but neither resolves `package://` paths nor reads every mesh format. Each mesh path is
 resolved here: `package://PKG/REST` in the folder named PKG nearest above the URDF (the ROS package holding it), then
@@ -28,6 +28,11 @@ MIN_MASS, MIN_INERTIA = 1e-4, 1e-8          # kg, kg·m²: MuJoCo's compiler rai
 
 
 PRIMITIVES = "`bodyschema robot init FILE --visual primitives` draws capsules and boxes sized from the links instead"
+
+
+def read_urdf(path: Path, text: str, record, budget: Budget) -> tuple[mujoco.MjSpec, dict[str, str], dict]:
+    """The URDF row of formats.py: `load_urdf` with the record's `mesh_dir` and `visual`."""
+    return load_urdf(path, text, record.mesh_path, record.visual, budget)
 
 
 def load_urdf(path: Path, text: str, mesh_dir: Path | None, visual: str, budget: Budget | None = None
