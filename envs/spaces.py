@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 from gymnasium import spaces
 
+from bodyschema.base import modalities
 from bodyschema.datagen.body.reach import arm_reach
 from bodyschema.datagen.body.robot import LIMIT_TOLERANCE
 
@@ -53,7 +54,7 @@ def image_space(robot) -> spaces.Box:
 
 
 def modality_space(robot, modality: str) -> spaces.Box:
-    if modality == "image":
+    if modalities.is_image(modality):
         return image_space(robot)
     bounds = {"joints": joints_bounds, "ee_xyz": reach_bounds, "ee_pixel": pixel_bounds}[modality](robot)
     return _box(bounds[:, 0], bounds[:, 1])

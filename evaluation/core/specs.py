@@ -18,6 +18,7 @@ from typing import Annotated
 
 import numpy as np
 
+from bodyschema.base import modalities
 from bodyschema.cli_marks import Flag
 from bodyschema.errors import must_be
 
@@ -140,7 +141,7 @@ def load_robot(models: Sequence, image_size: tuple[int, int] | None = None, actu
     models carry: `models.body_robot`), with the camera the image model (if any) was trained for, its sampling
     ranges the joint box every model was trained on."""
     from bodyschema.models.body_robot import body_robot
-    image = next((m for m in models if m.modality == "image"), None)
+    image = next((m for m in models if modalities.is_image(m.modality)), None)
     rgb = False
     if image is not None:
         image_size = image_size or tuple(image.output_shape[:2])

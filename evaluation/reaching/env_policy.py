@@ -12,6 +12,7 @@ from collections.abc import Sequence
 import numpy as np
 import torch
 
+from bodyschema.base import modalities
 from bodyschema.envs.policies import EpisodePolicy, Sensed
 from bodyschema.errors import must_be
 from bodyschema.evaluation.core.specs import check_models_match, resolve_encoder, resolve_models
@@ -37,7 +38,7 @@ class AIFPolicy(EpisodePolicy):
         check_models_match(self.models, env.robot)
         names = [m.modality for m in self.models]
         benchmark.goal_modality(config, self.models, env.robot)                  # the goal must be a model's
-        if "image" in names and not env.image:
+        if modalities.images_in(names) and not env.image:
             raise ValueError(must_be("the env's image", "True for an image model", env.image,
                                      "Make the env with image=True."))
         self.config = config
@@ -69,7 +70,7 @@ class AIFPolicy(EpisodePolicy):
 def _reading(modality: str, x: np.ndarray) -> torch.Tensor:
     """An observation as a sensory model reads it: (1, *out) float64, images as intensity in [0, 1]."""
     x = np.asarray(x, dtype=np.float64)
-    return torch.from_numpy(x / IMAGE_SCALE if modality == "image" else x)[None]
+    return torch.from_numpy(x / IMAGE_SCALE if modalities.is_image(modality) else x)[None]
 
 
 def _models(models: Sequence | None, env, tracking_uri: str | None) -> list:
