@@ -41,10 +41,10 @@ import signal
 import sys
 import traceback
 
-from bodyschema import commands, config_file, log, threads, tyro_marks
+from bodyschema import commands, log, threads
 from bodyschema.errors import expected_types, explain
+from bodyschema.parsing import parse_command
 from bodyschema.tracking_check import check_tracking_first
-from bodyschema.training.sweep_config import check_sweep_flags
 
 logger = logging.getLogger("bodyschema.cli")    # not __name__: run as `python -m bodyschema.cli` it is __main__
 
@@ -58,21 +58,6 @@ def run(command: commands.Command, config, create: bool = False) -> int:
 def progress_flag(argv: list[str]) -> bool:
     """The CLI's progress bars: on unless --quiet or a --no-progress flag (any config's) was given."""
     return log.progress_bars() and not any(a.split("=")[0].endswith("no-progress") for a in argv)
-
-
-# ---- the error boundary ----------------------------------------------------------------------------------
-def parse_command(argv: list[str]):
-    """The config a command line (after `bodyschema`, without the logging flags) stands for; a parsing error is
-    tyro's message box and exit 2, a config's own check (a ValueError) is raised for the house error."""
-    check_sweep_flags(argv)
-    argv, file = config_file.split_flag(argv)
-    words = commands.words_of(argv)
-    if file is None:
-        return tyro_marks.cli(commands.tyro_type(words), prog="bodyschema", args=argv, description=DESCRIPTION)
-    command = " ".join(["bodyschema", *words])                  # --config FILE: the file's values are defaults
-    config_type = config_file.command_type(commands.tyro_type(words), words)
-    default = config_file.load_config(file, config_type, command)
-    return tyro_marks.cli(config_type, prog=command, args=argv[len(words):], default=default)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -134,13 +119,6 @@ def after_interrupt(command: str) -> str:
     return "Run the same command again; it starts over."
 
 
-DESCRIPTION = ("A robot learns its body by motor babbling and perceives it by active inference. --debug (or "
-               "BODYSCHEMA_DEBUG=1) shows the traceback behind an error; --quiet: warnings only, no progress bars; "
-               "--verbose: debug lines (configs resolved, steps timed) and MLflow's own logging; --create: a command "
-               "that talks to MLflow may create a local tracking store and its folder; --threads N (or "
-               "BODYSCHEMA_THREADS): torch's threads, by default measured, 1 on a busy machine (each before or after "
-               "the subcommand). `<command> --config FILE`: its fields from a TOML/YAML file or a run.json, flags "
-               "override the file; --version: the package's version.")
 # tyro names a nested subcommand's inner dataclass `__tyro-dummy-inner__` (and its flags `__tyro_dummy_inner__.x`);
 # a value error raised while it builds the config can carry that name, which means nothing to a user.
 TYRO_DUMMY = re.compile(r"_{1,2}tyro[-_]dummy[-_]inner_{1,2}[.\-_]?")

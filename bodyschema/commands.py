@@ -13,13 +13,15 @@ carries its name and help.
 from __future__ import annotations
 
 import dataclasses
+import importlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Annotated, Union
 
 import tyro
 
-from bodyschema import export_commands as export, runners
+from bodyschema import export_commands as export
+from bodyschema.command_configs import RegistryList, RegistryPromote, ValidateArgs
 from bodyschema.datagen.body import commands as robot
 from bodyschema.datagen.config import DatagenConfig
 from bodyschema.datagen.exchange.importers.config import ImportConfig
@@ -60,9 +62,10 @@ def _is(cls: type) -> Callable[[], type]:
 def table() -> list[Command]:
     """Every command, in the order of the help."""
     return [
-        Command(("datagen",), "Generate a motor-babbling dataset (Zarr v3).", _is(DatagenConfig), runners.run_datagen),
+        Command(("datagen",), "Generate a motor-babbling dataset (Zarr v3).", _is(DatagenConfig),
+                _in_runners("run_datagen")),
         Command(("validate",), "Check a dataset store; exit 0 when valid, else list every problem.",
-                _is(runners.ValidateArgs), runners.run_validate),
+                _is(ValidateArgs), _in_runners("run_validate")),
         Command(("show",), "Summarize a dataset store and draw a contact sheet of its images (PNG).",
                 _is(export.ShowArgs), export.run_show),
         Command(("robot", "init"), "Write the robot record of an MJCF/URDF file with inferred values, to edit.",
@@ -72,29 +75,46 @@ def table() -> list[Command]:
         Command(("robot", "camera"), "Place a record's camera anew for its (edited) workspace.",
                 _is(robot.RobotCameraArgs), robot.run_camera),
         Command(("import",), "Import recordings (images + CSV of angles, HDF5, LeRobot v3.0) into a dataset store.",
-                _is(ImportConfig), runners.run_import),
-        *(Command(("train", kind), help, _is(config), runners.run_train, mlflow=True)
+                _is(ImportConfig), _in_runners("run_import")),
+        *(Command(("train", kind), help, _is(config), _in_runners("run_train"), mlflow=True)
           for kind, config, help in train_commands()),
         Command(("sweep",), "Grid or random search over a kind's hyper-parameters on Ray Tune: one MLflow parent run, "
-                "a child per trial, the best registered (champion if better).", _is(SweepConfig), runners.run_sweep,
-                mlflow=True),
+                "a child per trial, the best registered (champion if better).", _is(SweepConfig),
+                _in_runners("run_sweep"), mlflow=True),
         Command(("registry", "list"), "List registered model versions, metrics and aliases.",
-                _is(runners.RegistryList), runners.run_registry_list, mlflow=True, reads_models=True),
-        Command(("registry", "promote"), "Move the `champion` alias to NAME's VERSION.", _is(runners.RegistryPromote),
-                runners.run_registry_promote, mlflow=True, reads_models=True),
+                _is(RegistryList), _in_runners("run_registry_list"), mlflow=True, reads_models=True),
+        Command(("registry", "promote"), "Move the `champion` alias to NAME's VERSION.", _is(RegistryPromote),
+                _in_runners("run_registry_promote"), mlflow=True, reads_models=True),
         Command(("export", "dataset"), "A dataset store as HDF5 or in LeRobot's v3.0 layout.",
                 _is(export.ExportDatasetArgs), export.run_export_dataset),
         Command(("export", "onnx"), "A fitted model as ONNX: rad in, prediction out, checked with onnxruntime.",
                 _is(export.ExportOnnxArgs), export.run_export_onnx),
-        *(Command(("evaluate", *b.words), b.help, lambda b=b: b.config, runners.printing_paths(lambda b=b: b.run),
+        *(Command(("evaluate", *b.words), b.help, lambda b=b: b.config, printing_paths(lambda b=b: b.run),
                   lazy=True) for b in registry.BENCHMARKS),
         Command(("report",), "Gather the latest run of every benchmark on each robot into results/report.md and "
-                ".html, key figures first.", _is(ReportConfig), runners.printing_paths(_report)),
+                ".html, key figures first.", _is(ReportConfig), printing_paths(_report)),
         Command(("demo",), "The end-to-end demo: babble, fit, register, perceive, reach, recognise, report.",
-                _is(DemoConfig), runners.run_demo, mlflow=True),
+                _is(DemoConfig), _in_runners("run_demo"), mlflow=True),
         Command(("reproduce",), "Regenerate the README's measured tables with its own commands, each beside the "
-                "README's figures; resumable (hours on 2 cores).", _is(ReproduceConfig), runners.run_reproduce),
+                "README's figures; resumable (hours on 2 cores).", _is(ReproduceConfig), _in_runners("run_reproduce")),
     ]
+
+
+def printing_paths(runner: Callable[[], Callable]) -> Callable:
+    """A benchmark's or the report's runner (`runner()` imports it) that prints the paths it wrote."""
+    def run(config) -> None:
+        written = runner()(config)
+        paths = getattr(written, "paths", written)                         # levels: a summary holding its paths
+        print("\n".join(f"{k}: {v}" for k, v in paths.items()))
+    return run
+
+
+def _in_runners(name: str) -> Callable:
+    """The runner `name` of bodyschema/runners.py, imported when the command runs: the table names its runners
+    instead of importing them, because a runner (reproduce) parses command lines with this table (parsing.py)."""
+    def run(config):
+        return getattr(importlib.import_module("bodyschema.runners"), name)(config)
+    return run
 
 
 def _report():

@@ -1,4 +1,4 @@
-"""What the CLI's commands run (bodyschema/commands.py's `run` column), and the configs of the small ones.
+"""What the CLI's commands run (bodyschema/commands.py's `run` column, by name: see there why).
 
 Each runner takes its parsed config and returns the exit code (None: 0). A stage's code (torch, MuJoCo, MLflow) is
 imported inside its runner, so building the CLI imports none of it.
@@ -9,38 +9,11 @@ from __future__ import annotations
 import logging
 import os
 import sys
-from collections.abc import Callable
-from dataclasses import dataclass
-from pathlib import Path
-from typing import Annotated
 
-from bodyschema.cli_marks import Positional
+from bodyschema.command_configs import RegistryList, RegistryPromote, ValidateArgs
 from bodyschema.errors import must_be
 
 logger = logging.getLogger("bodyschema.cli")    # its debug lines are the CLI's (--verbose)
-
-
-@dataclass(frozen=True)
-class ValidateArgs:
-    """Check a dataset store against the schema; exit 0 when valid, else list every problem."""
-
-    path: Annotated[Path, Positional()]  # the .zarr store
-
-
-@dataclass(frozen=True)
-class RegistryList:
-    """List every registered bodyschema model version with its validation metric and aliases."""
-
-    tracking_uri: str | None = None  # None: $MLFLOW_TRACKING_URI, else sqlite:///<cwd>/mlflow.db
-
-
-@dataclass(frozen=True)
-class RegistryPromote:
-    """Move the `champion` alias to NAME's VERSION by hand."""
-
-    name: Annotated[str, Positional()]
-    version: Annotated[int, Positional()]
-    tracking_uri: str | None = None
 
 
 def run_datagen(config) -> None:
@@ -95,15 +68,6 @@ def run_registry_promote(config: RegistryPromote) -> None:
 
     promote(config.name, config.version, tracking=config.tracking_uri)
     print(f"{config.name} v{config.version} is now @champion")
-
-
-def printing_paths(runner: Callable[[], Callable]) -> Callable:
-    """A benchmark's or the report's runner (`runner()` imports it) that prints the paths it wrote."""
-    def run(config) -> None:
-        written = runner()(config)
-        paths = getattr(written, "paths", written)                         # levels: a summary holding its paths
-        print("\n".join(f"{k}: {v}" for k, v in paths.items()))
-    return run
 
 
 def run_demo(config) -> None:

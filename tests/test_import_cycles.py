@@ -14,9 +14,6 @@ KNOWN = {
     # Robot.load of a file without a record infers one, and inference measures candidate cameras with a Robot: a
     # recursion at run time, broken only by handing infer_record the loader (12 callers) or one module for both.
     "bodyschema.datagen.body.infer",
-    # reproduce parses each step with the CLI's own parser (cli.parse_command), and the CLI runs reproduce; the CLI is
-    # being rewritten into a command table (commands.py, runners.py): the parser moves below cli.py with it.
-    "bodyschema.cli",
 }
 
 

@@ -7,6 +7,7 @@ import shlex
 from dataclasses import dataclass
 
 from bodyschema import log
+from bodyschema.parsing import parse_command
 
 
 @dataclass(frozen=True)
@@ -18,8 +19,6 @@ class Done:
 
 def parse(command: str):
     """The config `bodyschema <command>` stands for."""
-    from bodyschema.cli import parse_command
-
     return parse_command(shlex.split(command))
 
 
