@@ -64,3 +64,4 @@ class FixedCamera:
         du = f * (self.rot[0][None] - cam[:, 0:1] * inv_z * self.rot[2][None]) * inv_z   # (N, 3)
         dv = f * (self.rot[1][None] - cam[:, 1:2] * inv_z * self.rot[2][None]) * inv_z
         return np.stack([du, dv], axis=1)
+

@@ -1,7 +1,7 @@
 """Forward kinematics and site Jacobian of a MuJoCo hinge chain in numpy, vectorized over a batch of poses.
 
 For large batches this is several times faster than calling mj_kinematics + mj_jacSite per pose; `Robot`
-switches to it from `VECTORIZE_FROM` poses up.
+switches to it from `VECTORIZE_FROM` poses up (kinematics.py).
 """
 
 from __future__ import annotations

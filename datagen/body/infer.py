@@ -24,8 +24,10 @@ import numpy as np
 
 from bodyschema.datagen.body.arm_chain import infer_arm
 from bodyschema.datagen.body.build import build_model, compile_spec, read_source
+from bodyschema.datagen.body.kinematics import ArmKinematics, fixed_camera
 from bodyschema.datagen.body.model_files import parse_xml
 from bodyschema.datagen.body.record import AUTO_CAMERA, SHIPPED, RobotRecord, load_record
+from bodyschema.datagen.body.robot_checks import checked_image_size
 from bodyschema.errors import must_be
 
 IMAGE_SIZE = (64, 64)       # px: the default image of an inferred robot (small, quick to render and learn from)
@@ -122,17 +124,34 @@ def inertia_gains(model: mujoco.MjModel, ranges: np.ndarray, sag: bool) -> tuple
 
 # ---- the camera -------------------------------------------------------------------------------------------
 def _infer_camera(draft: RobotRecord, spec: mujoco.MjSpec, ranges: np.ndarray) -> dict:
-    from bodyschema.datagen.body.robot import Robot
     best, name = 0.0, None
     for camera in (c.name for c in spec.cameras if c.name):
-        with Robot.load(dataclasses.replace(draft, camera={"name": camera})) as robot:
-            fraction = view_fraction(robot, ranges)
+        fraction = view_fraction(ArmView(dataclasses.replace(draft, camera={"name": camera})), ranges)
         if fraction > best:
             best, name = fraction, camera
     if name is not None and best >= GOOD_VIEW:
         return {"name": name}
-    with Robot.load(draft) as robot:
-        return place_camera(ee_samples(robot, ranges), draft.image_size)
+    return place_camera(ee_samples(ArmView(draft), ranges), draft.image_size)
+
+
+class ArmView:
+    """What placing a camera needs of a robot before a `Robot` of it exists (a Robot of a bare file is built from
+    this inference): the ee's position (`fk`) and whether the record's camera sees it (`in_view`), computed as
+    Robot computes them (kinematics.ArmKinematics, the camera at qpos0)."""
+
+    def __init__(self, record: RobotRecord):
+        built = build_model(record)
+        model = built.model
+        self.kinematics = ArmKinematics(model, model.site(built.ee_site).id)
+        self.camera = fixed_camera(model, self.kinematics.data, model.camera(built.camera).id,
+                                   checked_image_size(record.image_size))
+
+    def fk(self, q, check: bool = False) -> np.ndarray:
+        """As Robot.fk(q, check=False): the poses are drawn inside the joint limits, nothing to check."""
+        return self.kinematics.fk(np.asarray(q, dtype=np.float64))
+
+    def in_view(self, q) -> np.ndarray:
+        return self.camera.sees(self.kinematics.fk_and_jacobian(np.asarray(q, dtype=np.float64))[0])
 
 
 def ee_samples(robot, ranges: np.ndarray, n: int = VIEW_SAMPLES) -> np.ndarray:

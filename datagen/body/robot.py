@@ -5,8 +5,8 @@ All arrays are numpy float64 and batched over N poses; q is in rad, positions in
 Kinematic queries (fk, jacobian, render, observe, touch) run on a private MjData, so a caller stepping
 dynamics on `robot.data` keeps its state. Images: `robot_render` (a renderer made on the first render, in the
 process that renders); the camera's geometry: `camera.FixedCamera`; argument checks: `robot_checks`.
-`fk`/`jacobian` call MuJoCo per pose (the reference); `observe` and the analytic model use the same hinge
-recursion vectorized over the batch (`chain.HingeChain`, equal to 1e-12) when the batch is large.
+Kinematics: `kinematics.ArmKinematics` (`fk`/`jacobian` call MuJoCo per pose, the reference; `observe` and the
+analytic model use the hinge recursion vectorized over the batch, equal to 1e-12, when the batch is large).
 What the model file does not say (ee, joints used, camera, image size, workspaces, actuators, gains) comes from
 the robot's record (`record.RobotRecord`, `infer.robot_record`); `build.build_model` compiles the arm. Each
 robot names its workspaces (joint boxes, `robot.workspaces`); `sampling_ranges` is the one it was loaded with.
@@ -21,9 +21,8 @@ import mujoco
 import numpy as np
 
 from bodyschema.datagen.body.build import ACTUATOR_KINDS, Built, build_model
-from bodyschema.datagen.body.camera import FixedCamera
-from bodyschema.datagen.body.chain import HingeChain
 from bodyschema.datagen.body.infer import robot_record
+from bodyschema.datagen.body.kinematics import ArmKinematics, fixed_camera
 from bodyschema.datagen.body.record import RobotRecord, shipped_dir
 from bodyschema.datagen.body.robot_checks import check_ranges, checked_image_size, checked_points, finite_float
 from bodyschema.datagen.body.robot_render import CameraRenderer, fit_offscreen
@@ -32,7 +31,6 @@ from bodyschema.errors import must_be
 
 LIMIT_TOLERANCE = 0.05         # rad; the simulator's soft joint limits let recorded q overshoot a little
 GRAVITY = 9.81                 # m/s², default magnitude (downward, −z)
-VECTORIZE_FROM = 256           # poses; smaller batches call MuJoCo per pose (numpy's per-op cost dominates)
 DEFAULT_WORKSPACE = "camera"   # a Robot renders and projects: by default it samples the poses its camera sees
 
 
@@ -45,7 +43,6 @@ class Robot:
         self.name = record.name
         self.model = model
         self.data = mujoco.MjData(model)                  # for the caller's dynamics
-        self._kin = mujoco.MjData(model)                  # private: kinematic queries
         self.source = built.source                        # the model file: path, text, sha256, mesh digests
         self.mjcf_sha256 = built.source.sha256
         self.image_size = (int(image_size[0]), int(image_size[1]))
@@ -59,9 +56,8 @@ class Robot:
         if not (hinges and model.nq == model.nv == model.njnt):
             raise ValueError(must_be(f"the model of {self.name}", "an arm of hinge joints only (qpos = joint angles)",
                                      f"nq={model.nq}, nv={model.nv}, njnt={model.njnt}"))
-        self._site = model.site(self.ee_site).id
-        self._qpos = self._kin.qpos                       # cached views into the private MjData (hot loops)
-        self._ee = self._kin.site_xpos[self._site]
+        self._kinematics = ArmKinematics(model, model.site(self.ee_site).id)
+        self._kin = self._kinematics.data                 # private: kinematic queries, renders, touch
         self._cam = model.camera(self.camera_name).id
         self._touch_adr = touch_address(model)
         self._position_actuated = bool(model.nu) and bool(np.all(model.actuator_biastype ==
@@ -72,19 +68,14 @@ class Robot:
         self.workspace = workspace                                                  # the one sampled from
         self.sampling_ranges = self.workspaces[workspace].copy()                    # (Dq, 2) rad
         self._renderer: CameraRenderer | None = None
-        self._chain = HingeChain(model, self._site)
-        self._view = self._fixed_camera()
+        self._view = fixed_camera(model, self._kin, self._cam, self.image_size)
 
     # ---- pickling (a worker process gets its own copy) ----------------------------------------------------
     def __getstate__(self) -> dict:
-        # _qpos and _ee are views into _kin: pickled they would become copies, and fk would write a pose no
-        # kinematics reads (it returned the zero pose); the renderer holds a GL context
-        return {k: v for k, v in vars(self).items() if k not in ("_qpos", "_ee", "_renderer")}
+        return {k: v for k, v in vars(self).items() if k != "_renderer"}     # the renderer holds a GL context
 
     def __setstate__(self, state: dict) -> None:
         vars(self).update(state)
-        self._qpos = self._kin.qpos
-        self._ee = self._kin.site_xpos[self._site]
         self._renderer = None
 
     # ---- construction --------------------------------------------------------------------------------
@@ -137,13 +128,6 @@ class Robot:
         check_ranges(ranges, self.joint_names, self.joint_limits, self.name)
 
     # ---- camera --------------------------------------------------------------------------------------
-    def _fixed_camera(self) -> FixedCamera:
-        # Cameras are fixed in the world: compute the pose once at qpos0 (mj_camlight sets cam_xpos/xmat).
-        mujoco.mj_kinematics(self.model, self._kin)
-        mujoco.mj_camlight(self.model, self._kin)
-        return FixedCamera.from_mujoco(self._kin.cam_xpos[self._cam], self._kin.cam_xmat[self._cam],
-                                       self.model.cam_fovy[self._cam], self.image_size)
-
     def intrinsics(self) -> np.ndarray:
         """K (3, 3) in px for the configured image size."""
         return self._view.K.copy()
@@ -188,33 +172,13 @@ class Robot:
         return "position" if self._position_actuated else "torque"
 
     def _fk(self, q: np.ndarray) -> np.ndarray:
-        m, d, qpos, ee, kinematics = self.model, self._kin, self._qpos, self._ee, mujoco.mj_kinematics
-        out = np.empty((q.shape[0], 3))
-        for q_i, out_i in zip(q, out):
-            qpos[:] = q_i
-            kinematics(m, d)
-            out_i[:] = ee
-        return out
+        return self._kinematics.fk(q)
 
     def _jacobian(self, q: np.ndarray) -> np.ndarray:
-        return self._mj_fk_and_jacobian(q)[1]
+        return self._kinematics.mj_fk_and_jacobian(q)[1]
 
     def _fk_and_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Unchecked (any finite q, limits not enforced): (N, 3) m and (N, 3, Dq) m/rad, the fastest way."""
-        return self._chain(q) if q.shape[0] >= VECTORIZE_FROM else self._mj_fk_and_jacobian(q)
-
-    def _mj_fk_and_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The reference: mj_kinematics + mj_comPos + mj_jacSite per pose."""
-        m, d, qpos, ee, site = self.model, self._kin, self._qpos, self._ee, self._site
-        kinematics, com_pos, jac_site = mujoco.mj_kinematics, mujoco.mj_comPos, mujoco.mj_jacSite
-        xyz, jac = np.empty((q.shape[0], 3)), np.empty((q.shape[0], 3, self.dq))
-        for q_i, xyz_i, jac_i in zip(q, xyz, jac):
-            qpos[:] = q_i
-            kinematics(m, d)
-            com_pos(m, d)                                 # cdof and subtree_com, used by mj_jacSite
-            xyz_i[:] = ee
-            jac_site(m, d, jac_i, None, site)             # writes the (3, nv = Dq) row block in place
-        return xyz, jac
+        return self._kinematics.fk_and_jacobian(q)
 
     # ---- sensing -------------------------------------------------------------------------------------
     def render(self, q, check: bool = True) -> np.ndarray:

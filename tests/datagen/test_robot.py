@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from bodyschema.datagen.body.kinematics import VECTORIZE_FROM
 from bodyschema.datagen.body.record import SHIPPED
-from bodyschema.datagen.body.robot import LIMIT_TOLERANCE, VECTORIZE_FROM, Robot
+from bodyschema.datagen.body.robot import LIMIT_TOLERANCE, Robot
 
 FD_STEP = 1e-6          # rad
 TEST_SIZES = {"planar2": (128, 128), "nao_arm": (56, 80), "panda": (192, 192)}   # (H, W) px

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 import torch
 
-from bodyschema.datagen.body.robot import VECTORIZE_FROM, Robot
+from bodyschema.datagen.body.kinematics import VECTORIZE_FROM
+from bodyschema.datagen.body.robot import Robot
 from bodyschema.models import load_model
 from bodyschema.models.analytic import DEFAULT_PRECISION, AnalyticModel
 from tests.models.contract import SensoryModelContract
