@@ -138,7 +138,7 @@ class PDController:
 
 
 def robot_gains(robot: Robot) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """(kp, kd) of the robot's record [pd], else the old rule (`robot_infer.inertia_gains`: each joint's largest
+    """(kp, kd) of the robot's record [pd], else the old rule (`infer.inertia_gains`: each joint's largest
     diagonal inertia × (20 rad/s)², critically damped), what PDConfig(gains="record") runs without [pd]."""
     if robot.record.pd:
         return tuple(robot.record.pd["kp"]), tuple(robot.record.pd["kd"])

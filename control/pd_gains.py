@@ -7,7 +7,7 @@ The rule ("model"): a computed-torque PD, every joint critically damped at one b
   ω         min(OMEGA_MAX, RATE_FRACTION / Δt): the control period Δt bounds it. A double integrator under this
             law with a zero-order hold keeps real closed-loop poles up to ω·Δt = 0.5 and goes unstable at 1
             (eigenvalues of the sampled loop: ρ = 0.74 per tick at 0.4); OMEGA_MAX is the project's servo
-            bandwidth (`robot_infer.SERVO_RAD_S`), what the inferred servos were built for;
+            bandwidth (`infer.SERVO_RAD_S`), what the inferred servos were built for;
   s ∈ [0, 1] scales the whole acceleration so that τ fits the torque limits (the direction of the joint
             acceleration is kept; clipping joint by joint breaks the decoupling that M(q) buys);
   b(q, q̇)   `qfrc_bias`: gravity (under the configured gravity, a private copy of the model) + Coriolis;
@@ -41,7 +41,7 @@ def bandwidth(dt: float) -> float:
 
 
 def inferred_pd(robot) -> bool:
-    """Whether the record's [pd] is only what `bodyschema robot init` inferred (`robot_infer.inertia_gains` without
+    """Whether the record's [pd] is only what `bodyschema robot init` inferred (`infer.inertia_gains` without
     sag), not gains someone tuned (the Panda's libfranka gains). The inferred rule leaves two marks: kd = 2·kp/ω
     on every joint (kp = I·ω², kd = 2√(kp·I)), whatever the model, and kp within INFERRED_DRIFT of this model's
     own I·ω². The first survives a model that changed since `robot init` (mass lower bounds, meshes, MuJoCo's

@@ -1,7 +1,7 @@
 """The robot of a model's body: the one way every stage (analytic models, benchmarks) finds it.
 
 A shipped robot is found by its name, as it always was. Any other robot travels with the body (`BodySpec.source`):
-the robot attrs a store keeps (`datagen.robot_attrs`: the record and the model file's text, sha256 and mesh
+the robot attrs a store keeps (`datagen.body.attrs`: the record and the model file's text, sha256 and mesh
 digests), so a model of a robot from a file, or trained on its store, rebuilds that very robot wherever it is
 evaluated. Light at import (no MuJoCo): `training.data` builds bodies from store attrs with it.
 """

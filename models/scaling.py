@@ -23,7 +23,7 @@ class BodySpec:
     joint_names: tuple[str, ...]    # one per latent dimension, in order
     q_low: tuple[float, ...]        # rad, lower end of the scaled range
     q_high: tuple[float, ...]       # rad, upper end of the scaled range
-    # None: a shipped robot, found by its name; else the robot attrs of `datagen.robot_attrs` (the record and the
+    # None: a shipped robot, found by its name; else the robot attrs of `datagen.body.attrs` (the record and the
     # model file's text, sha256 and mesh digests) it is rebuilt from. Not hashed: a dict (the name stands for it).
     source: dict | None = field(default=None, hash=False)
 

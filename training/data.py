@@ -1,4 +1,4 @@
-"""Training data from a dataset store, split train/validation; datagen reads the store (`datagen.store_reader`).
+"""Training data from a dataset store, split train/validation; datagen reads the store (`datagen.store.reader`).
 
 The store is checked first (`check_store` lists every problem at once: the datagen validator's and the arrays the
 run asks for; an invalid or incomplete store is refused). The joint angles `q` and the modality arrays are read

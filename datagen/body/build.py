@@ -7,7 +7,7 @@ From the model file (read by its format, formats.py: MJCF, URDF, ...) the spec i
   chosen arm babbles on a fixed body, and qpos is exactly the chosen joint angles;
 - a continuous hinge (no limits) gets the limits ±π;
 - with `collisions = "none"` (what `robot init` writes) no geom of the arm collides, as in the shipped arms;
-- the ee becomes a site (an ee given as a body plus an offset adds one, `robot_record.EE_SITE`);
+- the ee becomes a site (an ee given as a body plus an offset adds one, `record.EE_SITE`);
 - a camera placed by the record is added to the world (with a light beside it when the model has none);
 - with [actuators] kind = "servos" the chosen joints get position servos with the record's gains;
 - `actuators="torque"` turns every actuator into a motor (ctrlrange = its force range, N·m).

@@ -1,7 +1,7 @@
 """`choose_camera`: the camera pose and image size of a record under which every chosen joint is seen, or the
 joints that cannot be and why (`bodyschema robot camera`).
 
-Candidates, each framing the ee over the workspace (`robot_infer.place_camera`): the principal-axes view it always
+Candidates, each framing the ee over the workspace (`infer.place_camera`): the principal-axes view it always
 placed, and views from AZIMUTHS around the ee's workspace at ELEVATIONS above it, each framing all the ee positions
 or COVER_TIGHT of them (closer; the ee must stay in view in ≥ GOOD_VIEW of the poses). Each is scored by its
 observability (`observability.py`, SEARCH_POSES poses at the record's image size): first how many joints reach

@@ -11,7 +11,7 @@ The shipped robots are the records beside their MJCF (datagen/robots/<name>.toml
     bodyschema datagen --robot planar2 | --robot arm.xml | --robot arm.urdf | --robot arm.toml
 
 A model file with a record of the same stem beside it uses that record; without one, the values are inferred
-(`robot_infer.infer_record`) and `bodyschema robot init FILE` writes them for the user to edit. Pure Python
+(`infer.infer_record`) and `bodyschema robot init FILE` writes them for the user to edit. Pure Python
 (tomllib): the CLI imports it at start-up.
 """
 
@@ -142,7 +142,7 @@ def robot_label(ref: str) -> str:
 
 def load_record(ref: str | Path) -> RobotRecord | None:
     """The record of a robot reference: a shipped name, a .toml, or a model file's sibling <stem>.toml.
-    None for a model file without a record (its values are inferred by `robot_infer.infer_record`)."""
+    None for a model file without a record (its values are inferred by `infer.infer_record`)."""
     problem = check_robot_ref(ref)
     if problem:
         raise ValueError(problem)

@@ -5,7 +5,7 @@ store is refused with every problem listed, as `bodyschema validate` would), its
 in, and a writer that builds the output beside its final path and renames it into place (base/outputs.py): a
 killed export never leaves a half-written OUT, and --overwrite replaces only a previous export of the same format,
 never the store itself. What they read (arrays, features, attrs, the body the models of it scale by) comes from
-`datagen.store_reader`, the reader training uses.
+`datagen.store.reader`, the reader training uses.
 """
 
 from __future__ import annotations

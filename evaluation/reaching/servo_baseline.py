@@ -4,7 +4,7 @@
 A MuJoCo servo pushes its joint with gear·(g₀·ctrl + b₀ + b₁·q + b₂·q̇) (`actuator_gainprm[0]`, `actuator_biasprm`;
 a `<position>` servo: g₀ = kp, b₀ = 0, b₁ = −kp, b₂ = −kv). Commanded to ctrl = q_d it comes to rest where that push
 holds the load, q = q_d − τ_hold/kp: a finite-gain servo sags under gravity (nao_arm: 1.3° on its shoulder, 4.8 mm
-of ee error; an inferred servo up to `robot_infer.SAG_RAD`). The rule: command the ctrl whose push at rest at q_d is
+of ee error; an inferred servo up to `infer.SAG_RAD`). The rule: command the ctrl whose push at rest at q_d is
 the torque that holds q_d,
     ctrl = (τ_hold(q_d) / gear − b₀ − b₁·q_d) / g₀          (= q_d + τ_hold(q_d) / kp for a `<position>` servo)
     τ_hold(q) = qfrc_bias(q, q̇ = 0) − qfrc_passive(q)     gravity (RNE at rest) minus springs,

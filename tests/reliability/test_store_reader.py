@@ -1,5 +1,5 @@
 """datagen owns the read side of a store (issue 22, item 3): training, export, import and evaluation read through
-`datagen.store_reader`, with the digests and the body they had before, and stores (or exports) edited where the old
+`datagen.store.reader`, with the digests and the body they had before, and stores (or exports) edited where the old
 body readers differed are refused by every reader alike. Bad command lines are one line each in CASES, run through the
 fuzz harness of tests/test_cli_fuzz.py (the extended fuzz test beside it)."""
 
@@ -87,7 +87,7 @@ def old_dataset_digest(path: Path) -> str:
 
 
 def old_source_digest(path: Path) -> str:
-    """datagen.export.source_digest as it was: the root attrs as sorted JSON, then the shard checksums."""
+    """datagen.exchange.export.source_digest as it was: the root attrs as sorted JSON, then the shard checksums."""
     root = zarr.open_group(str(path), mode="r")
     h = hashlib.sha256(json.dumps(dict(root.attrs), sort_keys=True, default=str).encode())
     h.update(np.asarray(root[DONE][:]).astype(np.uint64).tobytes())
