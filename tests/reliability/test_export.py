@@ -168,13 +168,14 @@ def test_partials_of_dead_exports_are_removed_and_a_live_ones_kept(world, tmp_pa
 
 
 def test_ctrl_c_during_an_export_leaves_nothing_and_says_so(world, tmp_path, monkeypatch, capsys):
-    import bodyschema.datagen.exchange.export_hdf5 as export_hdf5
+    from bodyschema.datagen.exchange import export
 
     def interrupted(root, out):
         out.write_bytes(b"half")
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(export_hdf5, "write_hdf5", interrupted)
+    kind, size_factor, _ = export.WRITERS["hdf5"]
+    monkeypatch.setitem(export.WRITERS, "hdf5", (kind, size_factor, interrupted))     # the format table's writer
     code = main(["export", "dataset", "--to", "hdf5", str(world / "good.zarr"), str(tmp_path / "d.h5")])
     err = capsys.readouterr().err
     assert code == 130 and "Nothing was written" in err and "resume" not in err, err
