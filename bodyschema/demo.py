@@ -197,7 +197,7 @@ def _report(config: DemoConfig) -> None:
     logger.info("== registry")
     for row in list_models(tracking=config.tracking_uri):
         print(f"  {row}")
-    report = write_report(ReportConfig(results=config.out / "results"))
+    report = write_report(ReportConfig(results=config.out / "results", trained=config.out / "runs"))
     print(f"report: {report['html']} (and {report['markdown'].name})")
 
 

@@ -28,7 +28,7 @@ from mlflow.exceptions import MlflowException
 from bodyschema import log
 from bodyschema.base import modalities
 from bodyschema.errors import must_be
-from bodyschema.training import guards, plots, run_record, runs, scoring
+from bodyschema.training import guards, plots, run_record, run_summary, runs, scoring
 from bodyschema.training.champion import CHAMPION, register_version
 from bodyschema.training.config import TrainConfig, build_model
 from bodyschema.training.data import Dataset, load_dataset, validation_digest
@@ -209,23 +209,24 @@ def _train_owned(config: TrainConfig, client, data: Dataset, model, members: dic
                 mlflow.log_artifact(str(path), artifact_path="plots")
             run_record.log_run_files(data, history, run_dir)
 
-        registered = []                                  # registration last: a failure above registers nothing
+        registered, cards = [], []                       # registration last: a failure above registers nothing
         for m, member in members.items():
             prefix = f"{m}/" if multi else ""
             with log.timed(_log, f"{m}: model logged" + (" and registered" if config.register else "")):
                 entry = _log_and_register(client, member, model_dirs[m], config, data, metrics, prefix, params,
-                                          multi)
+                                          multi, cards)
             if entry is not None:
                 registered.append(entry)
         mlflow.set_tag("bodyschema.champion", ",".join(r.name for r in registered if r.champion) or "none")
+        run_summary.write(run_dir, cards, registered, made)
     return TrainResult(run.info.run_id, tuple(registered), {**history.last(), **metrics}, made, model_dirs, run_dir,
                        units=units)
 
 
 def _log_and_register(client, member, model_dir: Path, config: TrainConfig, data: Dataset, metrics: dict[str, float],
-                      prefix: str, params: dict, multi: bool) -> Registered | None:
-    """Log one member as a pyfunc and its model card (`model_card[-<modality>].md`); register it (unless
-    config.register is False) and maybe make it champion."""
+                      prefix: str, params: dict, multi: bool, cards: list[str]) -> Registered | None:
+    """Log one member as a pyfunc and its model card (`model_card[-<modality>].md`, also appended to `cards`);
+    register it (unless config.register is False) and maybe make it champion."""
     m, val_rmse = member.modality, metrics[prefix + METRIC]
     name = registered_name(data.body.robot, m, config.kind) if config.register else None
     info, digest = log_sensory_model(model_dir, member, name=f"model-{m}" if multi else "model")
@@ -235,7 +236,9 @@ def _log_and_register(client, member, model_dir: Path, config: TrainConfig, data
             "dataset_sha256": data.sha256, "mjcf_sha256": str(data.attrs.get("mjcf_sha256", "")),
             VAL_TAG: validation_digest(data), DATASET_TAG: str(Path(data.path).resolve())}
     scores = {k[len(prefix):]: v for k, v in metrics.items() if k.startswith(prefix) and "/" not in k[len(prefix):]}
-    mlflow.log_text(card_markdown(member, name, tags, scores, params), f"model_card{'-' + m if multi else ''}.md")
+    card = card_markdown(member, name, tags, scores, params)
+    mlflow.log_text(card, f"model_card{'-' + m if multi else ''}.md")
+    cards.append(card)
     if name is None:
         return None
     version, champion = register_version(client, name, info.model_uri, tags, val_rmse)   # one guarded step

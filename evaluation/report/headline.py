@@ -22,6 +22,7 @@ from pathlib import Path
 from bodyschema.evaluation.core.runs import read_run_record
 from bodyschema.evaluation.core.tables import escape_markdown
 from bodyschema.evaluation.report.sections import Section
+from bodyschema.evaluation.report.trained import held_out
 
 
 class NoFigure(Exception):
@@ -212,7 +213,8 @@ def agency(section: Section) -> str:
 
 
 RULES: dict[str, Callable[[Section], str]] = {
-    "models": models, "levels": levels, "robustness": robustness, "tracking": tracking, "reaching": reaching,
+    "models": models, "trained": held_out, "levels": levels, "robustness": robustness, "tracking": tracking,
+    "reaching": reaching,
     "loop_robustness": loop_robustness,
     "adaptation/jupiter": jupiter, "adaptation/marker_shift": marker_shift, "self_recognition": self_recognition,
     "rubber_hand": rubber_hand, "agency": agency}

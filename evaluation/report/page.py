@@ -31,7 +31,9 @@ from bodyschema.evaluation.report.confined import is_inside, resolved
 from bodyschema.evaluation.report.headers import readable_tables
 from bodyschema.evaluation.report.headline import headline
 from bodyschema.evaluation.report.markdown_html import LINK, embedded_image, html_page, markdown_to_html, slug
+from bodyschema.evaluation.report.pipeline import order_key
 from bodyschema.evaluation.report.sections import Section, find_sections
+from bodyschema.evaluation.report.trained import trained_sections
 
 NO_RESULTS_HINT = "Run `bodyschema evaluate levels` first."
 URL = re.compile(r"[a-zA-Z][\w+.-]*:")
@@ -48,6 +50,7 @@ class ReportConfig:
     out: Path | None = None            # the Markdown page, HTML beside it (.html); None: <results>/report.md
     title: str = "bodyschema benchmark report"
     stale_after_s: float = 3600.0      # a plot/CSV this much older than its summary.md is left from an earlier run
+    trained: Path | None = Path("runs")  # `bodyschema train`'s --run-root: each model it fitted, a section; None: none
 
     def __post_init__(self):
         if not self.stale_after_s >= 0:
@@ -161,6 +164,8 @@ def write_report(config: ReportConfig = ReportConfig()) -> dict[str, Path]:
     if not results.is_dir():
         raise ValueError(must_be("results", "a folder holding benchmark outputs", str(results), NO_RESULTS_HINT))
     sections, skipped = find_sections(results, config.stale_after_s, config.runs)
+    sections = sorted(sections + trained_sections(config.trained),
+                      key=lambda s: order_key(s.benchmark, s.folder_name, s.robot))
     if not sections:
         raise ValueError(must_be("results", "a folder with at least one <benchmark>/summary.md", str(results),
                                  NO_RESULTS_HINT))

@@ -14,9 +14,9 @@ from bodyschema.evaluation import registry
 # Tracking is perception over a stream: it follows the levels (perception of one frame) and their robustness, before
 # the loop closes. Closed-loop robustness (`loop_robustness`) is reaching under noise: it follows reaching, which it
 # needs a reader to know. `data` and `models`: plain folders holding a summary.md of the first stages, should a user
-# add them.
-PIPELINE = ("data", "models", "levels", "robustness", "tracking", "reaching", "loop_robustness", "adaptation",
-            "self_recognition", "rubber_hand", "agency")
+# add them; `trained`: the models `bodyschema train` fitted (trained.py).
+PIPELINE = ("data", "models", "trained", "levels", "robustness", "tracking", "reaching", "loop_robustness",
+            "adaptation", "self_recognition", "rubber_hand", "agency")
 
 
 def registry_key(bench: registry.Benchmark) -> str:
