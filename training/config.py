@@ -135,7 +135,7 @@ def train_commands() -> list[tuple[str, type, str]]:
     return [(k.name, TrainConfig[k.config_class], k.summary) for k in kinds.trainable()]
 
 
-def build_model(config: TrainConfig, body, output_shapes: dict[str, tuple[int, ...]]):
+def untrained_model(config: TrainConfig, body, output_shapes: dict[str, tuple[int, ...]]):
     """The untrained model of `config`: `Model(body, modality, output_shape, **hyper)`, or for a kind that trains
     several modalities at once (`has_members`: multimodal) `Model(body, output_shapes, **hyper)`."""
     cls = kinds.model_class(config.kind)

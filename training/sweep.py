@@ -33,7 +33,7 @@ from bodyschema.base.ray_session import ray_session
 from bodyschema.errors import must_be
 from bodyschema.models import kinds
 from bodyschema.training import guards, sweep_report
-from bodyschema.training.config import TrainConfig, build_model
+from bodyschema.training.config import TrainConfig, untrained_model
 from bodyschema.training.data import load_dataset
 from bodyschema.training.registry import ensure_experiment, sqlite_path, tracking_uri, use_tracking
 from bodyschema.training.sweep_config import SweepConfig
@@ -216,7 +216,7 @@ def check_memory(p: Plan, data, available: float | None = None) -> None:
     available = guards.available_memory() if available is None else available
     for point in p.space.points():
         model_config = dataclasses.replace(p.train.model, **point)
-        model = build_model(dataclasses.replace(p.train, model=model_config), data.body, shapes)
+        model = untrained_model(dataclasses.replace(p.train, model=model_config), data.body, shapes)
         try:
             for shape in shapes.values():
                 guards.check_memory(p.config.kind, model, len(data.train), shape, available)

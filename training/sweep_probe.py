@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bodyschema.threads import pinned
-from bodyschema.training.config import build_model
+from bodyschema.training.config import untrained_model
 
 PROBE_ROWS = 256          # rows the probe trains on: a second or so for the shipped kinds on one core
 
@@ -51,7 +51,7 @@ def estimate(p, data) -> Cost:
     n = min(PROBE_ROWS, len(data.train))
     rows = np.random.default_rng(config.seed).choice(len(data.train), n, replace=False)
     sub = data.train.take(np.sort(rows))
-    model = build_model(config, data.body, {config.modality: data.output_shape(config.modality)})
+    model = untrained_model(config, data.body, {config.modality: data.output_shape(config.modality)})
     with pinned(1):
         started = time.perf_counter()
         model.fit(sub.q, sub.x, seed=config.seed, progress=False)

@@ -21,7 +21,7 @@ import mlflow
 import torch
 
 from bodyschema.training import runs
-from bodyschema.training.config import TrainConfig, build_model
+from bodyschema.training.config import TrainConfig, untrained_model
 from bodyschema.training.data import as_float, load_dataset, validation_digest
 from bodyschema.training.digest import DIGEST_TAG
 from bodyschema.training.pyfunc_loader import log_sensory_model
@@ -63,7 +63,7 @@ def run_trial(hyper: dict[str, Any], context: TrialContext) -> None:
     client = use_tracking(config.tracking_uri)
     data = load_dataset(config.data, config.modalities, val_fraction=config.val_fraction, seed=config.seed,
                         max_train=config.max_train)
-    model = build_model(config, data.body, {config.modality: data.output_shape(config.modality)})
+    model = untrained_model(config, data.body, {config.modality: data.output_shape(config.modality)})
     run_dir = config.run_dir(data.sha256)
     run_dir.mkdir(parents=True, exist_ok=True)
     child = runs.marked_run(client, run_dir)
@@ -114,7 +114,3 @@ def _short(hyper: dict[str, Any]) -> str:
     def word(v):
         return "x".join(map(str, v)) if isinstance(v, (list, tuple)) else f"{v:.3g}" if isinstance(v, float) else v
     return " ".join(f"{k}={word(v)}" for k, v in sorted(hyper.items()))
-
-
-def run_dir_of(context: TrialContext, hyper: dict[str, Any], dataset_sha256: str) -> Path:
-    return trial_config(context, hyper).run_dir(dataset_sha256)

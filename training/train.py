@@ -30,7 +30,7 @@ from bodyschema.base import modalities
 from bodyschema.errors import must_be
 from bodyschema.training import guards, plots, run_record, run_summary, runs, scoring
 from bodyschema.training.champion import CHAMPION, register_version
-from bodyschema.training.config import TrainConfig, build_model
+from bodyschema.training.config import TrainConfig, untrained_model
 from bodyschema.training.data import Dataset, load_dataset, validation_digest
 from bodyschema.training.digest import DIGEST_TAG
 from bodyschema.training.model_card import card_markdown
@@ -123,7 +123,7 @@ def _train(config: TrainConfig) -> TrainResult:
                ", ".join(data.modalities), data.sha256[:16], data.split_by, len(data.train), config.max_train,
                len(data.val))
     shapes = {m: data.output_shape(m) for m in data.modalities}
-    model = build_model(config, data.body, shapes)
+    model = untrained_model(config, data.body, shapes)
     on_device = "device" in inspect.signature(model.fit).parameters     # the network kinds train on a GPU
     if config.device != "cpu" and not on_device:
         raise ValueError(must_be("device", f"'cpu' for model kind {config.kind!r}", config.device,

@@ -22,11 +22,11 @@ TRAINABLE = [k.name for k in kinds.trainable() if k.module.startswith("bodyschem
 
 
 def _untrained(name: str):
-    from bodyschema.training.config import TrainConfig, build_model
+    from bodyschema.training.config import TrainConfig, untrained_model
 
     config = TrainConfig(model=kinds.get(name).config_class(), data="unused.zarr")
     shapes = {m: IMAGE if m == "image" else (3,) for m in config.modalities}
-    return build_model(config, BODY, shapes)
+    return untrained_model(config, BODY, shapes)
 
 
 @pytest.mark.parametrize("name", TRAINABLE)

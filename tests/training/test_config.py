@@ -4,7 +4,7 @@ import pytest
 
 from bodyschema.models import BodySpec
 from bodyschema.models.configs import GPRConfig, MDNConfig, MultimodalConfig, PixelConfig
-from bodyschema.training.config import TrainConfig, build_model, train_commands
+from bodyschema.training.config import TrainConfig, train_commands, untrained_model
 
 
 def test_a_config_that_is_not_a_kinds_names_the_available_ones():
@@ -56,10 +56,10 @@ def test_the_factory_passes_every_hyper_parameter_to_the_constructor(tiny_kind):
 
     body = BodySpec("r", ("a", "b"), (-1.0, -1.0), (1.0, 1.0))
     config = TrainConfig(model=TinyConfig(epochs=2, lr=0.1), data="d", modality="ee_xyz")
-    model = build_model(config, body, {"ee_xyz": (3,)})
+    model = untrained_model(config, body, {"ee_xyz": (3,)})
     assert isinstance(model, tiny_kind) and (model.epochs, model.lr) == (2, 0.1) and model.output_shape == (3,)
     with pytest.raises(ValueError, match="modality must be a single modality for model kind 'tiny'"):
-        build_model(config, body, {"ee_xyz": (3,), "joints": (2,)})
+        untrained_model(config, body, {"ee_xyz": (3,), "joints": (2,)})
 
 
 def test_one_train_subcommand_per_trainable_kind():

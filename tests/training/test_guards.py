@@ -7,7 +7,7 @@ import pytest
 
 from bodyschema.models.configs import GPRConfig, MDNConfig, SklearnGPRConfig
 from bodyschema.training import guards
-from bodyschema.training.config import TrainConfig, build_model
+from bodyschema.training.config import TrainConfig, untrained_model
 from bodyschema.training.data import load_dataset
 from bodyschema.training.train import train
 
@@ -35,7 +35,7 @@ def test_the_estimate_grows_with_n_squared_and_with_outputs_for_gpr_only():
 
 def test_a_gp_too_big_for_the_memory_is_refused_with_a_max_train_that_fits(kin_store, workdir, monkeypatch):
     data = load_dataset(kin_store, "ee_xyz")
-    model = build_model(TrainConfig(model=GPRConfig(), data=kin_store), data.body, {"ee_xyz": (3,)})
+    model = untrained_model(TrainConfig(model=GPRConfig(), data=kin_store), data.body, {"ee_xyz": (3,)})
     need = guards.gp_peak_bytes("gpr", len(data.train), min(len(data.train), 500), 3)
     available = need / 2                                                # half of what this fit needs
     with pytest.raises(ValueError, match=r"gpr fit memory must be at most .* GB \(80% of the .* GB available\)\. "
@@ -44,7 +44,7 @@ def test_a_gp_too_big_for_the_memory_is_refused_with_a_max_train_that_fits(kin_s
     fits = int(re.search(r"--max-train (\d+)", str(info.value))[1])
     assert 2 <= fits < len(data.train)
     guards.check_memory("gpr", model, fits, (3,), available=available)   # the advice is enough
-    mdn = build_model(TrainConfig(model=MDNConfig(), data=kin_store), data.body, {"ee_xyz": (3,)})
+    mdn = untrained_model(TrainConfig(model=MDNConfig(), data=kin_store), data.body, {"ee_xyz": (3,)})
     assert mdn.gp_memory is None and mdn.network, "a network is guarded by its size, not by n²"
     guards.check_memory("mdn", mdn, 10 ** 9, (3,), available=1e12)
 
