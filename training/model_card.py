@@ -67,7 +67,8 @@ def card_markdown(model, name: str | None, tags: dict[str, str], metrics: dict[s
              f"- robot MJCF sha256: `{tags.get('mjcf_sha256') or '?'}`",
              f"- rows: {params.get('n_train', '?')} train, {params.get('n_val', '?')} validation, split by "
              f"{params.get('split_by', '?')}", "", "## Held-out scores", ""]
-    lines += [f"- {k}: {v:.6g}" for k, v in sorted(metrics.items())]
+    unit = "deg" if model.encodes else modalities.unit(model.modality, "output units")
+    lines += [f"- {k}: {v:.6g}{' ' + unit if k.startswith('val_') else ''}" for k, v in sorted(metrics.items())]
     lines += ["", "## Hyper-parameters", ""] + [f"- {k}: {v}" for k, v in sorted(params.items())
                                                  if k.startswith("hyper.")]
     lines += ["", f"Weights sha256: `{tags.get(DIGEST_TAG, '?')}` (checked before every load from the registry)."]

@@ -13,7 +13,7 @@ from bodyschema.evaluation.report.confined import is_inside
 from bodyschema.evaluation.report.sections import Section
 
 SUMMARY = "summary.md"            # training/run_summary.py writes it (the report does not import training)
-HELD_OUT = re.compile(r"^- (val_rmse|val_mean_error): (\S+)$", re.M)
+HELD_OUT = re.compile(r"^- (val_rmse|val_mean_error): (\S+(?: .+)?)$", re.M)     # the score and its unit
 
 
 def trained_sections(root: Path | None) -> list[Section]:

@@ -24,7 +24,7 @@ def test_a_trained_model_is_a_report_section_with_its_card_scores_and_plots(work
     heads = re.findall(r"^## (.+)$", text, flags=re.M)
     trained = f"trained · planar2 · {result.run_dir.name.rsplit('-', 1)[0]}"
     assert heads.index(trained) < heads.index("levels · nao_arm"), heads
-    figure = rf"val_mean_error \S+, val_rmse {result.metrics['val_rmse']:.6g}"        # its card's held-out scores
+    figure = rf"val_mean_error \S+ m, val_rmse {result.metrics['val_rmse']:.6g} m"    # its card's scores, in m
     assert re.search(rf"\[{re.escape(trained)}\]\(#[^)]*\): {figure}", text)
     assert "loss_curves" in page["html"].read_text()
     assert "trained ·" not in write_report(ReportConfig(results=workdir / "results", trained=None))["markdown"] \
