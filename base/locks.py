@@ -41,19 +41,22 @@ def store_lock(store: Path, what: str | None = None, hint: str = STORE_HINT):
     """Hold the store's lock for the `with` body; raise `Locked` naming the holder's pid if it is taken.
     `what` names the output in that error (default "the store <path>")."""
     return exclusive(lock_path(store), wait=False, what=what or f"the store {store}", hint=hint,
-                     expected=ONE_WRITER, remove=True)
+                     expected=ONE_WRITER, remove=True, make_parent=False)
 
 
 @contextmanager
 def exclusive(path: str | Path, *, wait: bool = True, what: str | None = None, hint: str = "",
-              expected: str = "free (one process at a time)", remove: bool = False) -> Iterator[None]:
+              expected: str = "free (one process at a time)", remove: bool = False,
+              make_parent: bool = True) -> Iterator[None]:
     """Hold an exclusive flock on `path` (created if missing; it holds the holder's pid) for the `with` body.
 
     wait=False raises `Locked` ("<what> must be <expected>. Got locked by pid N ...") instead of waiting.
     remove=True deletes the file on exit, still locked (a store's lock file: see the module docstring).
+    make_parent=False: a missing folder is the caller's error to report (an output's), not one to create.
     """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    if make_parent:
+        path.parent.mkdir(parents=True, exist_ok=True)
     fd = _lock_current_file(path, wait, lambda holder: Locked(must_be(what or str(path), expected,
                                                                        f"locked by pid {holder}", hint)))
     try:
