@@ -132,7 +132,8 @@ class MultimodalConfig(ModelConfig):
 @dataclass(frozen=True)
 class EncoderConfig(ModelConfig):
     kind: ClassVar[str] = "encoder"
-    channels: tuple[int, ...] = (16, 32, 64)  # one stride-2 convolution per entry (56×80 → 28×40 → 14×20 → 7×10)
+    # one stride-2 convolution per entry; None: 16, 32, 64 and a 64 more while the last map is over 10 px a side
+    channels: tuple[int, ...] | None = None
     fc_hidden: int = 128  # width of the fully connected head
     epochs: int = 100  # at most this many passes over the training set
     batch_size: int = 64  # images per gradient step

@@ -9,7 +9,7 @@ import torch
 
 from bodyschema.errors import NotFittedError
 from bodyschema.models import SensoryModel, load_model
-from bodyschema.models.encoder import ImageEncoder
+from bodyschema.models.encoder import MAX_MAP, ImageEncoder, channels_for
 from tests.models.test_pixel import blob_images, one_thread
 from tests.toy_models import ToyPlanarArm
 
@@ -138,3 +138,15 @@ def test_unfitted_and_bad_settings_raise():
     q = elbow_up_angles(8, seed=0)
     with pytest.raises(ValueError, match=r"x must be of shape \(N, 16, 24\)"):
         tiny_encoder().fit(q, torch.zeros(8, 16, 20), progress=False)
+
+
+@pytest.mark.parametrize("shape, stages", [((56, 80), 3), ((64, 64), 3), ((32, 32, 3), 3), ((96, 96), 4),
+                                           ((128, 128), 4), ((256, 200), 5)])
+def test_default_stages_bring_the_last_map_to_ten_pixels_and_keep_the_shipped_arms_three(shape, stages):
+    # A 128×128 image through three stages left 16×16×64 inputs to the tanh head, which saturated at ±1 in the first
+    # epoch on SO-101 (RMSE twice a constant guess); the default adds stages for large images only.
+    encoder = ImageEncoder(ToyPlanarArm().body, "image", shape)
+    assert encoder.channels == channels_for(shape) and len(encoder.channels) == stages
+    h, w = shape[0] >> stages, shape[1] >> stages
+    assert max(h, w) <= MAX_MAP and encoder._factory().head[0].in_features == encoder.channels[-1] * h * w
+    assert ImageEncoder(ToyPlanarArm().body, "image", shape, channels=(8, 8)).channels == (8, 8)   # given: as is
