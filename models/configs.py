@@ -132,8 +132,7 @@ class MultimodalConfig(ModelConfig):
 @dataclass(frozen=True)
 class EncoderConfig(ModelConfig):
     kind: ClassVar[str] = "encoder"
-    # one stride-2 convolution per entry; None: 16, 32, 64 and a 64 more while the last map is over 10 px a side
-    channels: tuple[int, ...] | None = None
+    channels: tuple[int, ...] | None = None  # stride-2 convolutions; None: 16, 32, 64, + 64 while the map is > 10 px
     fc_hidden: int = 128  # width of the fully connected head
     epochs: int = 100  # at most this many passes over the training set
     batch_size: int = 64  # images per gradient step
