@@ -31,6 +31,8 @@ from contextvars import ContextVar
 from dataclasses import asdict, is_dataclass
 from pathlib import Path
 
+from bodyschema.base.processes import start_time
+
 LATEST = "latest"
 RUN_FILE = "run.json"                 # what the run is: its config's class and fields, its robot
 MAX_RUN_FILE_BYTES = 1_000_000        # a larger run.json was not written by new_run: not read
@@ -118,15 +120,7 @@ def run_record(config) -> dict:
 def _writer() -> dict:
     """Who writes the run: this process (pid, host, start time in clock ticks since boot: a pid reused after a
     reboot or by a later process does not match)."""
-    return {"pid": os.getpid(), "host": socket.gethostname(), "started": _start_time(os.getpid())}
-
-
-def _start_time(pid: int) -> int | None:
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-        return int(stat.rpartition(")")[2].split()[19])        # field 22, starttime (after the comm in parentheses)
-    except (OSError, ValueError, IndexError):
-        return None
+    return {"pid": os.getpid(), "host": socket.gethostname(), "started": start_time(os.getpid())}
 
 
 def _writer_gone(writer) -> bool:
@@ -135,9 +129,9 @@ def _writer_gone(writer) -> bool:
     if not isinstance(writer, dict) or writer.get("host") != socket.gethostname():
         return False
     pid, started = writer.get("pid"), writer.get("started")
-    if not isinstance(pid, int) or started is None or _start_time(os.getpid()) is None:
+    if not isinstance(pid, int) or started is None or start_time(os.getpid()) is None:
         return False
-    return _start_time(pid) != started
+    return start_time(pid) != started
 
 
 def is_complete(folder: Path) -> bool:
