@@ -57,6 +57,11 @@ def describe_registration(client, name: str, version: str, tags: dict[str, str],
     client.update_registered_model(name, description=registered_description(name, version, summary, tags))
 
 
+def score_unit(model) -> str:
+    """The unit of a model's held-out scores: joint degrees for an encoder, its modality's unit otherwise."""
+    return "deg" if model.encodes else modalities.unit(model.modality, "output units")
+
+
 def card_markdown(model, name: str | None, tags: dict[str, str], metrics: dict[str, float], params: dict) -> str:
     """`model_card.md`, a training run's artifact: what the model is (`model_summary`), the data it was trained and
     scored on (path, digests, split), its held-out scores and its hyper-parameters."""
@@ -67,7 +72,7 @@ def card_markdown(model, name: str | None, tags: dict[str, str], metrics: dict[s
              f"- robot MJCF sha256: `{tags.get('mjcf_sha256') or '?'}`",
              f"- rows: {params.get('n_train', '?')} train, {params.get('n_val', '?')} validation, split by "
              f"{params.get('split_by', '?')}", "", "## Held-out scores", ""]
-    unit = "deg" if model.encodes else modalities.unit(model.modality, "output units")
+    unit = score_unit(model)
     lines += [f"- {k}: {v:.6g}{' ' + unit if k.startswith('val_') else ''}" for k, v in sorted(metrics.items())]
     lines += ["", "## Hyper-parameters", ""] + [f"- {k}: {v}" for k, v in sorted(params.items())
                                                  if k.startswith("hyper.")]

@@ -33,7 +33,7 @@ from bodyschema.training.champion import CHAMPION, register_version
 from bodyschema.training.config import TrainConfig, untrained_model
 from bodyschema.training.data import Dataset, load_dataset, validation_digest
 from bodyschema.training.digest import DIGEST_TAG
-from bodyschema.training.model_card import card_markdown
+from bodyschema.training.model_card import card_markdown, score_unit
 from bodyschema.training.pyfunc_loader import log_sensory_model
 from bodyschema.training.registry import (
     DATASET_TAG,
@@ -144,8 +144,7 @@ def _train_owned(config: TrainConfig, client, data: Dataset, model, members: dic
     (run_dir / "config.json").write_text(json.dumps(config.identity(data.sha256), indent=2, default=str))
     experiment_id = ensure_experiment(config.experiment)
     identity = config.config_hash(data.sha256)
-    units = {(f"{m}/" if multi else ""): "deg" if member.encodes else modalities.unit(m, "output units")
-             for m, member in members.items()}
+    units = {(f"{m}/" if multi else ""): score_unit(member) for m, member in members.items()}
     done = runs.finished_run(client, run_dir, identity, experiment_id, tuple(members), config.register)
     if done is not None:                            # re-run of a finished command: no second version
         _log.debug("run %s finished before with this config: reused", done[0].info.run_id)
