@@ -11,8 +11,8 @@ from pathlib import Path
 
 from bodyschema.evaluation.report.confined import is_inside
 from bodyschema.evaluation.report.sections import Section
+from bodyschema.training.run_summary import SUMMARY
 
-SUMMARY = "summary.md"            # training/run_summary.py writes it (the report does not import training)
 HELD_OUT = re.compile(r"^- (val_rmse|val_mean_error): (\S+(?: .+)?)$", re.M)     # the score and its unit
 
 
