@@ -44,6 +44,9 @@ STEP_SCALE = 0.1
 PLATEAU_NATS = 0.1
 
 EpochCallback = Callable[[int, dict[str, float]], None]
+# −MLL and its gradient in θ of O GPs on inputs (m, D) and targets (O, m), given (ℓ or the kernel's per-input
+# parameter (O, D), s (O,), σ² (O,)): `_gp_math.neg_mll_and_grad` (RBF) or `_gp_trig.neg_mll_and_grad` (kinematic)
+Objective = Callable[..., tuple[torch.Tensor, torch.Tensor]]
 
 
 def log_bounds(latent_dim: int, noise_floor: float) -> np.ndarray:
@@ -68,8 +71,9 @@ class MarginalLikelihood:
     """−MLL of the O outputs on (u (m, D), ys (O, m)) or a subset of the points, counting and reporting every
     evaluation: on_epoch(step, {"train_neg_mll": Σ_o −MLL_o / m_o}), each output at its latest evaluation."""
 
-    def __init__(self, u: torch.Tensor, ys: torch.Tensor, on_epoch: EpochCallback | None, progress: bool):
-        self.u, self.ys, self.on_epoch = u, ys, on_epoch
+    def __init__(self, u: torch.Tensor, ys: torch.Tensor, on_epoch: EpochCallback | None, progress: bool,
+                 objective: Objective = _gp_math.neg_mll_and_grad):
+        self.u, self.ys, self.on_epoch, self.objective = u, ys, on_epoch, objective
         self.latest = torch.zeros(ys.shape[0], dtype=torch.float64)          # (O,) −MLL per point
         self.steps = 0
         self.bar = tqdm(total=None, desc="gpr hyper-parameters", disable=not progress)
@@ -78,7 +82,7 @@ class MarginalLikelihood:
                  ) -> tuple[torch.Tensor, torch.Tensor]:
         """θ (k, D+2) of `outputs` (k of them) on `points` (indices; None: all). → −MLL (k,), ∂/∂θ (k, D+2)."""
         u, ys = (self.u, self.ys[outputs]) if points is None else (self.u[points], self.ys[outputs][:, points])
-        loss, grad = _gp_math.neg_mll_and_grad(u, ys, *split_log_params(theta))  # (k,), (k, D+2)
+        loss, grad = self.objective(u, ys, *split_log_params(theta))  # (k,), (k, D+2)
         self.record(outputs, loss / u.shape[0])
         return loss, grad
 
@@ -91,16 +95,18 @@ class MarginalLikelihood:
 
 
 def fit_log_params(u: torch.Tensor, ys: torch.Tensor, gen: torch.Generator, *, noise_floor: float, adam_steps: int,
-                   lr: float, lbfgs_steps: int, on_epoch: EpochCallback | None = None, progress: bool = False
-                   ) -> tuple[torch.Tensor, int]:
-    """θ (O, D+2) at the MLL optimum of (u (m, D), ys (O, m)), and the number of MLL evaluations.
+                   lr: float, lbfgs_steps: int, on_epoch: EpochCallback | None = None, progress: bool = False,
+                   objective: Objective = _gp_math.neg_mll_and_grad) -> tuple[torch.Tensor, float, int]:
+    """θ (O, D+2) at the MLL optimum of (u (m, D), ys (O, m)), its −MLL summed over the outputs, and the number of
+    MLL evaluations.
 
     gen draws the coarse subset. lbfgs_steps caps the evaluations of each L-BFGS-B run (0: none, Adam only).
+    objective: the kernel's −MLL and gradient (the RBF's by default).
     """
     n_out, m = ys.shape
     bounds = log_bounds(u.shape[1], noise_floor)                                   # (D+2, 2)
     theta = initial_log_params(n_out, bounds)                                      # (O, D+2)
-    mll = MarginalLikelihood(u, ys, on_epoch, progress)
+    mll = MarginalLikelihood(u, ys, on_epoch, progress, objective)
     coarse = _gp_data.random_subset(m, COARSE_POINTS, gen) if m >= 2 * COARSE_POINTS else None
     mll(theta, list(range(n_out)), coarse)                                         # the start, every output
     if lbfgs_steps > 0 and coarse is not None:
@@ -116,12 +122,14 @@ def fit_log_params(u: torch.Tensor, ys: torch.Tensor, gen: torch.Generator, *, n
                                                lbfgs_steps)
         mll.latest[o] = loss / m                # the optimum (the last evaluation may be a rejected trial step)
     mll.bar.close()
-    return theta, mll.steps
+    return theta, float(mll.latest.sum()) * m, mll.steps
 
 
 def iid_neg_mll(y: torch.Tensor) -> float:
-    """−MLL per point of targets y (m,) as independent N(0, v) at the best v = mean(y²): ½ ln(2π v) + ½."""
-    return 0.5 * (float(np.log(2 * np.pi * float(y.pow(2).mean()))) + 1.0)
+    """−MLL per point of targets y (m,) as independent N(0, v) at the best v = mean(y²): ½ ln(2π v) + ½
+    (−inf for all-zero targets, e.g. a planar arm's z: no plateau to escape)."""
+    variance = float(y.pow(2).mean())
+    return 0.5 * (float(np.log(2 * np.pi * variance)) + 1.0) if variance > 0 else float("-inf")
 
 
 def restart_if_better(evaluate: Callable[[torch.Tensor], tuple[torch.Tensor, torch.Tensor]], theta: torch.Tensor,

@@ -15,6 +15,7 @@ A kernel may be batched over outputs (one hyper-parameter set per output, `gpr`)
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import torch
 from scipy.linalg import lapack
@@ -48,25 +49,35 @@ def cholesky_factor(x: torch.Tensor, lengthscale: torch.Tensor, outputscale: tor
     """L with L Lᵀ = K(X, X) + σ² I, batched over kernels. noise (Ok,) → (Ok, n, n), zeros above the diagonal.
 
     kernel: K(X, X) (Ok, n, n) if already computed (it is copied, not changed). Exact (Cholesky) whatever n: unlike
-    gpytorch's default, which switches to approximate CG solves above `max_cholesky_size` = 800 points. Retries
-    with growing diagonal jitter only if the factorization fails.
+    gpytorch's default, which switches to approximate CG solves above `max_cholesky_size` = 800 points.
     """
-    factor = rbf_train(x, lengthscale, outputscale) if kernel is None else kernel.clone()   # (Ok, n, n)
-    factor.diagonal(dim1=-2, dim2=-1).add_(noise[:, None])
+    if kernel is None:
+        return factorize(rbf_train(x, lengthscale, outputscale), noise, outputscale + noise,
+                         lambda o: rbf_train(x, lengthscale[o:o + 1], outputscale[o:o + 1])[0])
+    return factorize(kernel.clone(), noise, outputscale + noise, lambda o: kernel[o])
+
+
+def factorize(matrix: torch.Tensor, noise: torch.Tensor, scale: torch.Tensor,
+              rebuild: Callable[[int], torch.Tensor]) -> torch.Tensor:
+    """L with L Lᵀ = matrix + σ² I, IN PLACE, batched: matrix (Ok, n, n) symmetric, noise (Ok,) → the same tensor.
+
+    Retries with growing diagonal jitter (from 1e-10 · scale, 10× more each time) only if the factorization fails;
+    rebuild(o) gives output o's matrix (without the noise) again, since the failed attempt overwrote it.
+    """
+    matrix.diagonal(dim1=-2, dim2=-1).add_(noise[:, None])
     with blas_threads():
-        for o in range(factor.shape[0]):
-            jitter = 1e-10 * float(outputscale[o] + noise[o])
+        for o in range(matrix.shape[0]):
+            jitter = 1e-10 * float(scale[o])
             for _ in range(JITTER_TRIES):
-                if _potrf_lower(factor[o]):
+                if _potrf_lower(matrix[o]):
                     break
-                # the failed attempt overwrote this output's matrix: rebuild it, with 10× more jitter each time
-                factor[o] = rbf_train(x, lengthscale[o:o + 1], outputscale[o:o + 1])[0]
-                factor[o].diagonal().add_(float(noise[o]) + jitter)
+                matrix[o] = rebuild(o)
+                matrix[o].diagonal().add_(float(noise[o]) + jitter)
                 jitter *= 10
             else:
                 raise RuntimeError("K + σ²I is not positive definite even with jitter; the noise floor may be too "
                                    "low.")
-    return factor
+    return matrix
 
 
 def inverse_from_factor(factor: torch.Tensor) -> torch.Tensor:

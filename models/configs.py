@@ -54,6 +54,7 @@ class GPRConfig(ModelConfig):
     lbfgs_steps: int = 200  # at most this many evaluations per L-BFGS-B run (each output, coarse and fine)
     lr: float = 0.05  # Adam step on the log kernel hyper-parameters
     noise_floor: float = 3e-8  # noise variance floor on standardized targets: sets the error on noise-free data
+    kernel: Literal["auto", "rbf", "kinematic"] = "auto"  # auto: the likelier; kinematic: exact on ≤ 7 revolute joints
 
 
 @dataclass(frozen=True)

@@ -1,8 +1,13 @@
 """`gpr`: exact Gaussian-process regression of x = g(z), with a closed-form Jacobian.
 
-One independent GP per output dimension: ARD RBF kernel with an output scale, zero mean on standardized targets,
-learned Gaussian noise with a low floor, float64. `to_gpytorch` gives the same GP as ONE batched gpytorch model
-(batch_shape = n_outputs), for comparisons.
+One independent GP per output dimension: zero mean on standardized targets, learned Gaussian noise with a low floor,
+float64, and one of two kernels with an output scale (`kernel`):
+- "rbf": ARD RBF over the scaled joints. `to_gpytorch` gives the same GP as ONE batched gpytorch model
+  (batch_shape = n_outputs), for comparisons;
+- "kinematic": s Π_d (c_d + cos Δq_d) / (1 + c_d) (`_gp_trig.py`), exact for a point carried by revolute joints
+  (the end effector in 3-D): 1e-5 mm where the RBF is 30–100 mm off over a 6–7-joint arm's full ranges;
+- "auto" (the default): both are fitted to the hyper subset and the one of higher marginal likelihood is kept (the
+  data decide: kinematic for ee_xyz, RBF for camera pixels); the kinematic one only up to 7 joints (3^D features).
 
 Fitting (`fit`):
 1. at most `max_points` samples are kept (a seeded uniform random subset beyond that);
@@ -10,8 +15,8 @@ Fitting (`fit`):
    (`_gp_hyper.py`: closed-form MLL and gradient, L-BFGS-B per output, coarse then fine). No gpytorch solve is
    involved: its default silently switches to approximate CG solves above 800 points (measured 55 mm instead of
    0.003 mm mean error on nao_arm, 2000 poses);
-3. the GP is conditioned on all kept samples with our own Cholesky: α = (K + σ²I)⁻¹ y (see `_gp_math.py`).
-   `condition(q, x)` re-does only this step on new data.
+3. the GP is conditioned on all kept samples with our own Cholesky: α = (K + σ²I)⁻¹ y (see `_gp_math.py`; the
+   kinematic kernel in its feature form instead, `_gp_trig.TrigPosterior`). `condition(q, x)` re-does only this step.
 
 Prediction, Jacobian (no autograd) and variance are closed form from the cached α (`_gp_math.py`), then
 chained through the target de-standardization and the latent scaling rad → [-1, 1]; `predict_with_jacobian`
@@ -21,17 +26,23 @@ scaling; the Cholesky factor (only the precision needs it) is recomputed on firs
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Callable
+from typing import Literal
 
 import gpytorch
 import torch
 
-from bodyschema.models import _gp_data, _gp_hyper, _gp_math
+from bodyschema.errors import must_be
+from bodyschema.models import _gp_data, _gp_hyper, _gp_math, _gp_trig
 from bodyschema.models.capabilities import GPMemory
 from bodyschema.models.contract import BaseSensoryModel, register_kind
 from bodyschema.models.scaling import BodySpec
 
 STATE_KEYS = ("train_u", "alpha", "lengthscale", "outputscale", "noise", "y_mean", "y_std")
+TRIG_STATE_KEYS = ("train_u", "weights", "offset", "outputscale", "noise", "y_mean", "y_std")
+KERNELS = ("auto", "rbf", "kinematic")
+_log = logging.getLogger(__name__)
 # noise_floor: noise-free targets fit with σ² at the floor, so it sets their error (regularization), e.g. nao_arm
 # 2000 poses: 1e-7 / 3e-8 / 1e-8 → 1.33 / 0.72 / 0.42 µm mean; 1e-9 let the output scale run away (2.3 µm). 3e-8
 # keeps a margin from that and beats sklearn-gpr's 1.09 µm (its floor 1e-7, one kernel shared by the outputs).
@@ -75,7 +86,6 @@ def _filled(value, shape) -> torch.Tensor:
 class GPRModel(_gp_data.SavedGPState, BaseSensoryModel):
     """Exact GP sensory model, kind "gpr". `__init__` stores hyper-parameters only; `fit` learns."""
 
-    STATE_KEYS = STATE_KEYS
     kind = "gpr"
     precision_varies = True      # 1 / (predictive variance + noise) at z
     exports_onnx = True          # its posterior mean is a few matmuls and one exp (models/onnx_export.py)
@@ -88,17 +98,25 @@ class GPRModel(_gp_data.SavedGPState, BaseSensoryModel):
                  adam_steps: int = 0,         # optional Adam steps between the coarse and fine L-BFGS-B runs
                  lbfgs_steps: int = 200,      # max MLL evaluations per L-BFGS-B run (each output, coarse and fine)
                  lr: float = 0.05,            # Adam step on the log hyper-parameters
-                 noise_floor: float = 3e-8):  # standardized targets; see the noise_floor note above
+                 noise_floor: float = 3e-8,   # standardized targets; see the noise_floor note above
+                 kernel: Literal["auto", "rbf", "kinematic"] = "auto"):   # see the module doc
         super().__init__(body, modality, output_shape)
         _gp_data.check_gp_hyper(hyper_points, max_points, noise_floor)
+        check_kernel(kernel, self.latent_dim)
+        self.kernel = kernel
         self.hyper_points, self.max_points = int(hyper_points), int(max_points)
         self.adam_steps, self.lbfgs_steps, self.lr = int(adam_steps), int(lbfgs_steps), float(lr)
         self.noise_floor = float(noise_floor)
         self._factor = None                   # Cholesky of K + σ²I, (O, n, n); rebuilt lazily after load
+        self._trig = None                     # the kinematic kernel's posterior (`_gp_trig.TrigPosterior`)
+
+    @property
+    def STATE_KEYS(self) -> tuple[str, ...]:  # noqa: N802 (SavedGPState's name)
+        return TRIG_STATE_KEYS if self.kernel_ == "kinematic" else STATE_KEYS
 
     @property
     def is_fitted(self) -> bool:
-        return hasattr(self, "alpha_")
+        return hasattr(self, "alpha_") or hasattr(self, "weights_")
 
     # ---- fitting ------------------------------------------------------------------------------------
     def fit(self, q, x, *, seed: int = 0, val=None, on_epoch: Callable[[int, dict[str, float]], None] | None = None,
@@ -113,12 +131,7 @@ class GPRModel(_gp_data.SavedGPState, BaseSensoryModel):
         u, y, val, gen = _gp_data.training_subset(self, q, x, val, seed)              # (n, Dz), (n, O)
         ys, y_mean, y_std = _gp_data.standardize(y)                                  # (O, n), (O,), (O,)
         sub = _gp_data.random_subset(u.shape[0], self.hyper_points, gen)
-        theta, step = _gp_hyper.fit_log_params(u[sub], ys[:, sub], gen, noise_floor=self.noise_floor,
-                                               adam_steps=self.adam_steps, lr=self.lr, lbfgs_steps=self.lbfgs_steps,
-                                               on_epoch=on_epoch, progress=progress)
-        lengthscale, outputscale, noise = _gp_hyper.split_log_params(theta)          # (O, D), (O,), (O,)
-
-        self.lengthscale_, self.outputscale_, self.noise_ = lengthscale, outputscale, noise
+        step = self._fit_hyper(u[sub], ys[:, sub], gen, on_epoch, progress)
         self.y_mean_, self.y_std_ = y_mean, y_std
         self._condition_unit(u, ys)
         if val is not None and on_epoch is not None:
@@ -127,6 +140,31 @@ class GPRModel(_gp_data.SavedGPState, BaseSensoryModel):
             on_epoch(step, {"val_mean_error": float(diff.norm(dim=-1).mean()),
                             "val_rmse": float(diff.pow(2).mean().sqrt())})
         return self
+
+    def _fit_hyper(self, u: torch.Tensor, ys: torch.Tensor, gen: torch.Generator, on_epoch, progress: bool) -> int:
+        """The kernel and its hyper-parameters at the highest marginal likelihood on the hyper subset (u (m, Dz) in
+        [-1, 1], ys (O, m)); "auto" fits both kernels and keeps the better. → the number of MLL evaluations."""
+        fits, step = {}, 0
+        for kernel in candidate_kernels(self.kernel, self.latent_dim):     # rbf first: its fit is as before
+            def log_step(i, metrics, offset=step):                         # one step count over both searches
+                on_epoch(offset + i, metrics)
+            inputs, objective = ((u, _gp_math.neg_mll_and_grad) if kernel == "rbf" else
+                                 (self.body.from_unit(u), _gp_trig.neg_mll_and_grad))
+            theta, loss, steps = _gp_hyper.fit_log_params(
+                inputs, ys, gen, noise_floor=self.noise_floor, adam_steps=self.adam_steps, lr=self.lr,
+                lbfgs_steps=self.lbfgs_steps, objective=objective, progress=progress,
+                on_epoch=None if on_epoch is None else log_step)
+            fits[kernel], step = (theta, loss), step + steps
+        self.kernel_ = min(fits, key=lambda k: fits[k][1])
+        if len(fits) > 1:
+            _log.info("gpr kernel: %s (−log marginal likelihood: %s)", self.kernel_,
+                      ", ".join(f"{k} {loss:.4g}" for k, (_, loss) in fits.items()))
+        per_input, self.outputscale_, self.noise_ = _gp_hyper.split_log_params(fits[self.kernel_][0])
+        if self.kernel_ == "kinematic":
+            self.offset_ = per_input                                       # (O, Dz) c_d
+        else:
+            self.lengthscale_ = per_input                                  # (O, Dz) ℓ_d
+        return step
 
     def condition(self, q, x, *, seed: int = 0) -> "GPRModel":
         """Re-condition on new data (q (N, Dz) rad, x (N, *out)) keeping the fitted hyper-parameters and target
@@ -138,25 +176,53 @@ class GPRModel(_gp_data.SavedGPState, BaseSensoryModel):
         return self
 
     def _condition_unit(self, u: torch.Tensor, ys: torch.Tensor) -> None:
-        """α = (K + σ²I)⁻¹ y by our own Cholesky, exact at any n. u (n, Dz) in [-1, 1], ys (O, n) standardized."""
+        """α = (K + σ²I)⁻¹ y by our own Cholesky, exact at any n (the kinematic kernel: its feature-form posterior).
+        u (n, Dz) in [-1, 1], ys (O, n) standardized."""
         self.train_u_ = u
+        if self.kernel_ == "kinematic":
+            self._trig = _gp_trig.TrigPosterior(self.body.from_unit(u), self.offset_, self.outputscale_, self.noise_,
+                                                ys=ys)
+            self.weights_ = self._trig.weights                                        # (O, 3^Dz)
+            return
         self._factor = _gp_math.cholesky_factor(u, self.lengthscale_, self.outputscale_, self.noise_)   # (O, n, n)
         self.alpha_ = _gp_math.solve_weights(self._factor, ys)                        # (O, n)
+
+    def _restored(self) -> None:
+        if self.kernel_ == "kinematic":
+            self._trig = _gp_trig.TrigPosterior(self.body.from_unit(self.train_u_), self.offset_, self.outputscale_,
+                                                self.noise_, weights=self.weights_)
+
+    @classmethod
+    def _from_saved(cls, body, modality, output_shape, config, state):
+        model = cls(body, modality, output_shape, **config)
+        model.kernel_ = "kinematic" if "weights" in state else "rbf"                  # the fitted kernel's tensors
+        _gp_data.restore_state(model, state, model.STATE_KEYS)
+        model._restored()
+        return model
 
     # ---- closed-form prediction ---------------------------------------------------------------------
     def _kernel(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         u = self.body.to_unit(z.to(torch.float64))                                    # (B, Dz)
         return u, _gp_math.rbf(u, self.train_u_, self.lengthscale_, self.outputscale_)  # (O, B, n)
 
+    def _mean_and_jacobian(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Standardized mean (O, B) and its Jacobian in output units per rad (B, O, Dz)."""
+        if self.kernel_ == "kinematic":
+            mean, jac = self._trig.mean_and_jacobian(z.to(torch.float64))
+            return mean, jac * self.y_std_[:, None]
+        u, k = self._kernel(z)
+        mean, jac_u = _gp_math.mean_and_jacobian(u, self.train_u_, k, self.alpha_, self.lengthscale_)
+        return mean, jac_u * self.y_std_[:, None] * self.body.unit_per_rad(u)
+
     def _predict(self, z):
-        _, k = self._kernel(z)
-        mean = _gp_math.posterior_mean(k, self.alpha_).T * self.y_std_ + self.y_mean_   # (B, O)
-        return mean.reshape(z.shape[0], *self.output_shape)
+        if self.kernel_ == "kinematic":
+            mean = self._trig.mean(z.to(torch.float64))                              # (O, B)
+        else:
+            mean = _gp_math.posterior_mean(self._kernel(z)[1], self.alpha_)          # (O, B)
+        return (mean.T * self.y_std_ + self.y_mean_).reshape(z.shape[0], *self.output_shape)
 
     def _jacobian(self, z):
-        u, k = self._kernel(z)
-        _, jac_u = _gp_math.mean_and_jacobian(u, self.train_u_, k, self.alpha_, self.lengthscale_)   # (B, O, Dz)
-        return jac_u * self.y_std_[:, None] * self.body.unit_per_rad(u)               # (B, O, Dz) per rad
+        return self._mean_and_jacobian(z)[1]                                          # (B, O, Dz) per rad
 
     def _vjp(self, z, v):
         # Jᵀv in float64 (the hooks compute in float64; the base class casts the result to z.dtype).
@@ -165,16 +231,16 @@ class GPRModel(_gp_data.SavedGPState, BaseSensoryModel):
     def predict_with_jacobian(self, z: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """predict(z) and jacobian(z) sharing one kernel matrix. → (B, *out), (B, O, Dz)."""
         z = self._check_z(z)
-        u, k = self._kernel(z)
-        mean_u, jac_u = _gp_math.mean_and_jacobian(u, self.train_u_, k, self.alpha_, self.lengthscale_)
+        mean_u, jac = self._mean_and_jacobian(z)
         mean = mean_u.T * self.y_std_ + self.y_mean_                                 # (B, O)
-        jac = jac_u * self.y_std_[:, None] * self.body.unit_per_rad(u)                # (B, O, Dz)
         return mean.reshape(z.shape[0], *self.output_shape).to(z.dtype), jac.to(z.dtype)
 
     def _precision(self, z):
         """1 / (σ²_pred + σ²_noise) in output units⁻², diagonal. # (B, *out)"""
-        _, k = self._kernel(z)
-        var = _gp_math.posterior_variance(k, self.factor, self.outputscale_)         # (O, B) standardized
+        if self.kernel_ == "kinematic":
+            var = self._trig.variance(z.to(torch.float64))                           # (O, B) standardized
+        else:
+            var = _gp_math.posterior_variance(self._kernel(z)[1], self.factor, self.outputscale_)
         var_out = (var + self.noise_[:, None]) * self.y_std_[:, None].pow(2)          # (O, B) output units²
         return (1.0 / var_out).T.reshape(z.shape[0], *self.output_shape)
 
@@ -187,7 +253,10 @@ class GPRModel(_gp_data.SavedGPState, BaseSensoryModel):
 
     def to_gpytorch(self) -> BatchExactGP:
         """The fitted model as a gpytorch ExactGP in eval mode (for comparisons; inputs in [-1, 1], targets
-        standardized). Its targets are rebuilt from α as y = (K + σ²I) α."""
+        standardized). Its targets are rebuilt from α as y = (K + σ²I) α. RBF kernel only."""
+        if self.kernel_ != "rbf":
+            raise ValueError(must_be("the gpr kernel", "rbf for to_gpytorch", self.kernel_,
+                                     'Fit with kernel="rbf" to compare with gpytorch.'))
         ys = (self.factor @ (self.factor.transpose(-1, -2) @ self.alpha_[..., None])).squeeze(-1)  # (O, n)
         floor = min(self.noise_floor, 0.5 * float(self.noise_.min()))
         gp = build_exact_gp(self.train_u_, ys, floor, self.lengthscale_[:, None, :],
@@ -198,4 +267,21 @@ class GPRModel(_gp_data.SavedGPState, BaseSensoryModel):
     # ---- persistence --------------------------------------------------------------------------------
     def _config(self):
         return {"hyper_points": self.hyper_points, "max_points": self.max_points, "adam_steps": self.adam_steps,
-                "lbfgs_steps": self.lbfgs_steps, "lr": self.lr, "noise_floor": self.noise_floor}
+                "lbfgs_steps": self.lbfgs_steps, "lr": self.lr, "noise_floor": self.noise_floor,
+                "kernel": self.kernel}
+
+
+def check_kernel(kernel: str, joints: int) -> None:
+    """`kernel` is one of KERNELS, and "kinematic" has at most 7 joints (3^D features)."""
+    if kernel not in KERNELS:
+        raise ValueError(must_be("kernel", f"one of {KERNELS}", repr(kernel)))
+    if kernel == "kinematic" and _gp_trig.feature_count(joints) > _gp_trig.MAX_FEATURES:
+        raise ValueError(must_be('kernel "kinematic"', "used with at most 7 joints (3^D features)", f"{joints} joints",
+                                 'Use kernel="rbf" or "auto" (which falls back to rbf).'))
+
+
+def candidate_kernels(kernel: str, joints: int) -> tuple[str, ...]:
+    """The kernels a fit tries: the one named, or for "auto" rbf and, up to 7 joints, kinematic."""
+    if kernel != "auto":
+        return (kernel,)
+    return ("rbf", "kinematic") if _gp_trig.feature_count(joints) <= _gp_trig.MAX_FEATURES else ("rbf",)

@@ -139,7 +139,7 @@ class SVGPModel(_gp_data.SavedGPState, BaseSensoryModel):
         u = self.body.to_unit(q)                                                       # (N, Dz)
         ys, y_mean, y_std = _gp_data.standardize(y)                                    # (O, N), (O,), (O,)
         sub = _gp_data.random_subset(u.shape[0], self.hyper_points, gen)
-        theta, _ = _gp_hyper.fit_log_params(u[sub], ys[:, sub], gen, noise_floor=self.noise_floor, adam_steps=0,
+        theta, _, _ = _gp_hyper.fit_log_params(u[sub], ys[:, sub], gen, noise_floor=self.noise_floor, adam_steps=0,
                                             lr=0.05, lbfgs_steps=200)
         lengthscale, outputscale, noise = _gp_hyper.split_log_params(theta)            # (O, D), (O,), (O,)
         m = min(self.num_inducing, u.shape[0])

@@ -53,8 +53,10 @@ def fit_gpr(n: int, seed: int = 0, **hyper) -> GPRModel:
 
 
 class TestGPR(SensoryModelContract):
+    """The RBF kernel (the kinematic one: tests/models/test_gpr_kinematic.py)."""
+
     def make_model(self, seed):
-        return fit_gpr(200, seed)
+        return fit_gpr(200, seed, kernel="rbf")
 
     def make_inputs(self, n, dtype=torch.float64):
         return toy_data(n, seed=n)[0].to(dtype)
@@ -92,7 +94,7 @@ class TestGPR(SensoryModelContract):
 
 def test_precision_drops_away_from_the_training_data():
     q, x = toy_data(150, seed=3, low=-1.0, high=1.0)
-    model = GPRModel(TOY.body, "ee_xyz", (3,)).fit(q, x, progress=False)
+    model = GPRModel(TOY.body, "ee_xyz", (3,), kernel="rbf").fit(q, x, progress=False)
     inside, outside = toy_data(50, seed=4, low=-0.8, high=0.8)[0], toy_data(50, seed=5, low=2.2, high=2.5)[0]
     assert model.precision(outside)[:, :2].max() < model.precision(inside)[:, :2].min()
 

@@ -86,7 +86,7 @@ def test_fitted_hyper_parameters_are_a_local_optimum_of_the_mll():
     q = torch.rand(320, 2, generator=gen, dtype=torch.float64) * 4 - 2                   # (320, 2) rad
     x = TOY.predict(q) + 1e-3 * torch.randn(320, 3, generator=gen, dtype=torch.float64)   # (320, 3) m
     steps = []
-    model = GPRModel(TOY.body, "ee_xyz", (3,), hyper_points=320, max_points=320).fit(
+    model = GPRModel(TOY.body, "ee_xyz", (3,), hyper_points=320, max_points=320, kernel="rbf").fit(
         q, x, progress=False, on_epoch=lambda step, metrics: steps.append(step))
     u, (ys, _, _) = TOY.body.to_unit(q), _gp_data.standardize(x)
     theta = torch.cat([model.lengthscale_.log(), model.outputscale_.log()[:, None], model.noise_.log()[:, None]], -1)

@@ -68,7 +68,8 @@ def test_inducing_points_at_the_data_give_the_exact_gp():
     q, x = toy_data(120, seed=100)
     sparse = SVGPModel(TOY.body, "ee_xyz", (3,), num_inducing=120, inducing_init="random", hyper_points=120,
                        elbo_epochs=0, noise_floor=1e-6).fit(q, x)
-    exact = GPRModel(TOY.body, "ee_xyz", (3,), noise_floor=1e-6)
+    exact = GPRModel(TOY.body, "ee_xyz", (3,), noise_floor=1e-6, kernel="rbf")
+    exact.kernel_ = "rbf"
     for key in ("lengthscale", "outputscale", "noise", "y_mean", "y_std"):
         setattr(exact, f"{key}_", getattr(sparse, f"{key}_"))
     exact._condition_unit(TOY.body.to_unit(q), ((x - sparse.y_mean_) / sparse.y_std_).T.contiguous())
@@ -81,7 +82,7 @@ def test_enough_k_means_inducing_points_approach_the_exact_gp_on_the_same_poses(
     # 600 noise-free poses: exact gpr on all of them vs 150 k-means inducing points (the same starting kernel, the
     # collapsed q(u), no minibatch epochs): tolerance 3× the exact held-out error (measured 10.2 vs 4.5 µm).
     q, x = toy_data(600, seed=100)
-    exact = held_out_error(GPRModel(TOY.body, "ee_xyz", (3,), hyper_points=150).fit(q, x))
+    exact = held_out_error(GPRModel(TOY.body, "ee_xyz", (3,), hyper_points=150, kernel="rbf").fit(q, x))
     sparse = held_out_error(SVGPModel(TOY.body, "ee_xyz", (3,), num_inducing=150, hyper_points=150,
                                       elbo_epochs=0).fit(q, x))
     assert sparse < 3 * exact, f"sparse {sparse * 1e3:.4f} mm vs exact {exact * 1e3:.4f} mm"
