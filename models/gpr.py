@@ -131,7 +131,7 @@ class GPRModel(_gp_data.SavedGPState, BaseSensoryModel):
         u, y, val, gen = _gp_data.training_subset(self, q, x, val, seed)              # (n, Dz), (n, O)
         ys, y_mean, y_std = _gp_data.standardize(y)                                  # (O, n), (O,), (O,)
         sub = _gp_data.random_subset(u.shape[0], self.hyper_points, gen)
-        step = self._fit_hyper(u[sub], ys[:, sub], gen, on_epoch, progress)
+        step = self._fit_hyper(u, ys, sub, gen, on_epoch, progress)
         self.y_mean_, self.y_std_ = y_mean, y_std
         self._condition_unit(u, ys)
         if val is not None and on_epoch is not None:
@@ -141,9 +141,13 @@ class GPRModel(_gp_data.SavedGPState, BaseSensoryModel):
                             "val_rmse": float(diff.pow(2).mean().sqrt())})
         return self
 
-    def _fit_hyper(self, u: torch.Tensor, ys: torch.Tensor, gen: torch.Generator, on_epoch, progress: bool) -> int:
-        """The kernel and its hyper-parameters at the highest marginal likelihood on the hyper subset (u (m, Dz) in
-        [-1, 1], ys (O, m)); "auto" fits both kernels and keeps the better. → the number of MLL evaluations."""
+    def _fit_hyper(self, u_all: torch.Tensor, ys_all: torch.Tensor, sub: torch.Tensor, gen: torch.Generator, on_epoch,
+                   progress: bool) -> int:
+        """The kernel and its hyper-parameters at the highest marginal likelihood on the hyper subset `sub` of the
+        kept poses (u_all (n, Dz) in [-1, 1], ys_all (O, n)); "auto" fits both kernels and keeps the better; the
+        kinematic one is then settled on all n (`_gp_trig.refine_on_all_poses`).
+        → the number of MLL evaluations."""
+        u, ys = u_all[sub], ys_all[:, sub]
         fits, step = {}, 0
         for kernel in candidate_kernels(self.kernel, self.latent_dim):     # rbf first: its fit is as before
             def log_step(i, metrics, offset=step):                         # one step count over both searches
@@ -161,7 +165,10 @@ class GPRModel(_gp_data.SavedGPState, BaseSensoryModel):
                       ", ".join(f"{k} {loss:.4g}" for k, (_, loss) in fits.items()))
         per_input, self.outputscale_, self.noise_ = _gp_hyper.split_log_params(fits[self.kernel_][0])
         if self.kernel_ == "kinematic":
-            self.offset_ = per_input                                       # (O, Dz) c_d
+            # (O, Dz) c_d: the subset's or all 1 (a flat prior), the likelier on all kept poses
+            self.offset_, self.outputscale_, self.noise_ = _gp_trig.refine_on_all_poses(
+                self.body.from_unit(u_all), ys_all, [per_input, torch.ones_like(per_input)], self.outputscale_,
+                self.noise_, _gp_hyper.log_bounds(self.latent_dim, self.noise_floor)[-2:])
         else:
             self.lengthscale_ = per_input                                  # (O, Dz) ℓ_d
         return step
