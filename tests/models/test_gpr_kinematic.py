@@ -1,6 +1,7 @@
 """`gpr` with the kinematic kernel (models/_gp_trig.py): the shared contract on the toy arm, its marginal-likelihood
 gradient, its exactness on a 7-joint arm, and the `auto` choice between it and the RBF."""
 
+import numpy as np
 import pytest
 import torch
 
@@ -91,3 +92,23 @@ def test_kinematic_refuses_eight_joints_and_auto_falls_back_to_rbf():
     q = torch.rand(60, 8, generator=torch.Generator().manual_seed(1), dtype=torch.float64) * 2 - 1
     model = GPRModel(body, "ee_xyz", (3,), hyper_points=30).fit(q, q[:, :3].sin())
     assert model.kernel_ == "rbf"
+
+
+def test_the_feature_form_likelihood_on_all_poses_equals_the_kernel_form():
+    # refine_on_all_poses optimizes s and σ² through M's eigendecomposition (Woodbury, determinant lemma): its −MLL
+    # must be the kernel form's, here with more features (27) than poses (20) and the other way round (60).
+    gen = torch.Generator().manual_seed(8)
+    for n in (20, 60):
+        q = torch.rand(n, 3, generator=gen, dtype=torch.float64) * 4 - 2
+        y = torch.randn(1, n, generator=gen, dtype=torch.float64)
+        offset, scale, noise = torch.tensor([[0.4, 2.0, 1.0]], dtype=torch.float64), 1.7, 0.03
+        root = _gp_trig.prior_weights(offset, torch.ones(1, dtype=torch.float64)).sqrt()[0]     # (27,)
+        phi = _gp_trig.features(q)
+        e, v = torch.linalg.eigh(root[:, None] * (phi.T @ phi) * root[None, :])
+        b2 = (v.T @ (root * (y[0] @ phi))).pow(2)
+        objective = _gp_trig._scale_noise_mll(e.clamp_min(0).numpy(), b2.numpy(), float(y[0] @ y[0]), n)
+        loss, grad = objective(np.log([scale, noise]))
+        expected, expected_grad = _gp_trig.neg_mll_and_grad(q, y, offset, torch.tensor([scale], dtype=torch.float64),
+                                                            torch.tensor([noise], dtype=torch.float64))
+        assert loss + 0.5 * n * np.log(2 * np.pi) == pytest.approx(float(expected[0]), rel=1e-9)
+        np.testing.assert_allclose(grad, expected_grad[0, -2:].numpy(), rtol=1e-7)
