@@ -11,6 +11,7 @@ The trained network as a model (`NetHolder`, `NetModel`): `_nn_model.py`.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import time
@@ -24,6 +25,7 @@ from torch import nn
 from tqdm.auto import tqdm
 
 from bodyschema.errors import must_be
+from bodyschema.models._nn_device import DevicePlan, plan_for, warmup_factor
 from bodyschema.models.device import check_device
 from bodyschema.models.files import torch_bytes, write_atomically
 from bodyschema.models.scaling import IMAGE_SCALE
@@ -140,7 +142,8 @@ def train(module: nn.Module, loss_fn: Callable[..., torch.Tensor], data: tuple[t
           settings: TrainSettings, gen: torch.Generator, *, val: tuple[torch.Tensor, ...] | None = None,
           on_epoch: Callable[[int, dict], None] | None = None, progress: bool = False,
           checkpoint: str | Path | None = None, param_groups: list[dict] | None = None,
-          desc: str = "fit", device: str | torch.device = "cpu") -> dict[str, float]:
+          desc: str = "fit", device: str | torch.device = "cpu", mixed_precision: bool = False,
+          plan: DevicePlan | None = None) -> dict[str, float]:
     """Minimise `loss_fn(module, *batch)` (a mean over the batch); leaves the best weights in `module`.
 
     The score is the validation loss when `val` is given, else the train loss. `settings.epochs` is a cap: the
@@ -150,14 +153,22 @@ def train(module: nn.Module, loss_fn: Callable[..., torch.Tensor], data: tuple[t
     at the start.
     The module and the data live on `device` while training; the module is back on the CPU on return
     (models are saved and shipped on CPU; `NetModel.to` moves them for inference). The shuffling stays on
-    the CPU generator, so a seed gives the same minibatches on every device.
+    the CPU generator, so a seed gives the same minibatches on every device. `plan` (None: the device's,
+    `_nn_device.plan_for`) sets the batch size, the learning rate's scale and warm-up, and bf16 autocast
+    (`mixed_precision`); on the CPU it changes nothing. The epoch's loss is summed on the device and read once per
+    epoch (no host synchronisation per step).
     """
     device = check_device(device)
+    plan = plan or plan_for(device, settings.batch_size, mixed_precision)
     module.to(device)
     data = tuple(d.to(device) for d in data)
     val = tuple(d.to(device) for d in val) if val is not None else None
     n = data[0].shape[0]
     opt = torch.optim.Adam(param_groups or module.parameters(), lr=settings.lr, weight_decay=settings.weight_decay)
+    base_lrs = [group["lr"] for group in opt.param_groups]     # before a resume restores a warmed-up one
+    steps_per_epoch = math.ceil(n / plan.batch_size)
+    if plan != plan_for(torch.device("cpu"), settings.batch_size):
+        _log.info("%s on %s: %s", desc, device, plan.describe(settings.batch_size, settings.lr))
     fingerprint = {"n": n, "shapes": [list(d.shape[1:]) for d in data], **asdict(settings)}
     state = {"epoch": -1, "best": math.inf, "best_epoch": -1, "bad": 0,
              "best_weights": _clone(module.state_dict()), "metrics": {}}
@@ -172,17 +183,21 @@ def train(module: nn.Module, loss_fn: Callable[..., torch.Tensor], data: tuple[t
         start = time.perf_counter()
         module.train()
         perm = torch.randperm(n, generator=gen)
-        total = 0.0
-        for i in range(0, n, settings.batch_size):
-            idx = perm[i:i + settings.batch_size]
-            loss = loss_fn(module, *(d[idx] for d in data))
+        total = torch.zeros((), dtype=torch.float64, device=device)
+        for step, i in enumerate(range(0, n, plan.batch_size), start=epoch * steps_per_epoch):
+            if plan.lr_scale != 1.0:
+                for group, lr in zip(opt.param_groups, base_lrs):
+                    group["lr"] = lr * warmup_factor(plan, step, steps_per_epoch)
+            idx = perm[i:i + plan.batch_size]
+            with _autocast(device, plan.autocast):
+                loss = loss_fn(module, *(d[idx] for d in data))
             opt.zero_grad(set_to_none=True)
             loss.backward()
             opt.step()
-            total += float(loss.detach()) * len(idx)
-        metrics = {"train_loss": total / n}
+            total += loss.detach().double() * len(idx)   # float64 as the former Python float sum: the same bits
+        metrics = {"train_loss": float(total) / n}
         if val is not None:
-            metrics["val_loss"] = evaluate(module, loss_fn, val, settings.batch_size)
+            metrics["val_loss"] = evaluate(module, loss_fn, val, plan.batch_size)
         score = metrics.get("val_loss", metrics["train_loss"])
         if score < state["best"]:
             state.update(best=score, best_epoch=epoch, bad=0, best_weights=_clone(module.state_dict()))
@@ -214,13 +229,20 @@ def train(module: nn.Module, loss_fn: Callable[..., torch.Tensor], data: tuple[t
 
 @torch.no_grad()
 def evaluate(module: nn.Module, loss_fn, data: tuple[torch.Tensor, ...], batch_size: int) -> float:
+    """The mean loss over `data` in float32 (no autocast), summed on its device, read once."""
     was_training = module.training
     module.eval()
     n = data[0].shape[0]
-    total = sum(float(loss_fn(module, *(d[i:i + batch_size] for d in data))) * min(batch_size, n - i)
-                for i in range(0, n, batch_size))
+    total = torch.zeros((), dtype=torch.float64, device=data[0].device)
+    for i in range(0, n, batch_size):
+        total += loss_fn(module, *(d[i:i + batch_size] for d in data)).double() * min(batch_size, n - i)
     module.train(was_training)
-    return total / n
+    return float(total) / n
+
+
+def _autocast(device: torch.device, dtype: torch.dtype | None):
+    """bf16 autocast of the forward pass when the plan asks; else no context at all (float32 as before)."""
+    return torch.autocast(device.type, dtype=dtype) if dtype is not None else contextlib.nullcontext()
 
 
 def _clone(weights: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:

@@ -92,7 +92,7 @@ class ImageEncoder(NetHolder, Estimator):
 
     # ---- fit ------------------------------------------------------------------------------------------
     def fit(self, q, x, *, seed: int = 0, val=None, on_epoch=None, progress: bool = False, checkpoint=None,
-            device: str = "cpu"):
+            device: str = "cpu", mixed_precision: bool = False):
         """Train on joint angles q (N, Dz) rad and their images x (N, *image_shape) by the squared error of the
         unit-box joint angles, on `device`; self. Same argument order as the sensory models (q, x)."""
         q, x = check_fit_data(q, x, self.latent_dim, self.image_shape)      # (N, Dz), (N, *image) in [0, 1]
@@ -102,7 +102,8 @@ class ImageEncoder(NetHolder, Estimator):
         to_unit = self.body.to_unit
         self.fit_info_ = train(net, _unit_mse, (x, to_unit(q)), self.settings, gen,
                                val=(val[1], to_unit(val[0])) if val is not None else None, on_epoch=on_epoch,
-                               progress=progress, checkpoint=checkpoint, desc="fit encoder", device=device)
+                               progress=progress, checkpoint=checkpoint, desc="fit encoder", device=device,
+                               mixed_precision=mixed_precision)
         self._set_net(net)
         return self
 

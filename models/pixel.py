@@ -176,7 +176,7 @@ class PixelDecoder(NetModel, BaseSensoryModel):
 
     # ---- fit ------------------------------------------------------------------------------------------
     def fit(self, q, x, *, seed: int = 0, val=None, on_epoch=None, progress: bool = False, checkpoint=None,
-            device: str = "cpu"):
+            device: str = "cpu", mixed_precision: bool = False):
         """Train on q (N, Dz) rad, x (N, *output_shape) by the per-pixel squared error (`_nn_fit.train`) on
         `device`; self (its network on the CPU: `to(device)` for inference elsewhere)."""
         q, x = check_fit_data(q, x, self.latent_dim, self.output_shape)     # (N, Dz), (N, *out) in [0, 1]
@@ -187,7 +187,7 @@ class PixelDecoder(NetModel, BaseSensoryModel):
         self.fit_info_ = train(net, _mse, (to_unit(q), x), self.settings, gen,
                                val=(to_unit(val[0]), val[1]) if val is not None else None,
                                on_epoch=on_epoch, progress=progress, checkpoint=checkpoint, desc="fit pixel",
-                               device=device)
+                               device=device, mixed_precision=mixed_precision)
         q_res, x_res = val if val is not None else (q, x)
         self.residual_var_ = evaluate(net, _mse, (to_unit(q_res), x_res), self.settings.batch_size)   # on CPU
         self.precision_ = self.fixed_precision or 1.0 / max(self.residual_var_, 1e-8)

@@ -50,6 +50,7 @@ class TrainConfig(Generic[M]):
     register: bool = True  # register the model and maybe move the `champion` alias; False: log the run only
     progress: Progress = False  # show progress bars (--quiet hides them too)
     device: str = "cpu"  # cpu | cuda | cuda:N: where the network kinds (pixel, encoder) train; saved on CPU either way
+    mixed_precision: bool = False  # bf16 autocast of the network kinds' forward pass (models/_nn_device.py)
 
     def __post_init__(self) -> None:
         def fix(name: str, value: Any) -> None:

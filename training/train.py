@@ -128,6 +128,9 @@ def _train(config: TrainConfig) -> TrainResult:
     if config.device != "cpu" and not on_device:
         raise ValueError(must_be("device", f"'cpu' for model kind {config.kind!r}", config.device,
                                  "Only the network kinds (pixel, encoder) train on CUDA."))
+    if config.mixed_precision and not on_device:
+        raise ValueError(must_be("mixed_precision", f"false for model kind {config.kind!r}", True,
+                                 "Only the network kinds (pixel, encoder) train in bf16."))
     for shape in shapes.values():                                 # GP memory (n², outputs) vs available RAM
         guards.check_memory(config.kind, model, len(data.train), shape)
     multi = model.has_members                      # MultimodalModel: one SensoryModel per modality
@@ -175,7 +178,7 @@ def _train_owned(config: TrainConfig, client, data: Dataset, model, members: dic
         if "checkpoint" in inspect.signature(model.fit).parameters:
             fit_kwargs["checkpoint"] = run_dir / "checkpoint.pt"
         if on_device:
-            fit_kwargs["device"] = config.device
+            fit_kwargs.update(device=config.device, mixed_precision=config.mixed_precision)
         t0 = time.perf_counter()
         try:
             model.fit(data.train.q, train_x, **fit_kwargs)

@@ -159,7 +159,7 @@ def test_device_is_checked_at_the_config_and_left_out_of_the_run_identity(kin_st
     with pytest.raises(ValueError, match=r"Got 'cuda:1'. This machine has 1 CUDA device"):
         tiny_config(kin_store, device="cuda:1")
     gpu = tiny_config(kin_store, device="cuda:0")
-    assert gpu.config_hash("sha") == config.config_hash("sha"), "the device does not change the trained model"
+    assert gpu.config_hash("sha") == config.config_hash("sha"), "the device is not part of a run's identity"
 
 
 def test_a_kind_without_device_support_refuses_cuda_before_any_run(workdir, kin_store, tiny_kind, monkeypatch):
@@ -168,6 +168,9 @@ def test_a_kind_without_device_support_refuses_cuda_before_any_run(workdir, kin_
     with pytest.raises(ValueError, match=r"device must be 'cpu' for model kind 'tiny'. Got 'cuda'"):
         train(tiny_config(kin_store, device="cuda"))
     assert not (workdir / "runs").exists(), "refused before a run directory or MLflow run exists"
+    with pytest.raises(ValueError, match=r"mixed_precision must be false for model kind 'tiny'. Got True"):
+        train(tiny_config(kin_store, mixed_precision=True))
+    assert not (workdir / "runs").exists()
 
 
 def test_val_rmse_has_one_name_and_one_meaning(workdir, kin_store, tiny_kind):
