@@ -62,6 +62,13 @@ def score_unit(model) -> str:
     return "deg" if model.encodes else modalities.unit(model.modality, "output units")
 
 
+def with_unit(key: str, unit: str) -> str:
+    """" <unit>" for a held-out score key ("val_rmse", "image/val_mean_error"); "" for `val_loss`, the fit's own
+    objective on the held-out rows, which is in the model's internal units (unit-box or [0, 1] squared errors)."""
+    name = key.rsplit("/", 1)[-1]
+    return f" {unit}" if unit and name.startswith("val_") and name != "val_loss" else ""
+
+
 def card_markdown(model, name: str | None, tags: dict[str, str], metrics: dict[str, float], params: dict) -> str:
     """`model_card.md`, a training run's artifact: what the model is (`model_summary`), the data it was trained and
     scored on (path, digests, split), its held-out scores and its hyper-parameters."""
@@ -73,7 +80,7 @@ def card_markdown(model, name: str | None, tags: dict[str, str], metrics: dict[s
              f"- rows: {params.get('n_train', '?')} train, {params.get('n_val', '?')} validation, split by "
              f"{params.get('split_by', '?')}", "", "## Held-out scores", ""]
     unit = score_unit(model)
-    lines += [f"- {k}: {v:.6g}{' ' + unit if k.startswith('val_') else ''}" for k, v in sorted(metrics.items())]
+    lines += [f"- {k}: {v:.6g}{with_unit(k, unit)}" for k, v in sorted(metrics.items())]
     lines += ["", "## Hyper-parameters", ""] + [f"- {k}: {v}" for k, v in sorted(params.items())
                                                  if k.startswith("hyper.")]
     lines += ["", f"Weights sha256: `{tags.get(DIGEST_TAG, '?')}` (checked before every load from the registry)."]

@@ -33,7 +33,7 @@ from bodyschema.training.champion import CHAMPION, register_version
 from bodyschema.training.config import TrainConfig, untrained_model
 from bodyschema.training.data import Dataset, load_dataset, validation_digest
 from bodyschema.training.digest import DIGEST_TAG
-from bodyschema.training.model_card import card_markdown, score_unit
+from bodyschema.training.model_card import card_markdown, score_unit, with_unit
 from bodyschema.training.pyfunc_loader import log_sensory_model
 from bodyschema.training.registry import (
     DATASET_TAG,
@@ -101,9 +101,8 @@ class TrainResult:
         return "\n".join(lines)
 
     def _unit(self, key: str) -> str:
-        """" <unit>" of the score `key` ("val_rmse" or "<modality>/val_rmse"), or "" where none is known."""
-        unit = self.units.get(key[:key.rfind("/") + 1], "")
-        return f" {unit}" if unit else ""
+        """" <unit>" of the score `key` ("val_rmse" or "<modality>/val_rmse"), or "" where none is known or applies."""
+        return with_unit(key, self.units.get(key[:key.rfind("/") + 1], ""))
 
 
 def train(config: TrainConfig) -> TrainResult:

@@ -41,3 +41,5 @@ def test_train_prints_each_score_with_its_unit():
     multi = TrainResult("r", (), {"ee_xyz/val_rmse": 0.001, "ee_pixel/val_rmse": 1.5},
                         units={"ee_xyz/": "m", "ee_pixel/": "px"})
     assert "ee_pixel/val_rmse=1.5 px, ee_xyz/val_rmse=0.001 m" in str(multi)
+    encoder = TrainResult("r", (), {"val_loss": 0.2019, "val_rmse": 52.41}, units={"": "deg"})
+    assert "held-out: val_loss=0.2019, val_rmse=52.41 deg" in str(encoder), "val_loss is the fit's unit-box MSE"
