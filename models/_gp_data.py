@@ -49,15 +49,22 @@ def check_training_data(q, x, body: BodySpec, output_shape: tuple[int, ...], pre
     return q, x.reshape(x.shape[0], -1)
 
 
-def training_subset(model, q, x, val, seed: int) -> tuple[torch.Tensor, torch.Tensor, tuple | None,
-                                                         torch.Generator]:
-    """A GP's training data checked, and its random subset of at most `model.max_points`: (u (n, Dz) in the unit box,
-    y (n, O)), the checked `val` pair (or None), and the generator the hyper-parameter subset is drawn with next."""
+def training_data(model, q, x, val, seed: int) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, tuple | None,
+                                                     torch.Generator]:
+    """A GP's training data checked: all of it (q (N, Dz) rad, y (N, O)), the indices of its seeded random subset of
+    at most `model.max_points` (n,), the checked `val` pair (or None), and the generator the hyper-parameter subset
+    is drawn with next."""
     q, y = check_training_data(q, x, model.body, model.output_shape)            # (N, Dz), (N, O)
     if val is not None:
         val = check_training_data(*val, model.body, model.output_shape, prefix="val ")
     gen = torch.Generator().manual_seed(int(seed))
-    keep = random_subset(q.shape[0], model.max_points, gen)
+    return q, y, random_subset(q.shape[0], model.max_points, gen), val, gen
+
+
+def training_subset(model, q, x, val, seed: int) -> tuple[torch.Tensor, torch.Tensor, tuple | None,
+                                                         torch.Generator]:
+    """`training_data`'s subset only: (u (n, Dz) in the unit box, y (n, O)), `val` and the generator."""
+    q, y, keep, val, gen = training_data(model, q, x, val, seed)
     return model.body.to_unit(q[keep]), y[keep], val, gen
 
 

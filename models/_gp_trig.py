@@ -30,6 +30,7 @@ import torch
 from bodyschema.models import _gp_math
 
 MAX_FEATURES = 3 ** 7      # 7 joints: a 2187² system per output (~1 s); 8 would be 6561² (~30 s, 340 MB each)
+CHUNK = 8192               # poses per block of Φ while summing ΦᵀΦ: 8192 × 2187 float64 = 143 MB at 7 joints
 
 
 def feature_count(joints: int) -> int:
@@ -63,6 +64,20 @@ def features_and_derivatives(q: torch.Tensor) -> tuple[torch.Tensor, torch.Tenso
     values = list(value.unbind(1))
     derivatives = [_kron(values[:d] + [slope[:, d]] + values[d + 1:]) for d in range(q.shape[1])]
     return _kron(values), torch.stack(derivatives, 1)
+
+
+def moments(q: torch.Tensor, ys: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor | None]:
+    """ΦᵀΦ (P, P) and Φᵀy per output (O, P) over any number of poses, in blocks of CHUNK (memory O(CHUNK·P + P²),
+    not O(n·P)). q (n, D) rad, ys (O, n) or None."""
+    p = feature_count(q.shape[1])
+    gram = torch.zeros(p, p, dtype=torch.float64)
+    phi_y = None if ys is None else torch.zeros(ys.shape[0], p, dtype=torch.float64)
+    for i in range(0, q.shape[0], CHUNK):
+        phi = features(q[i:i + CHUNK])                                      # (≤ CHUNK, P)
+        gram += phi.T @ phi
+        if ys is not None:
+            phi_y += ys[:, i:i + CHUNK] @ phi
+    return gram, phi_y
 
 
 def prior_weights(offset: torch.Tensor, outputscale: torch.Tensor) -> torch.Tensor:
@@ -108,16 +123,17 @@ class TrigPosterior:
     """The posterior of O kinematic-kernel GPs conditioned on (q (n, D) rad, ys (O, n) standardized targets).
 
     weights (O, P): m(q) = φ(q) · v. The Cholesky factor of A (O, P, P), needed only for the variance, is formed
-    on first use from the kept poses (after a load too).
+    on first use from the kept poses (after a load too). ΦᵀΦ is summed in blocks: any number of poses fits in memory.
     """
 
     def __init__(self, q: torch.Tensor, offset: torch.Tensor, outputscale: torch.Tensor, noise: torch.Tensor,
                  ys: torch.Tensor | None = None, weights: torch.Tensor | None = None):
         self.q, self.noise = q, noise
         self.root = prior_weights(offset, outputscale).sqrt()               # (O, P): √λ
-        self._factor = None
+        self._factor, self._gram = None, None
         if weights is None:
-            psi_y = self.root * (ys @ features(q))                          # (O, P): Ψᵀ y = √λ ⊙ Φᵀ y
+            self._gram, phi_y = moments(q, ys)
+            psi_y = self.root * phi_y                                       # (O, P): Ψᵀ y = √λ ⊙ Φᵀ y
             half = torch.linalg.solve_triangular(self.factor, psi_y[..., None], upper=False)
             weights = self.root * torch.linalg.solve_triangular(self.factor.mT, half, upper=True).squeeze(-1)
         self.weights = weights                                              # (O, P)
@@ -126,12 +142,12 @@ class TrigPosterior:
     def factor(self) -> torch.Tensor:
         """L with L Lᵀ = diag(√λ) ΦᵀΦ diag(√λ) + σ² I. # (O, P, P)"""
         if self._factor is None:
-            phi = features(self.q)                                          # (n, P)
-            gram = phi.T @ phi                                              # (P, P)
+            gram = self._gram if self._gram is not None else moments(self.q)[0]   # (P, P)
+            self._gram = None                                               # needed once: free its P² floats
             scaled = self.root[:, :, None] * gram[None] * self.root[:, None, :]   # (O, P, P)
             scale = scaled.diagonal(dim1=-2, dim2=-1).mean(-1) + self.noise
             self._factor = _gp_math.factorize(
-                scaled.clone(), self.noise, scale, lambda o: self.root[o, :, None] * gram * self.root[o, None, :])
+                scaled, self.noise, scale, lambda o: self.root[o, :, None] * gram * self.root[o, None, :])
         return self._factor
 
     def mean(self, q: torch.Tensor) -> torch.Tensor:
@@ -165,15 +181,15 @@ def refine_on_all_poses(q: torch.Tensor, ys: torch.Tensor, offsets: list[torch.T
     q (n, D) rad, ys (O, n), offsets: candidates (O, D) each, outputscale and noise (O,) the starts,
     bounds (2, 2) rows (log s, log σ²) [low, high] → offset (O, D), s (O,), σ² (O,).
     """
-    phi = features(q)                                                       # (n, P)
-    gram, phi_y = phi.T @ phi, ys @ phi                                     # (P, P), (O, P)
+    gram, phi_y = moments(q, ys)                                            # (P, P), (O, P)
+    n = q.shape[0]
     best = [(math.inf, None)] * ys.shape[0]
     for offset in offsets:
         root = prior_weights(offset, torch.ones_like(outputscale)).sqrt()   # (O, P)
         for o in range(ys.shape[0]):
             e, v = torch.linalg.eigh(root[o, :, None] * gram * root[o, None, :])
             objective = _scale_noise_mll(e.clamp_min(0).numpy(), (v.T @ (root[o] * phi_y[o])).pow(2).numpy(),
-                                         float(ys[o] @ ys[o]), phi.shape[0])
+                                         float(ys[o] @ ys[o]), n)
             start = np.log([float(outputscale[o]), float(noise[o])])
             result = scipy.optimize.minimize(objective, start, jac=True, method="L-BFGS-B", bounds=bounds)
             if result.fun < best[o][0]:

@@ -49,7 +49,7 @@ class ModelConfig:
 class GPRConfig(ModelConfig):
     kind: ClassVar[str] = "gpr"
     hyper_points: int = 500  # the marginal likelihood is fitted on this many samples: O(m³) per step
-    max_points: int = 5000  # the GP is conditioned on at most this many samples: O(n³) once, O(n²) memory
+    max_points: int = 5000  # RBF: conditioned on at most this many samples (O(n³), O(n²) memory); kinematic: on all
     adam_steps: int = 0  # optional Adam steps between the coarse and the fine L-BFGS-B runs (not needed)
     lbfgs_steps: int = 200  # at most this many evaluations per L-BFGS-B run (each output, coarse and fine)
     lr: float = 0.05  # Adam step on the log kernel hyper-parameters

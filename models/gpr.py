@@ -10,7 +10,8 @@ float64, and one of two kernels with an output scale (`kernel`):
   data decide: kinematic for ee_xyz, RBF for camera pixels); the kinematic one only up to 7 joints (3^D features).
 
 Fitting (`fit`):
-1. at most `max_points` samples are kept (a seeded uniform random subset beyond that);
+1. at most `max_points` samples are kept (a seeded uniform random subset beyond that) for the likelihood and the RBF;
+   the kinematic kernel is conditioned on every sample (its feature form costs O(n·9^D) time, O(9^D) memory);
 2. hyper-parameters maximize the exact marginal likelihood on a seeded random subset of `hyper_points` samples
    (`_gp_hyper.py`: closed-form MLL and gradient, L-BFGS-B per output, coarse then fine). No gpytorch solve is
    involved: its default silently switches to approximate CG solves above 800 points (measured 55 mm instead of
@@ -94,7 +95,8 @@ class GPRModel(_gp_data.SavedGPState, BaseSensoryModel):
 
     def __init__(self, body: BodySpec, modality: str, output_shape: tuple[int, ...], *,
                  hyper_points: int = 500,     # MLL fitted on this many samples: O(m³) per evaluation (~10 ms)
-                 max_points: int = 5000,      # conditioned on at most this many: O(n³) once, O(n²) memory per output
+                 max_points: int = 5000,      # RBF: conditioned on at most this many (O(n³) once, O(n²) memory per
+                                              # output); the kinematic kernel takes all (O(n·9^Dz), O(9^Dz) memory)
                  adam_steps: int = 0,         # optional Adam steps between the coarse and fine L-BFGS-B runs
                  lbfgs_steps: int = 200,      # max MLL evaluations per L-BFGS-B run (each output, coarse and fine)
                  lr: float = 0.05,            # Adam step on the log hyper-parameters
@@ -128,11 +130,14 @@ class GPRModel(_gp_data.SavedGPState, BaseSensoryModel):
         over outputs, each at its latest evaluation), then {"val_mean_error", "val_rmse"} (output units: mean
         per-sample Euclidean error, RMSE over all output elements, as training.scoring.score) when val is given.
         """
-        u, y, val, gen = _gp_data.training_subset(self, q, x, val, seed)              # (n, Dz), (n, O)
-        ys, y_mean, y_std = _gp_data.standardize(y)                                  # (O, n), (O,), (O,)
+        q_all, y_all, keep, val, gen = _gp_data.training_data(self, q, x, val, seed)  # (N, Dz), (N, O), (n,)
+        u = self.body.to_unit(q_all[keep])                                            # (n, Dz)
+        ys, self.y_mean_, self.y_std_ = _gp_data.standardize(y_all[keep])             # (O, n), (O,), (O,)
         sub = _gp_data.random_subset(u.shape[0], self.hyper_points, gen)
-        step = self._fit_hyper(u, ys, sub, gen, on_epoch, progress)
-        self.y_mean_, self.y_std_ = y_mean, y_std
+        step = self._fit_hyper(u[sub], ys[:, sub], gen, on_epoch, progress)
+        if self.kernel_ == "kinematic":      # its feature form takes every pose, not the max_points subset
+            u, ys = self.body.to_unit(q_all), self._standardized(y_all)               # (N, Dz), (O, N)
+            self._settle_offsets(u, ys)
         self._condition_unit(u, ys)
         if val is not None and on_epoch is not None:
             pred = self._predict(val[0])                                              # (Nv, *out)
@@ -141,13 +146,9 @@ class GPRModel(_gp_data.SavedGPState, BaseSensoryModel):
                             "val_rmse": float(diff.pow(2).mean().sqrt())})
         return self
 
-    def _fit_hyper(self, u_all: torch.Tensor, ys_all: torch.Tensor, sub: torch.Tensor, gen: torch.Generator, on_epoch,
-                   progress: bool) -> int:
-        """The kernel and its hyper-parameters at the highest marginal likelihood on the hyper subset `sub` of the
-        kept poses (u_all (n, Dz) in [-1, 1], ys_all (O, n)); "auto" fits both kernels and keeps the better; the
-        kinematic one is then settled on all n (`_gp_trig.refine_on_all_poses`).
-        → the number of MLL evaluations."""
-        u, ys = u_all[sub], ys_all[:, sub]
+    def _fit_hyper(self, u: torch.Tensor, ys: torch.Tensor, gen: torch.Generator, on_epoch, progress: bool) -> int:
+        """The kernel and its hyper-parameters at the highest marginal likelihood on the hyper subset (u (m, Dz) in
+        [-1, 1], ys (O, m)); "auto" fits both kernels and keeps the better. → the number of MLL evaluations."""
         fits, step = {}, 0
         for kernel in candidate_kernels(self.kernel, self.latent_dim):     # rbf first: its fit is as before
             def log_step(i, metrics, offset=step):                         # one step count over both searches
@@ -165,21 +166,31 @@ class GPRModel(_gp_data.SavedGPState, BaseSensoryModel):
                       ", ".join(f"{k} {loss:.4g}" for k, (_, loss) in fits.items()))
         per_input, self.outputscale_, self.noise_ = _gp_hyper.split_log_params(fits[self.kernel_][0])
         if self.kernel_ == "kinematic":
-            # (O, Dz) c_d: the subset's or all 1 (a flat prior), the likelier on all kept poses
-            self.offset_, self.outputscale_, self.noise_ = _gp_trig.refine_on_all_poses(
-                self.body.from_unit(u_all), ys_all, [per_input, torch.ones_like(per_input)], self.outputscale_,
-                self.noise_, _gp_hyper.log_bounds(self.latent_dim, self.noise_floor)[-2:])
+            self.offset_ = per_input                                       # (O, Dz) c_d
         else:
             self.lengthscale_ = per_input                                  # (O, Dz) ℓ_d
         return step
+
+    def _settle_offsets(self, u: torch.Tensor, ys: torch.Tensor) -> None:
+        """The kinematic kernel's c_d (O, Dz): the hyper subset's or all 1 (a flat prior), the likelier on all the
+        poses (u (N, Dz), ys (O, N)), with s and σ² at their optimum there (`_gp_trig.refine_on_all_poses`)."""
+        self.offset_, self.outputscale_, self.noise_ = _gp_trig.refine_on_all_poses(
+            self.body.from_unit(u), ys, [self.offset_, torch.ones_like(self.offset_)], self.outputscale_,
+            self.noise_, _gp_hyper.log_bounds(self.latent_dim, self.noise_floor)[-2:])
+
+    def _standardized(self, y: torch.Tensor) -> torch.Tensor:
+        """Targets in the fitted scaling. y (N, O) → (O, N)."""
+        return ((y - self.y_mean_) / self.y_std_).T.contiguous()
 
     def condition(self, q, x, *, seed: int = 0) -> "GPRModel":
         """Re-condition on new data (q (N, Dz) rad, x (N, *out)) keeping the fitted hyper-parameters and target
         scaling: one Cholesky, no optimization (e.g. after a body change, or to compare training-set sizes)."""
         self._require_fitted()
         q, y = _gp_data.check_training_data(q, x, self.body, self.output_shape)        # (N, Dz), (N, O)
-        keep = _gp_data.random_subset(q.shape[0], self.max_points, torch.Generator().manual_seed(int(seed)))
-        self._condition_unit(self.body.to_unit(q[keep]), ((y[keep] - self.y_mean_) / self.y_std_).T.contiguous())
+        if self.kernel_ == "rbf":                                                      # the kinematic one: all
+            keep = _gp_data.random_subset(q.shape[0], self.max_points, torch.Generator().manual_seed(int(seed)))
+            q, y = q[keep], y[keep]
+        self._condition_unit(self.body.to_unit(q), self._standardized(y))
         return self
 
     def _condition_unit(self, u: torch.Tensor, ys: torch.Tensor) -> None:

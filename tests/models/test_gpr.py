@@ -115,7 +115,8 @@ def test_more_than_800_points_still_uses_exact_solves():
 def test_max_points_keeps_a_seeded_random_subset_and_reports_validation():
     q, x = toy_data(300, seed=11)
     steps, metrics = [], {}
-    model = GPRModel(TOY.body, "ee_xyz", (3,), max_points=120, hyper_points=60, adam_steps=5, lbfgs_steps=20).fit(
+    model = GPRModel(TOY.body, "ee_xyz", (3,), max_points=120, hyper_points=60, adam_steps=5, lbfgs_steps=20,
+                     kernel="rbf").fit(
         q.numpy(), x.numpy(), seed=3, val=toy_data(40, seed=12), progress=False,
         on_epoch=lambda step, m: (steps.append(step), metrics.update(m)))
     assert model.train_u_.shape == (120, 2)

@@ -112,3 +112,18 @@ def test_the_feature_form_likelihood_on_all_poses_equals_the_kernel_form():
                                                             torch.tensor([noise], dtype=torch.float64))
         assert loss + 0.5 * n * np.log(2 * np.pi) == pytest.approx(float(expected[0]), rel=1e-9)
         np.testing.assert_allclose(grad, expected_grad[0, -2:].numpy(), rtol=1e-7)
+
+
+def test_the_kinematic_kernel_is_conditioned_on_every_pose_past_max_points(monkeypatch):
+    # max_points bounds the RBF's n×n matrices; the feature form's cost is O(n·9^D) time and O(9^D) memory, summed in
+    # blocks (CHUNK, made small here to cross block boundaries): all 300 poses are kept, and blocks change nothing
+    monkeypatch.setattr(_gp_trig, "CHUNK", 64)
+    q, x = toy_data(300, seed=11)
+    model = GPRModel(TOY.body, "ee_xyz", (3,), max_points=120, hyper_points=60, kernel="kinematic").fit(q, x)
+    assert model.train_u_.shape == (300, 2)
+    gram, phi_y = _gp_trig.moments(q, x.T)
+    phi = _gp_trig.features(q)
+    torch.testing.assert_close(gram, phi.T @ phi, rtol=1e-12, atol=1e-9)
+    torch.testing.assert_close(phi_y, x.T @ phi, rtol=1e-12, atol=1e-9)
+    model.condition(q[:200], x[:200])
+    assert model.train_u_.shape == (200, 2)
