@@ -59,20 +59,21 @@ def _encoder():
     return ImageEncoder(BODY, "image", IMAGE, channels=(4, 8), fc_hidden=16, epochs=2).fit(q, image, progress=False)
 
 
-def _gpr():
+def _gpr(kernel: str = "rbf"):
     from bodyschema.models.gpr import GPRModel
     q, xyz, _ = _data()
-    return GPRModel(BODY, "ee_pixel", (3,), adam_steps=5, lbfgs_steps=5).fit(q, xyz, progress=False)
+    return GPRModel(BODY, "ee_pixel", (3,), adam_steps=5, lbfgs_steps=5, kernel=kernel).fit(q, xyz, progress=False)
 
 
 KINDS = {"mdn-mean": lambda: _mdn("mean"), "mdn-max": lambda: _mdn("max"), "pixel": _pixel,
          "pixel-rgb": lambda: _pixel(rgb=True),
          "multimodal-mlp": lambda: _member("mlp"), "multimodal-pixel": lambda: _member("pixel"),
-         "encoder": _encoder, "gpr": _gpr}
+         "encoder": _encoder, "gpr": _gpr, "gpr-kinematic": lambda: _gpr("kinematic")}
 
 
 UNITS = {"mdn-mean": "in px", "mdn-max": "in px", "pixel": "in intensity [0, 1]", "pixel-rgb": "in intensity [0, 1]",
-         "multimodal-mlp": "in m", "multimodal-pixel": "in intensity [0, 1]", "encoder": "rad", "gpr": "in px"}
+         "multimodal-mlp": "in m", "multimodal-pixel": "in intensity [0, 1]", "encoder": "rad", "gpr": "in px",
+         "gpr-kinematic": "in px"}
 
 
 @pytest.mark.parametrize("kind", list(KINDS))
