@@ -1,6 +1,7 @@
 """The per-call costs of issue 36's table on "cpu", and on "cuda" where torch sees one (a script, not a test).
 
-Rows, per device: a decoder epoch at batch 64 and 512 (a small pixel decoder of planar2's camera), the levels'
+Rows, per device: a decoder epoch at batch 64 and 512 (a small pixel decoder of planar2's camera; on cuda the
+training loop's device rule makes batch 64 a 512, `models/_nn_device.py`, and the row says so), the levels'
 inference of --trials trials at once (adam+lm, ms per round: wall / the rounds the batch ran), one tracker frame of
 --trials streams. Then, on the CPU, the Adam loop before/after its batched checks (aif/descent.py, check_every): the
 former descent.py read from git (--before), both on the same targets in this run, with the largest belief change.
@@ -28,6 +29,7 @@ from bodyschema.aif.perception_config import AdamSettings, PerceptionConfig
 from bodyschema.aif.tracker import Tracker
 from bodyschema.aif.tracker_config import TrackerConfig
 from bodyschema.datagen.body.robot import Robot
+from bodyschema.models._nn_device import plan_for
 from bodyschema.models.pixel import PixelDecoder
 from bodyschema.models.scaling import BodySpec
 
@@ -62,7 +64,9 @@ def timed(call):
 def device_rows(device: str, body, q, images, model, trials: int) -> None:
     for batch in (64, 512):
         t, _ = timed(lambda batch=batch: decoder(body, batch, 1).fit(q.float(), images, progress=False, device=device))
-        print(f"    {device}: decoder epoch, {len(q)} poses, batch {batch}: {t * 1e3:.0f} ms")
+        ruled = plan_for(torch.device(device), batch).batch_size       # cuda: the device rule's batch
+        shown = f"batch {batch}" + (f" (the cuda rule's {ruled})" if ruled != batch else "")
+        print(f"    {device}: decoder epoch, {len(q)} poses, {shown}: {t * 1e3:.0f} ms")
     model.to(device)
     obs, mu0 = {"image": images[:trials]}, q[:trials] + 0.1
     perception = Perception([model], PerceptionConfig(record=False))
