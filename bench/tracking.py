@@ -7,14 +7,15 @@ Prints, measured side by side in one run of `bodyschema evaluate tracking` (the 
     recover, ms per frame (median, p95) and the networks' share;
   * every target of the issue, measured vs target, and the ratios tracker / encoder and tracker / flow.
 
-The decoder and encoder it needs, trained with the project's own commands in a scratch folder (≈ 35 min on a shared
-2-core machine; a longer decoder training lowers the floor, README "Estimation levels"):
+The decoder and encoder the README's figures come from: `make reproduce ONLY=levels`'s (18 000 images, the decoder 60
+epochs, the encoder 40), trained with the project's own commands in a scratch folder (≈ 17 min on an idle 2-core
+machine, one thread; smaller ones, e.g. 12 000 images and 40 / 30 epochs, track worse and slower: 1.65° and 10.9 ms):
 
     mkdir -p /tmp/track_scratch && cd /tmp/track_scratch
     export MUJOCO_GL=egl MLFLOW_TRACKING_URI=sqlite:////tmp/track_scratch/mlflow.db
-    bodyschema datagen --robot nao_arm --n 12000 --workers 1 --seed 0 --out data/nao.zarr
-    bodyschema train pixel --data data/nao.zarr --epochs 40          # the lean decoder (the default size)
-    bodyschema train encoder --data data/nao.zarr --epochs 30
+    bodyschema --threads 1 datagen --robot nao_arm --n 18000 --workers 1 --seed 0 --out data/nao.zarr
+    bodyschema --threads 1 --create train pixel --data data/nao.zarr --epochs 60 --seed 0   # the lean decoder
+    bodyschema --threads 1 train encoder --data data/nao.zarr --epochs 40 --seed 0
 
 Run (from the repository): `MLFLOW_TRACKING_URI=sqlite:////tmp/track_scratch/mlflow.db .venv/bin/python
 bench/tracking.py [--seconds 60] [--rate 30] [--threads 1] [--budget 2] [--out /tmp/track_scratch/results]`.
