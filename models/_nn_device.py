@@ -1,4 +1,4 @@
-"""How the network training loop uses its device: the batch and learning-rate rule on a GPU, bf16, memory format.
+"""How the network training loop uses its device: the batch and learning-rate rule on a GPU, and bf16.
 
 On the CPU the plan is the identity: the settings as given, float32, no learning-rate writes, so a seed gives the
 same model as before the rule. On cuda (issue 36, measured on one H100 with nao_arm's lean decoder: 2.06 s per

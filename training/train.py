@@ -123,11 +123,12 @@ def _train(config: TrainConfig) -> TrainResult:
                len(data.val))
     shapes = {m: data.output_shape(m) for m in data.modalities}
     model = untrained_model(config, data.body, shapes)
-    on_device = "device" in inspect.signature(model.fit).parameters     # the network kinds train on a GPU
+    fit_parameters = inspect.signature(model.fit).parameters
+    on_device = "device" in fit_parameters                       # the network kinds (and svgp) train on a GPU
     if config.device != "cpu" and not on_device:
         raise ValueError(must_be("device", f"'cpu' for model kind {config.kind!r}", config.device,
                                  "Only the network kinds (pixel, encoder) train on CUDA."))
-    if config.mixed_precision and not on_device:
+    if config.mixed_precision and "mixed_precision" not in fit_parameters:
         raise ValueError(must_be("mixed_precision", f"false for model kind {config.kind!r}", True,
                                  "Only the network kinds (pixel, encoder) train in bf16."))
     for shape in shapes.values():                                 # GP memory (n², outputs) vs available RAM
@@ -177,7 +178,9 @@ def _train_owned(config: TrainConfig, client, data: Dataset, model, members: dic
         if "checkpoint" in inspect.signature(model.fit).parameters:
             fit_kwargs["checkpoint"] = run_dir / "checkpoint.pt"
         if on_device:
-            fit_kwargs.update(device=config.device, mixed_precision=config.mixed_precision)
+            fit_kwargs["device"] = config.device
+        if config.mixed_precision:
+            fit_kwargs["mixed_precision"] = True
         t0 = time.perf_counter()
         try:
             model.fit(data.train.q, train_x, **fit_kwargs)

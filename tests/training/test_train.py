@@ -195,3 +195,15 @@ def test_val_rmse_has_one_name_and_one_meaning(workdir, kin_store, tiny_kind):
     expected = score(pred, data.val.x, "val")
     assert reports[-1]["val_rmse"] == pytest.approx(expected["val_rmse"], rel=1e-6)
     assert reports[-1]["val_mean_error"] == pytest.approx(expected["val_mean_error"], rel=1e-6)
+
+
+def test_svgp_trains_through_train_and_refuses_mixed_precision(workdir, kin_store):
+    # svgp's fit takes a device but has no bf16: train passes each only where the kind's fit takes it
+    from bodyschema.models.configs import SVGPConfig
+    from bodyschema.training.config import TrainConfig
+
+    small = SVGPConfig(num_inducing=16, hyper_points=40)
+    with pytest.raises(ValueError, match=r"mixed_precision must be false for model kind 'svgp'. Got True"):
+        train(TrainConfig(model=small, data=kin_store, modality="ee_xyz", progress=False, mixed_precision=True))
+    result = train(TrainConfig(model=small, data=kin_store, modality="ee_xyz", progress=False))
+    assert result.metrics["val_rmse"] < 0.05                            # m: a 2-link arm, 16 inducing points
