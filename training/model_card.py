@@ -63,10 +63,12 @@ def score_unit(model) -> str:
 
 
 def with_unit(key: str, unit: str) -> str:
-    """" <unit>" for a held-out score key ("val_rmse", "image/val_mean_error"); "" for `val_loss`, the fit's own
-    objective on the held-out rows, which is in the model's internal units (unit-box or [0, 1] squared errors)."""
+    """" <unit>" for a score key ("val_rmse", "train_mean_error", "image/val_rmse"); "" for `val_loss` and
+    `train_loss`, the fit's own objective, which is in the model's internal units (unit-box or [0, 1] squared errors),
+    and for anything else (fit_seconds)."""
     name = key.rsplit("/", 1)[-1]
-    return f" {unit}" if unit and name.startswith("val_") and name != "val_loss" else ""
+    scored = name.startswith(("val_", "train_")) and not name.endswith("_loss")
+    return f" {unit}" if unit and scored else ""
 
 
 def card_markdown(model, name: str | None, tags: dict[str, str], metrics: dict[str, float], params: dict) -> str:
