@@ -75,6 +75,12 @@ class BaseSensoryModel(Estimator, Capabilities):
         row = modalities.MODALITIES.get(self.modality)
         return None if row is None else row.precision
 
+    @property
+    def fitted_choices(self) -> str:
+        """What the fit chose that the hyper-parameters do not say (e.g. `gpr`'s kernel under "auto"), one sentence
+        for the model card and the registry's description; "" where nothing was chosen."""
+        return ""
+
     def __init__(self, body: BodySpec, modality: str, output_shape: tuple[int, ...]):
         self.body = check_body(body)
         self.latent_dim = body.latent_dim

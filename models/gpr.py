@@ -118,6 +118,12 @@ class GPRModel(_gp_data.SavedGPState, BaseSensoryModel):
         return TRIG_STATE_KEYS if self.kernel_ == "kinematic" else STATE_KEYS
 
     @property
+    def fitted_choices(self) -> str:
+        if not self.is_fitted or self.kernel != "auto":
+            return ""
+        return f"Kernel {self.kernel_}: the likelier of {' and '.join(candidate_kernels('auto', self.latent_dim))}."
+
+    @property
     def is_fitted(self) -> bool:
         return hasattr(self, "alpha_") or hasattr(self, "weights_")
 

@@ -25,7 +25,8 @@ def model_summary(model) -> str:
         return f"{model.kind} of {body}: {images} → {z}. Scored by val_rmse in joint degrees."
     unit = modalities.unit(model.modality, "output units")
     x = f"{model.modality} (B, {', '.join(map(str, model.output_shape))}) {unit}"
-    return f"{model.kind} model of {body}: {z} → {x}. Scored by val_rmse in {unit}."
+    chosen = getattr(model, "fitted_choices", "")
+    return f"{model.kind} model of {body}: {z} → {x}. Scored by val_rmse in {unit}." + (f" {chosen}" if chosen else "")
 
 
 def version_description(summary: str, tags: dict[str, str]) -> str:

@@ -127,3 +127,12 @@ def test_the_kinematic_kernel_is_conditioned_on_every_pose_past_max_points(monke
     torch.testing.assert_close(phi_y, x.T @ phi, rtol=1e-12, atol=1e-9)
     model.condition(q[:200], x[:200])
     assert model.train_u_.shape == (200, 2)
+
+
+def test_the_model_card_says_which_kernel_auto_chose():
+    from bodyschema.training.model_card import model_summary
+
+    q, x = toy_data(120, seed=6)
+    chosen = GPRModel(TOY.body, "ee_xyz", (3,), hyper_points=60).fit(q, x)
+    assert model_summary(chosen).endswith("Kernel kinematic: the likelier of rbf and kinematic.")
+    assert "Kernel" not in model_summary(GPRModel(TOY.body, "ee_xyz", (3,), kernel="rbf", hyper_points=60).fit(q, x))
