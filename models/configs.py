@@ -137,7 +137,7 @@ class EncoderConfig(ModelConfig):
     fc_hidden: int = 128  # width of the fully connected head
     epochs: int = 100  # at most this many passes over the training set
     batch_size: int = 64  # images per gradient step
-    lr: float = 2e-3  # Adam learning rate
+    lr: float | None = None  # Adam learning rate; None: 2e-3 up to 80 px a side, 5e-4 above
     patience: int = 10  # stop after this many epochs without a better validation loss
     weight_decay: float = 0.0  # Adam's L2 penalty
 

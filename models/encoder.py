@@ -27,6 +27,11 @@ from bodyschema.models.scaling import IMAGE_SCALE, BodySpec
 FLOATS = (torch.float32, torch.float64)
 BASE_CHANNELS = (16, 32, 64)   # nao_arm's 56×80 → 28×40×16 → 14×20×32 → 7×10×64
 MAX_MAP = 10                   # px a side of the last feature map the default stages reach
+# Adam's step by image size (None: `lr_for`). At 2e-3 the UR5's 128×128 encoder collapsed in its first epoch (the tanh
+# head at ±1 for every image, the loss flat at 4/3, held-out RMSE 207°: twice a constant guess); at 5e-4 it trained
+# (93°), and SO-101's and the Panda URDF's 128×128 encoders came out the same at either step (52.2 vs 52.4°, 77.5 vs
+# 76.6°). Up to 80 px a side (nao_arm's 56×80, the 64×64 arms) the step measured there stays.
+LR_SMALL, LR_LARGE, SMALL_SIDE = 2e-3, 5e-4, 80
 CHUNK = 512   # images per forward in `encode`
 
 
@@ -55,6 +60,12 @@ class EncoderNet(nn.Module):
         return self.head(y.flatten(1))                                   # (B, Dz)
 
 
+def lr_for(image_shape: tuple[int, ...]) -> float:
+    """The default Adam step: LR_SMALL up to SMALL_SIDE px a side, LR_LARGE above (see their comment)."""
+    h, w, _ = image_layout(image_shape)
+    return LR_SMALL if max(h, w) <= SMALL_SIDE else LR_LARGE
+
+
 def channels_for(image_shape: tuple[int, ...]) -> tuple[int, ...]:
     """The default stages: BASE_CHANNELS, then one more stride-2 stage of 64 while the last map is wider than MAX_MAP
     px a side (nao_arm's 56×80 and 64×64 keep three). Measured on SO-101's 128×128 images (3 000, seed 0): with three
@@ -75,7 +86,9 @@ class ImageEncoder(NetHolder, Estimator):
     def __init__(self, body: BodySpec, modality: str, image_shape: tuple[int, ...], *,   # the data's (H, W[, C])
                  channels: tuple[int, ...] | None = None,   # None: `channels_for(image_shape)`
                  fc_hidden: int = 128,
-                 epochs: int = 100, batch_size: int = 64, lr: float = 2e-3, patience: int = 10,
+                 epochs: int = 100, batch_size: int = 64,
+                 lr: float | None = None,                   # None: `lr_for(image_shape)`
+                 patience: int = 10,
                  weight_decay: float = 0.0):
         self.body, self.latent_dim, self.modality = check_body(body), body.latent_dim, modality
         self.image_shape = tuple(int(s) for s in image_shape)
@@ -87,6 +100,7 @@ class ImageEncoder(NetHolder, Estimator):
             raise ValueError(must_be("channels and fc_hidden", "a non-empty tuple of positive ints and > 0",
                                      (channels, fc_hidden)))
         self.channels, self.fc_hidden = tuple(channels), fc_hidden
+        lr = lr_for(self.image_shape) if lr is None else lr
         self.settings = TrainSettings(epochs, batch_size, lr, patience, weight_decay)
         self.fit_info_: dict = {}
 

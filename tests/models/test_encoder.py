@@ -150,3 +150,12 @@ def test_default_stages_bring_the_last_map_to_ten_pixels_and_keep_the_shipped_ar
     h, w = shape[0] >> stages, shape[1] >> stages
     assert max(h, w) <= MAX_MAP and encoder._factory().head[0].in_features == encoder.channels[-1] * h * w
     assert ImageEncoder(ToyPlanarArm().body, "image", shape, channels=(8, 8)).channels == (8, 8)   # given: as is
+
+
+@pytest.mark.parametrize("shape, lr", [((56, 80), 2e-3), ((64, 64), 2e-3), ((80, 80, 3), 2e-3), ((96, 96), 5e-4),
+                                       ((128, 128), 5e-4)])
+def test_the_default_step_follows_the_image_size_and_a_given_one_is_kept(shape, lr):
+    # 2e-3 collapsed the UR5's 128×128 encoder in its first epoch (tanh at ±1, loss flat at 4/3); 5e-4 trained it
+    assert ImageEncoder(ToyPlanarArm().body, "image", shape).settings.lr == lr
+    assert ImageEncoder(ToyPlanarArm().body, "image", shape, lr=1e-3).settings.lr == 1e-3
+    assert ImageEncoder(ToyPlanarArm().body, "image", shape)._config()["lr"] == lr      # saved: the step it used
