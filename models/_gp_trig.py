@@ -130,12 +130,13 @@ class TrigPosterior:
     """
 
     def __init__(self, q: torch.Tensor, offset: torch.Tensor, outputscale: torch.Tensor, noise: torch.Tensor,
-                 ys: torch.Tensor | None = None, weights: torch.Tensor | None = None):
+                 ys: torch.Tensor | None = None, weights: torch.Tensor | None = None,
+                 sums: tuple[torch.Tensor, torch.Tensor] | None = None):
         self.q, self.noise = q, noise
         self.root = prior_weights(offset, outputscale).sqrt()               # (O, P): √λ
         self._factor, self._gram = None, None
-        if weights is None:
-            self._gram, phi_y = moments(q, ys)
+        if weights is None:                     # sums: `moments(q, ys)` when the caller has them already
+            self._gram, phi_y = sums if sums is not None else moments(q, ys)
             psi_y = self.root * phi_y                                       # (O, P): Ψᵀ y = √λ ⊙ Φᵀ y
             half = torch.linalg.solve_triangular(self.factor, psi_y[..., None], upper=False)
             weights = self.root * torch.linalg.solve_triangular(self.factor.mT, half, upper=True).squeeze(-1)
@@ -169,8 +170,9 @@ class TrigPosterior:
         return self.noise[:, None] * v.pow(2).sum(-2)
 
 
-def refine_on_all_poses(q: torch.Tensor, ys: torch.Tensor, offsets: list[torch.Tensor], outputscale: torch.Tensor,
-                        noise: torch.Tensor, bounds: np.ndarray) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+def refine_on_all_poses(sums: tuple[torch.Tensor, torch.Tensor], ys: torch.Tensor, offsets: list[torch.Tensor],
+                        outputscale: torch.Tensor, noise: torch.Tensor, bounds: np.ndarray
+                        ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Per output, the likeliest of the candidate `offsets` on ALL n poses, with s and σ² at its optimum there.
 
     Why: the offsets c come from the hyper subset, a few hundred poses, fewer than the 3^D features, where the
@@ -181,11 +183,12 @@ def refine_on_all_poses(q: torch.Tensor, ys: torch.Tensor, offsets: list[torch.T
         −MLL = ½ (yᵀy − s Σ b²/d) / σ² + ½ ((n − P) log σ² + Σ log d) + (n/2) log 2π
     costs O(P) per evaluation after one eigendecomposition per output and candidate, so s and σ² are optimized
     there; c is not (its gradient would need an eigendecomposition per step).
-    q (n, D) rad, ys (O, n), offsets: candidates (O, D) each, outputscale and noise (O,) the starts,
-    bounds (2, 2) rows (log s, log σ²) [low, high] → offset (O, D), s (O,), σ² (O,).
+    sums: `moments(q, ys)` of the n poses (ΦᵀΦ (P, P), Φᵀy (O, P)), ys (O, n), offsets: candidates (O, D) each,
+    outputscale and noise (O,) the starts, bounds (2, 2) rows (log s, log σ²) [low, high] → offset (O, D), s (O,),
+    σ² (O,).
     """
-    gram, phi_y = moments(q, ys)                                            # (P, P), (O, P)
-    n = q.shape[0]
+    gram, phi_y = sums
+    n = ys.shape[1]
     best = [(math.inf, None)] * ys.shape[0]
     for offset in offsets:
         root = prior_weights(offset, torch.ones_like(outputscale)).sqrt()   # (O, P)

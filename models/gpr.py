@@ -142,10 +142,12 @@ class GPRModel(_gp_data.SavedGPState, BaseSensoryModel):
         ys, self.y_mean_, self.y_std_ = _gp_data.standardize(y_all[keep])             # (O, n), (O,), (O,)
         sub = _gp_data.random_subset(u.shape[0], self.hyper_points, gen)
         step = self._fit_hyper(u[sub], ys[:, sub], gen, on_epoch, progress)
+        sums = None
         if self.kernel_ == "kinematic":      # its feature form takes every pose, not the max_points subset
             u, ys = self.body.to_unit(q_all), self._standardized(y_all)               # (N, Dz), (O, N)
-            self._settle_offsets(u, ys)
-        self._condition_unit(u, ys)
+            sums = _gp_trig.moments(self.body.from_unit(u), ys)                       # ΦᵀΦ, Φᵀy: once, the O(N·9^Dz)
+            self._settle_offsets(sums, ys)
+        self._condition_unit(u, ys, sums)
         if val is not None and on_epoch is not None:
             pred = self._predict(val[0])                                              # (Nv, *out)
             diff = pred.reshape(pred.shape[0], -1) - val[1]                           # (Nv, O)
@@ -178,11 +180,12 @@ class GPRModel(_gp_data.SavedGPState, BaseSensoryModel):
             self.lengthscale_ = per_input                                  # (O, Dz) ℓ_d
         return step
 
-    def _settle_offsets(self, u: torch.Tensor, ys: torch.Tensor) -> None:
+    def _settle_offsets(self, sums: tuple[torch.Tensor, torch.Tensor], ys: torch.Tensor) -> None:
         """The kinematic kernel's c_d (O, Dz): the hyper subset's or all 1 (a flat prior), the likelier on all the
-        poses (u (N, Dz), ys (O, N)), with s and σ² at their optimum there (`_gp_trig.refine_on_all_poses`)."""
+        poses (their `_gp_trig.moments`, ys (O, N)), with s and σ² at their optimum there
+        (`_gp_trig.refine_on_all_poses`)."""
         self.offset_, self.outputscale_, self.noise_ = _gp_trig.refine_on_all_poses(
-            self.body.from_unit(u), ys, [self.offset_, torch.ones_like(self.offset_)], self.outputscale_,
+            sums, ys, [self.offset_, torch.ones_like(self.offset_)], self.outputscale_,
             self.noise_, _gp_hyper.log_bounds(self.latent_dim, self.noise_floor)[-2:])
 
     def _standardized(self, y: torch.Tensor) -> torch.Tensor:
@@ -200,13 +203,13 @@ class GPRModel(_gp_data.SavedGPState, BaseSensoryModel):
         self._condition_unit(self.body.to_unit(q), self._standardized(y))
         return self
 
-    def _condition_unit(self, u: torch.Tensor, ys: torch.Tensor) -> None:
-        """α = (K + σ²I)⁻¹ y by our own Cholesky, exact at any n (the kinematic kernel: its feature-form posterior).
-        u (n, Dz) in [-1, 1], ys (O, n) standardized."""
+    def _condition_unit(self, u: torch.Tensor, ys: torch.Tensor, sums=None) -> None:
+        """α = (K + σ²I)⁻¹ y by our own Cholesky, exact at any n (the kinematic kernel: its feature-form posterior,
+        from `sums` = its ΦᵀΦ and Φᵀy where the fit has them already). u (n, Dz) in [-1, 1], ys (O, n) standardized."""
         self.train_u_ = u
         if self.kernel_ == "kinematic":
             self._trig = _gp_trig.TrigPosterior(self.body.from_unit(u), self.offset_, self.outputscale_, self.noise_,
-                                                ys=ys)
+                                                ys=ys, sums=sums)
             self.weights_ = self._trig.weights                                        # (O, 3^Dz)
             return
         self._factor = _gp_math.cholesky_factor(u, self.lengthscale_, self.outputscale_, self.noise_)   # (O, n, n)
