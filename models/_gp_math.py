@@ -154,13 +154,8 @@ def neg_mll_and_grad(x: torch.Tensor, y: torch.Tensor, lengthscale: torch.Tensor
         ∂K/∂log s = K_f,  ∂K/∂log σ² = σ² I,  ∂K/∂log ℓ_d = K_f ⊙ (x_d − x_d')² / ℓ_d²
     """
     k_f = rbf_train(x, lengthscale, outputscale)                            # (O, m, m): K without the noise
-    factor = cholesky_factor(x, lengthscale, outputscale, noise, kernel=k_f)  # (O, m, m)
-    alpha = solve_weights(factor, y)                                        # (O, m)
-    log_det = factor.diagonal(dim1=-2, dim2=-1).log().sum(-1)              # (O,): ½ log |K|
-    m = x.shape[0]
-    loss = 0.5 * (y * alpha).sum(-1) + log_det + 0.5 * m * math.log(2 * math.pi)
+    loss, alpha, k_inv = neg_mll_terms(k_f, y, noise, outputscale + noise)  # (O,), (O, m), (O, m, m)
     # W = P − Q with P = K⁻¹ and Q = ααᵀ; Q's terms come from K_f [α, α ⊙ X] (no (O, m, m) outer product).
-    k_inv = inverse_from_factor(factor)                                     # (O, m, m), the factor's memory
     grad_noise = 0.5 * noise * (k_inv.diagonal(dim1=-2, dim2=-1).sum(-1) - alpha.pow(2).sum(-1))   # (O,)
     p_kf = k_inv.mul_(k_f)                                                  # (O, m, m): K⁻¹ ⊙ K_f, in place
     k_alpha = k_f @ torch.cat([alpha[..., None], alpha[..., None] * x], -1)  # (O, m, 1+D): K_f α, K_f (α ⊙ x_d)
@@ -172,3 +167,17 @@ def neg_mll_and_grad(x: torch.Tensor, y: torch.Tensor, lengthscale: torch.Tensor
     quad = m_row @ x.pow(2) - (m_x * x).sum(-2)                             # (O, D)
     grad_length = quad / lengthscale.pow(2)                                 # (O, D)
     return loss, torch.cat([grad_length, grad_scale[:, None], grad_noise[:, None]], -1)
+
+
+def neg_mll_terms(k_f: torch.Tensor, y: torch.Tensor, noise: torch.Tensor, scale: torch.Tensor
+                  ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The exact −log p(y) of O GPs from their noise-free kernel matrices (any kernel), and what its gradient needs.
+
+    k_f (O, m, m) (not changed), y (O, m), noise σ² (O,), scale (O,) the jitter's scale (`factorize`) →
+    −MLL (O,) (R&W Alg. 2.1, line 8), α = (K_f + σ²I)⁻¹ y (O, m), (K_f + σ²I)⁻¹ (O, m, m) (in the factor's memory).
+    """
+    factor = factorize(k_f.clone(), noise, scale, lambda o: k_f[o])        # (O, m, m)
+    alpha = solve_weights(factor, y)                                        # (O, m)
+    log_det = factor.diagonal(dim1=-2, dim2=-1).log().sum(-1)              # (O,): ½ log |K|
+    loss = 0.5 * (y * alpha).sum(-1) + log_det + 0.5 * y.shape[-1] * math.log(2 * math.pi)
+    return loss, alpha, inverse_from_factor(factor)

@@ -107,11 +107,8 @@ def neg_mll_and_grad(q: torch.Tensor, y: torch.Tensor, offset: torch.Tensor, out
     f = (c + cos_delta) / (1 + c)                                           # (O, D, m, m)
     s = outputscale[:, None, None]
     k_f = s * f.prod(1)                                                     # (O, m, m)
-    factor = _gp_math.factorize(k_f.clone(), noise, outputscale + noise, lambda o: k_f[o])
-    alpha = _gp_math.solve_weights(factor, y)                               # (O, m)
-    m = q.shape[0]
-    loss = 0.5 * (y * alpha).sum(-1) + factor.diagonal(dim1=-2, dim2=-1).log().sum(-1) + 0.5 * m * math.log(2 * math.pi)
-    w = _gp_math.inverse_from_factor(factor).sub_(alpha[:, :, None] * alpha[:, None, :])   # (O, m, m): W
+    loss, alpha, k_inv = _gp_math.neg_mll_terms(k_f, y, noise, outputscale + noise)   # (O,), (O, m), (O, m, m)
+    w = k_inv.sub_(alpha[:, :, None] * alpha[:, None, :])                   # (O, m, m): W
     grad_scale = 0.5 * (w * k_f).sum((-2, -1))                              # (O,)
     grad_noise = 0.5 * noise * w.diagonal(dim1=-2, dim2=-1).sum(-1)         # (O,)
     grad_offset = []
