@@ -108,50 +108,71 @@ def _bound(step: torch.Tensor, max_step: float | None) -> torch.Tensor:
 
 def levenberg_marquardt(objective: Objective, mu0: torch.Tensor, low, high, *, max_steps: int, tol: float,
                         damping: float, max_step: float | None, record: bool,
-                        trial_derivatives: bool = False) -> DescentResult:
+                        trial_derivatives: bool = False, check_every: int = 1) -> DescentResult:
     """Batched Levenberg–Marquardt on F from mu0 (B, Dz) rad; λ₀ = `damping` (relative to diag H). A trial step is
-    judged on F alone and its derivatives asked where it is accepted, or (trial_derivatives) asked with F."""
+    judged on F alone and its derivatives asked where it is accepted, or (trial_derivatives) asked with F.
+
+    As in `adam`, the running trials' state lives in tensors of the running rows only, and whether a trial stopped
+    is read back every `check_every` steps (1 when recording). Above 1 nothing in the loop reads a tensor back: every
+    trial step brings its derivatives (trial_derivatives), an accepted step is taken by a mask, not gathered, and a
+    stopped trial stays in the batch frozen where it stopped until the next read."""
     b, dz = mu0.shape
-    mu, t, steps, converged, diverged, rec, active = _start(objective, mu0, low, high, True, record)
-    free, grad, hess, errors = t.free.clone(), t.grad.clone(), t.hess.clone(), dict(t.errors)
-    lam = torch.full((b,), float(damping), dtype=torch.float64)
-    nu = torch.full((b,), 2.0, dtype=torch.float64)
+    mu_full, t, steps, converged, diverged, rec, active = _start(objective, mu0, low, high, True, record)
+    free_full = t.free.clone()
+    mu, free, grad, hess = mu_full[active], t.free[active], t.grad[active], t.hess[active]
+    errors = {k: v[active] for k, v in t.errors.items()}
+    lam = torch.full((len(active),), float(damping), dtype=torch.float64)
+    nu = torch.full((len(active),), 2.0, dtype=torch.float64)
+    taken = torch.zeros(len(active), dtype=torch.long)
+    stopped = torch.zeros(len(active), dtype=torch.bool)
     evaluations = b
     eye = torch.eye(dz, dtype=torch.float64)
-    for _ in range(max_steps):
-        if active.numel() == 0:
+    every = 1 if record else max(1, int(check_every))
+    held = _held if every > 1 else _all
+    with_trial = trial_derivatives or every > 1
+    for i in range(max_steps):
+        if len(active) == 0:
             break
-        rec.add(active, mu[active], free[active], {k: v[active] for k, v in errors.items()})
-        g, h, m = grad[active], hess[active], mu[active]
-        diag = torch.diagonal(h, dim1=1, dim2=2)                                  # (b, Dz)
+        rec.add(active, mu, free, errors)
+        on = ~stopped
+        diag = torch.diagonal(hess, dim1=1, dim2=2)                               # (b_a, Dz)
         scale = diag + 1e-9 * diag.amax(-1, keepdim=True) + 1e-300                # unobservable joint: still damped
-        system = h + lam[active, None, None] * torch.diag_embed(scale) + 1e-12 * eye * scale.amax(-1)[:, None, None]
-        step = _bound(torch.linalg.solve(system, -g.unsqueeze(-1)).squeeze(-1), max_step)   # (b, Dz)
-        new = _clamp(m + step, low, high)
-        step = new - m
-        gain = -(g * step).sum(-1) - 0.5 * torch.einsum("bi,bij,bj->b", step, h, step)     # predicted decrease
-        trial = objective(active, new, trial_derivatives, trial_derivatives)     # F alone, or with derivatives
-        evaluations += active.numel()
-        rho = (free[active] - trial.free) / gain.clamp_min(1e-300)
-        ok = torch.isfinite(trial.free) & (trial.free < free[active]) & (gain > 0)
-        steps[active] += 1
-        if ok.any():                                                              # gradient and H where accepted
-            acc = active[ok]
-            full = _rows(trial, ok) if trial_derivatives else objective(acc, new[ok], True, True)
-            mu[acc], free[acc], grad[acc], hess[acc] = new[ok], full.free, full.grad, full.hess
+        system = hess + lam[:, None, None] * torch.diag_embed(scale) + 1e-12 * eye * scale.amax(-1)[:, None, None]
+        step = _bound(torch.linalg.solve(system, -grad.unsqueeze(-1)).squeeze(-1), max_step)   # (b_a, Dz)
+        new = _clamp(mu + held(on[:, None], step, 0.0), low, high)               # a stopped trial: evaluated in place
+        step = new - mu
+        gain = -(grad * step).sum(-1) - 0.5 * torch.einsum("bi,bij,bj->b", step, hess, step)   # predicted decrease
+        trial = objective(active, new, with_trial, with_trial)                   # F alone, or with derivatives
+        evaluations += len(active)
+        taken += on
+        rho = (free - trial.free) / gain.clamp_min(1e-300)
+        ok = held(on, torch.isfinite(trial.free) & (trial.free < free) & (gain > 0), False)
+        if with_trial:
+            mu, free, grad, hess, errors = _where(ok, (new, trial.free, trial.grad, trial.hess, trial.errors),
+                                                  (mu, free, grad, hess, errors))
+        elif bool(ok.any()):                                                      # gradient and H where accepted
+            rows = ok.nonzero().squeeze(-1)
+            full = objective(active[rows], new[rows], True, True)
+            mu[rows], free[rows], grad[rows], hess[rows] = new[rows], full.free, full.grad, full.hess
             for k, v in full.errors.items():
-                errors[k][acc] = v
-            r = rho[ok]
-            lam[acc] = lam[acc] * torch.clamp(1 - (2 * r - 1) ** 3, min=1 / 3)
-            nu[acc] = 2.0
-        lam[active[~ok]] = lam[active[~ok]] * nu[active[~ok]]
-        nu[active[~ok]] = nu[active[~ok]] * 2
+                errors[k][rows] = v
+        shrink = torch.clamp(1 - (2 * rho - 1) ** 3, min=1 / 3)
+        lam = torch.where(ok, lam * shrink, held(on, lam * nu, lam))
+        nu = torch.where(ok, 2.0, held(on, nu * 2, nu))
         moved = step.abs().amax(-1)
-        energy = sum(e[active] for e in errors.values())                       # E = Σ ½εᵀΠε: F without ln|Π|
-        done = (moved < tol) | (gain <= F_NOISE * energy) | (lam[active] > LM_LAMBDA_MAX)
-        converged[active[done]] = True
-        active = active[~done]
-    return DescentResult(mu, free, steps, converged, diverged, evaluations, rec.rows)
+        energy = sum(errors.values())                                            # E = Σ ½εᵀΠε: F without ln|Π|
+        done = (moved < tol) | (gain <= F_NOISE * energy) | (lam > LM_LAMBDA_MAX)
+        stopped = stopped | held(on, done, False)
+        if (i + 1) % every == 0 and bool(stopped.any()):                         # the one read-back: compact
+            out, keep = stopped.nonzero().squeeze(-1), (~stopped).nonzero().squeeze(-1)
+            rows = active[out]
+            mu_full[rows], free_full[rows], steps[rows], converged[rows] = mu[out], free[out], taken[out], True
+            active, mu, free, grad, hess, lam, nu, taken, stopped = (
+                x[keep] for x in (active, mu, free, grad, hess, lam, nu, taken, stopped))
+            errors = {k: v[keep] for k, v in errors.items()}
+    converged[active] = stopped                                                  # the rows left at the last step
+    mu_full[active], free_full[active], steps[active] = mu, free, taken
+    return DescentResult(mu_full, free_full, steps, converged, diverged, evaluations, rec.rows)
 
 
 def adam(objective: Objective, mu0: torch.Tensor, low, high, *, max_steps: int, tol: float, lr: float,
@@ -242,19 +263,25 @@ def _all(on: torch.Tensor, value, frozen):
     return value
 
 
-def _rows(terms: Terms, ok: torch.Tensor) -> Terms:
-    """The rows ok of a trial's terms (F, gradient, H, prediction errors)."""
-    return Terms(terms.free[ok], terms.grad[ok], terms.hess[ok], {k: v[ok] for k, v in terms.errors.items()})
+def _where(ok: torch.Tensor, new: tuple, old: tuple) -> tuple:
+    """Per row, the new values where ok, else the old ones: tensors of (b, …) rows, or dicts of (b,) rows."""
+    def pick(n, o):
+        if isinstance(n, dict):
+            return {k: torch.where(ok, v, o[k]) for k, v in n.items()}
+        return torch.where(ok.reshape(-1, *(1,) * (n.ndim - 1)), n, o)
+    return tuple(pick(n, o) for n, o in zip(new, old))
 
 
 def adam_then_lm(objective: Objective, mu0: torch.Tensor, low, high, *, max_steps: int, tol: float, lr: float,
                  patience: int, handover: float, max_step: float | None, record: bool,
-                 trial_derivatives: bool = False, check_every: int = 1) -> DescentResult:
-    """Adam until its step is below `handover` rad, then Levenberg–Marquardt (λ₀ = 0.1) from its best belief."""
+                 trial_derivatives: bool = False, check_every: int = 1, lm_check_every: int = 1) -> DescentResult:
+    """Adam until its step is below `handover` rad, then Levenberg–Marquardt (λ₀ = 0.1) from its best belief; each
+    reads back which trials stopped every check_every / lm_check_every steps."""
     first = adam(objective, mu0, low, high, max_steps=max_steps, tol=handover, lr=lr, patience=patience,
                  max_step=max_step, record=record, check_every=check_every)
     second = levenberg_marquardt(objective, first.mu, low, high, max_steps=max_steps, tol=tol, damping=0.1,
-                                 max_step=max_step, record=record, trial_derivatives=trial_derivatives)
+                                 max_step=max_step, record=record, trial_derivatives=trial_derivatives,
+                                 check_every=lm_check_every)
     trajectory = None
     if record:                                                             # one time axis: Adam's rows, then LM's
         trajectory = {name: first.trajectory.get(name, []) + second.trajectory.get(name, [])

@@ -69,9 +69,14 @@ class LMSettings:
     trial_derivatives: bool = False   # the derivatives with every trial step, one model call instead of F and then
     # the derivatives where the step is accepted: for a few trials whose steps are mostly accepted (a tracker's
     # restart); a batch's rejected rows would waste theirs
+    check_every: int = 1           # lm: steps between two reads of whether a trial stopped (a host sync on a GPU);
+                                   # > 1: no read-back inside the loop at all (each trial step brings its derivatives,
+                                   # an accepted one is taken by a mask); stopped trials stay in the batch as Adam's
 
     def __post_init__(self):
         _positive(self, "damping")
+        if self.check_every < 1:
+            raise ValueError(must_be("check_every", "at least 1", self.check_every))
 
 
 @dataclass(frozen=True)

@@ -3,10 +3,11 @@
 Rows, per device: a decoder epoch at batch 64 and 512 (a small pixel decoder of planar2's camera; on cuda the
 training loop's device rule makes batch 64 a 512, `models/_nn_device.py`, and the row says so), the levels'
 inference of --trials trials at once (adam+lm, ms per round: wall / the rounds the batch ran), one tracker frame of
---trials streams. Then, on the CPU, the Adam loop before/after its batched checks (aif/descent.py, check_every): the
-former descent.py read from git (--before), both on the same targets in this run, with the largest belief change.
+--trials streams. Then, on the CPU, the levels' descent (Adam, then LM) before/after its batched checks
+(aif/descent.py, check_every; d78a013: Adam's, 00ac2f9: LM's): the former descent.py read from git (--before), both
+on the same targets in this run, with the largest belief change.
 
-    MUJOCO_GL=egl OMP_NUM_THREADS=1 .venv/bin/python bench/gpu.py [--trials 500] [--before d78a013] [--repeats 3]
+    MUJOCO_GL=egl OMP_NUM_THREADS=1 .venv/bin/python bench/gpu.py [--trials 500] [--before 00ac2f9] [--repeats 3]
 
 Without a GPU it prints "cuda: not available on this machine": the CUDA rows (and CUDA graphs / torch.compile of the
 fixed-shape step, which pay only where kernel launches dominate) need one.
@@ -25,7 +26,7 @@ import torch
 
 from bodyschema.aif import descent
 from bodyschema.aif.perception import Perception
-from bodyschema.aif.perception_config import AdamSettings, PerceptionConfig
+from bodyschema.aif.perception_config import AdamSettings, LMSettings, PerceptionConfig
 from bodyschema.aif.tracker import Tracker
 from bodyschema.aif.tracker_config import TrackerConfig
 from bodyschema.datagen.body.robot import Robot
@@ -38,7 +39,7 @@ def arguments() -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--trials", type=int, default=500)
     parser.add_argument("--poses", type=int, default=2048, help="training poses of the decoder epoch")
-    parser.add_argument("--before", default="d78a013", help="the commit whose aif/descent.py is the 'before'")
+    parser.add_argument("--before", default="00ac2f9", help="the commit whose aif/descent.py is the 'before'")
     parser.add_argument("--repeats", type=int, default=3, help="interleaved rounds of before/after (min taken)")
     return parser.parse_args()
 
@@ -92,30 +93,39 @@ def former_descent(commit: str) -> types.ModuleType:
 
 
 def before_after(model, q, images, trials: int, commit: str, repeats: int) -> None:
-    former, current = former_descent(commit), descent.adam
+    """The levels' inference (adam+lm) with `commit`'s descent.py and with today's, K = 1 and 4, on the same targets."""
+    former, names = former_descent(commit), ("adam", "levenberg_marquardt", "adam_then_lm")
+    current = {name: getattr(descent, name) for name in names}
+    plain = former.adam_then_lm
 
-    def before(*args, check_every=1, **kwargs):
-        return former.adam(*args, **kwargs)
+    def before(*args, lm_check_every=1, **kwargs):                        # the former took no LM period
+        return plain(*args, **kwargs)
 
+    former.adam_then_lm = before
     obs, mu0 = {"image": images[:trials]}, q[:trials] + 0.1
-    runs = {"before": (before, 1), "after K=1": (current, 1), "after K=4": (current, 4)}
+    runs = {"before": (former, 1, False), "after K=1": (None, 1, False), "K=1 + trial derivatives": (None, 1, True),
+            "after K=4": (None, 4, False)}
     times, results = {name: [] for name in runs}, {}
     try:
         for _ in range(repeats):
-            for name, (adam, k) in runs.items():
-                descent.adam = adam
-                perception = Perception([model], PerceptionConfig(record=False, adam=AdamSettings(check_every=k)))
+            for name, (module, k, derivatives) in runs.items():
+                for function in names:
+                    setattr(descent, function, getattr(module, function) if module else current[function])
+                config = PerceptionConfig(record=False, adam=AdamSettings(check_every=k),
+                                          lm=LMSettings(check_every=k, trial_derivatives=derivatives))
+                perception = Perception([model], config)
                 t, results[name] = timed(lambda p=perception: p.infer(obs, mu0))
                 times[name].append(t)
     finally:
-        descent.adam = current
+        for function in names:
+            setattr(descent, function, current[function])
     base = results["before"]
     rounds = int(base.steps.max())
-    print(f"[2] cpu, levels' inference (adam+lm) of {trials} trials, {rounds} rounds, before = {commit}'s descent.py, "
-          f"min of {repeats} interleaved runs")
+    print(f"[2] cpu, levels' inference (adam+lm) of {trials} trials, {rounds} rounds, before = {commit}'s descent.py "
+          f"(its check_every ignored), min of {repeats} interleaved runs")
     for name, r in results.items():
         t = min(times[name])
-        print(f"    {name:10s} {t / rounds * 1e3:6.2f} ms per round, /before {t / min(times['before']):.2f}; "
+        print(f"    {name:24s} {t / rounds * 1e3:6.2f} ms per round, /before {t / min(times['before']):.2f}; "
               f"steps equal {torch.equal(r.steps, base.steps)}, converged equal "
               f"{torch.equal(r.converged, base.converged)}, max |Δμ| {float((r.mu - base.mu).abs().max()):.1e} rad")
 

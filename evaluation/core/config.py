@@ -47,8 +47,8 @@ LIMITS = {
     "screen_steps": Limit(1, 100_000, "Updates of every start before pruning (default 5)."),
     "plain_steps": Limit(0, 100_000, "Euler steps of the plain Pixel-AIF reference per trial (default 5000)."),
     "multistart": Limit(0, 64, f"Starts multiply the batch; {ONE_BATCH.lower()} (default 8)."),
-    "check_every": Limit(1, 1000, "Adam's steps between two reads of which trials stopped (default 1); a trial runs "
-                         "on frozen up to that many steps."),
+    "check_every": Limit(1, 1000, "Adam's or LM's steps between two reads of which trials stopped (default 1); a "
+                         "trial runs on frozen up to that many steps."),
     "keep": Limit(1, 64, "Starts per trial refined to convergence, at most --multistart (default 2)."),
     "goal_starts": Limit(1, 64, f"Starts multiply the batch; {ONE_BATCH.lower()} (default 8)."),
     "perception_steps": Limit(1, 1_000, "Perception updates run on every control tick (defaults 1–2)."),
