@@ -274,14 +274,14 @@ def _where(ok: torch.Tensor, new: tuple, old: tuple) -> tuple:
 
 def adam_then_lm(objective: Objective, mu0: torch.Tensor, low, high, *, max_steps: int, tol: float, lr: float,
                  patience: int, handover: float, max_step: float | None, record: bool,
-                 trial_derivatives: bool = False, check_every: int = 1, lm_check_every: int = 1) -> DescentResult:
-    """Adam until its step is below `handover` rad, then Levenberg–Marquardt (λ₀ = 0.1) from its best belief; each
-    reads back which trials stopped every check_every / lm_check_every steps."""
+                 trial_derivatives: bool = False, check_every: int = 1) -> DescentResult:
+    """Adam until its step is below `handover` rad, then Levenberg–Marquardt (λ₀ = 0.1) from its best belief; both
+    read back which trials stopped every `check_every` steps."""
     first = adam(objective, mu0, low, high, max_steps=max_steps, tol=handover, lr=lr, patience=patience,
                  max_step=max_step, record=record, check_every=check_every)
     second = levenberg_marquardt(objective, first.mu, low, high, max_steps=max_steps, tol=tol, damping=0.1,
                                  max_step=max_step, record=record, trial_derivatives=trial_derivatives,
-                                 check_every=lm_check_every)
+                                 check_every=check_every)
     trajectory = None
     if record:                                                             # one time axis: Adam's rows, then LM's
         trajectory = {name: first.trajectory.get(name, []) + second.trajectory.get(name, [])

@@ -172,14 +172,14 @@ class Perception:
         if cfg.method == "lm":
             r = descent.levenberg_marquardt(objective, mu0, self.low, self.high, damping=cfg.lm.damping,
                                             trial_derivatives=cfg.lm.trial_derivatives,
-                                            check_every=cfg.lm.check_every, **common)
+                                            check_every=cfg.check_every, **common)
         elif cfg.method == "adam":
             r = descent.adam(objective, mu0, self.low, self.high, lr=cfg.adam.lr, patience=cfg.adam.patience,
-                             check_every=cfg.adam.check_every, **common)
+                             check_every=cfg.check_every, **common)
         else:
             r = descent.adam_then_lm(objective, mu0, self.low, self.high, lr=cfg.adam.lr,
                                      patience=cfg.adam.patience, handover=cfg.adam.handover,
-                                     check_every=cfg.adam.check_every, lm_check_every=cfg.lm.check_every,
+                                     check_every=cfg.check_every,
                                      trial_derivatives=cfg.lm.trial_derivatives, **common)
         traj = None if r.trajectory is None else \
             {name: torch.stack(rows) if rows else torch.empty(0, len(mu0)) for name, rows in r.trajectory.items()}

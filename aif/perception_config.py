@@ -69,14 +69,9 @@ class LMSettings:
     trial_derivatives: bool = False   # the derivatives with every trial step, one model call instead of F and then
     # the derivatives where the step is accepted: for a few trials whose steps are mostly accepted (a tracker's
     # restart); a batch's rejected rows would waste theirs
-    check_every: int = 1           # lm: steps between two reads of whether a trial stopped (a host sync on a GPU);
-                                   # > 1: no read-back inside the loop at all (each trial step brings its derivatives,
-                                   # an accepted one is taken by a mask); stopped trials stay in the batch as Adam's
 
     def __post_init__(self):
         _positive(self, "damping")
-        if self.check_every < 1:
-            raise ValueError(must_be("check_every", "at least 1", self.check_every))
 
 
 @dataclass(frozen=True)
@@ -86,18 +81,11 @@ class AdamSettings:
     lr: float = 0.02               # adam: initial step per joint, rad
     patience: int = 5              # adam: steps without a new best F before the step halves
     handover: float = 1e-2         # adam+lm: Adam's step (rad) below which LM takes over (one halving of lr)
-    check_every: int = 1           # adam: steps between two reads of whether a trial stopped (a host sync on a GPU);
-                                   # > 1: stopped trials stay in the batch, masked, a float32 network may round the
-                                   # others' rows differently, which the descent can amplify (measured K=4, 16×16
-                                   # decoder: ≤ 4.9e-5 rad at 500 trials, up to 9.7e-3 rad at 50): 1, exact, unless a
-                                   # read-back costs (a GPU)
 
     def __post_init__(self):
         _positive(self, "lr", "handover")
         if self.patience < 1:
             raise ValueError(must_be("patience", "at least 1", self.patience))
-        if self.check_every < 1:
-            raise ValueError(must_be("check_every", "at least 1", self.check_every))
 
 
 @dataclass(frozen=True)
@@ -116,6 +104,12 @@ class PerceptionConfig:
     precisions: tuple[tuple[str, float], ...] = ()   # per-modality overrides, e.g. (("ee_xyz", 1e4),)
     precision_update: str = "step"  # "step": Π from model.precision(μ) at every step; "initial": at μ0 only
     record: bool = False           # keep the trajectory of μ̃, F and the prediction errors
+    check_every: int = 1           # lm, adam: steps between two reads of whether a trial stopped (a host sync on a
+                                   # GPU); > 1: stopped trials stay in the batch, masked, and LM takes each trial's
+                                   # derivatives with it (an accepted step by a mask: no read-back inside the loop).
+                                   # A float32 network may round the others' rows differently in the larger batch,
+                                   # which the descent can amplify (measured K=4, 16×16 decoder: ≤ 4.9e-5 rad at 500
+                                   # trials, up to 9.7e-3 rad at 50): 1, exact, unless a read-back costs (a GPU)
     method: str = "auto"           # "flow": generalized filtering; order 0 only: "lm" (Levenberg–Marquardt), "adam"
                                    # (adaptive first-order flow) or "adam+lm" (Adam, then LM once in a basin);
                                    # "auto": adam+lm at order 0 with an image model, else flow
@@ -136,6 +130,8 @@ class PerceptionConfig:
             raise ValueError(must_be("order", "0, 1 or 2", self.order))
         if self.max_steps < 1:
             raise ValueError(must_be("max_steps", "at least 1", self.max_steps))
+        if self.check_every < 1:
+            raise ValueError(must_be("check_every", "at least 1", self.check_every))
         if self.prior not in PRIORS:
             raise ValueError(must_be("prior", f"one of {PRIORS}", self.prior))
         if self.max_step is not None and not self.max_step > 0:
@@ -157,7 +153,7 @@ DEFAULTS = PerceptionConfig()           # the default of every `config` argument
 
 def is_image(modality: str) -> bool:
     """Whether `modality` is a camera's frames, asked of its record; a modality outside the table is not."""
-    return modality in modality_table.MODALITIES and modality_table.get(modality).is_image
+    return modality_table.is_image(modality)
 
 
 def resolve(config: PerceptionConfig, modalities: Iterable[str], warm: bool = False) -> PerceptionConfig:

@@ -26,7 +26,7 @@ import torch
 
 from bodyschema.aif import descent
 from bodyschema.aif.perception import Perception
-from bodyschema.aif.perception_config import AdamSettings, LMSettings, PerceptionConfig
+from bodyschema.aif.perception_config import LMSettings, PerceptionConfig
 from bodyschema.aif.tracker import Tracker
 from bodyschema.aif.tracker_config import TrackerConfig
 from bodyschema.datagen.body.robot import Robot
@@ -98,8 +98,9 @@ def before_after(model, q, images, trials: int, commit: str, repeats: int) -> No
     current = {name: getattr(descent, name) for name in names}
     plain = former.adam_then_lm
 
-    def before(*args, lm_check_every=1, **kwargs):                        # the former took no LM period
-        return plain(*args, **kwargs)
+    def before(*args, check_every=1, **kwargs):                           # the former: Adam's period only
+        return plain(*args, check_every=check_every, **kwargs) if "check_every" in plain.__kwdefaults__ else \
+            plain(*args, **kwargs)
 
     former.adam_then_lm = before
     obs, mu0 = {"image": images[:trials]}, q[:trials] + 0.1
@@ -111,8 +112,7 @@ def before_after(model, q, images, trials: int, commit: str, repeats: int) -> No
             for name, (module, k, derivatives) in runs.items():
                 for function in names:
                     setattr(descent, function, getattr(module, function) if module else current[function])
-                config = PerceptionConfig(record=False, adam=AdamSettings(check_every=k),
-                                          lm=LMSettings(check_every=k, trial_derivatives=derivatives))
+                config = PerceptionConfig(record=False, check_every=k, lm=LMSettings(trial_derivatives=derivatives))
                 perception = Perception([model], config)
                 t, results[name] = timed(lambda p=perception: p.infer(obs, mu0))
                 times[name].append(t)

@@ -10,7 +10,7 @@ import torch
 
 from bodyschema.aif import descent
 from bodyschema.aif.perception import Perception, PerceptionConfig
-from bodyschema.aif.perception_config import AdamSettings, LMSettings
+from bodyschema.aif.perception_config import LMSettings
 from tests.aif.toys import ToyBlobImage, perturb, planar_poses
 from tests.toy_models import ToyPlanarArm
 
@@ -18,8 +18,8 @@ from tests.toy_models import ToyPlanarArm
 def _infer(model, method: str, k: int, n: int = 40, trial_derivatives: bool = False):
     q = planar_poses(n, seed=3)
     obs = {model.modality: model.predict(q)}
-    config = PerceptionConfig(method=method, record=False, adam=AdamSettings(check_every=k),
-                              lm=LMSettings(check_every=k, trial_derivatives=trial_derivatives))
+    config = PerceptionConfig(method=method, record=False, check_every=k,
+                              lm=LMSettings(trial_derivatives=trial_derivatives))
     return Perception([model], config).infer(obs, perturb(q, seed=4, max_rad=0.4))
 
 
@@ -56,19 +56,18 @@ def test_recording_compacts_every_step_so_the_trajectory_is_unchanged():
     model = ToyPlanarArm()
     q = planar_poses(6, seed=3)
     obs = {"ee_xyz": model.predict(q)}
-    runs = [Perception([model], PerceptionConfig(method="adam", record=True, adam=AdamSettings(check_every=k)))
+    runs = [Perception([model], PerceptionConfig(method="adam", record=True, check_every=k))
             .infer(obs, perturb(q, seed=4)) for k in (1, 5)]
     for name in runs[0].trajectory:
         assert torch.equal(runs[0].trajectory[name].nan_to_num(-9), runs[1].trajectory[name].nan_to_num(-9)), name
 
 
-@pytest.mark.parametrize("settings", [AdamSettings, LMSettings])
-def test_check_every_must_be_positive(settings):
+def test_check_every_must_be_positive():
     with pytest.raises(ValueError, match="check_every"):
-        settings(check_every=0)
+        PerceptionConfig(check_every=0)
 
 
 def test_the_default_checks_every_step():
-    assert AdamSettings().check_every == LMSettings().check_every == 1   # exact on CPU: opt in where a sync costs
+    assert PerceptionConfig().check_every == 1                           # exact on CPU: opt in where a sync costs
     for function in (descent.adam, descent.levenberg_marquardt):        # the functions themselves: every step
         assert function.__kwdefaults__["check_every"] == 1
