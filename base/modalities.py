@@ -14,13 +14,16 @@ rest), never on its name, so a second camera or a new sensor is one more row: `r
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from bodyschema.errors import must_be
 
 IMAGE_UNIT = "intensity [0, 1]"     # images are stored uint8 0–255; models and sensors see x / 255
 IMAGE = "image"                     # the robot camera's modality: the default of image models and image goals
+CAMERA_PREFIX = "image_"            # a robot's further camera <c> (its record's `cameras`) is the modality image_<c>
+CAMERA_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_\-]*")   # what such a camera may be called (a store array's name)
 KINDS = ("vector", "image")
 
 
@@ -100,23 +103,48 @@ def images() -> tuple[Modality, ...]:
     return tuple(m for m in MODALITIES.values() if m.is_image)
 
 
+def camera_modality(camera: str) -> str:
+    """The modality of a robot's further camera `camera`: image_<camera>, an image row like the robot's own."""
+    if not isinstance(camera, str) or not CAMERA_NAME.fullmatch(camera):
+        raise ValueError(must_be("camera name", f"letters, digits, _ or - ({CAMERA_NAME.pattern})", camera,
+                                 "Rename the camera in the model file."))
+    return f"{CAMERA_PREFIX}{camera}"
+
+
+def find(name: str) -> Modality | None:
+    """The row of `name`: the table's, a further camera's (image_<camera>: rows by rule, so every process knows
+    them without registering), or None."""
+    if name in MODALITIES:
+        return MODALITIES[name]
+    camera = name[len(CAMERA_PREFIX):] if isinstance(name, str) and name.startswith(CAMERA_PREFIX) else None
+    if camera is None or not CAMERA_NAME.fullmatch(camera):
+        return None
+    return replace(MODALITIES[IMAGE], name=name, camera=camera)
+
+
 def images_in(names: Iterable[str]) -> list[str]:
-    """The camera rows' store arrays among `names` (a store's array keys, an observation's), in table order."""
-    names = set(names)
-    return [m.store_array for m in images() if m.store_array in names]
+    """The camera rows' store arrays among `names` (a store's array keys, an observation's): the table's in table
+    order, then further cameras' in the order given."""
+    names = list(names)
+    table = [m.store_array for m in images() if m.store_array in names]
+    return table + [n for n in names if n not in table and is_image(n)]
 
 
 def is_image(name: str) -> bool:
     """Whether `name` is a camera's modality; a name outside the table is not."""
-    return name in MODALITIES and MODALITIES[name].is_image
+    row = find(name)
+    return row is not None and row.is_image
 
 
 def stored(image: bool, sensors: Iterable[str] = ()) -> tuple[Modality, ...]:
-    """The rows a store holds, in its order: those every store has (computed from q), then the cameras' when it
-    holds images, then the robot's `sensors` (names of sensor rows)."""
+    """The rows a store holds, in its order: those every store has (computed from q), then, when it holds images,
+    the robot's own camera and the further cameras among `sensors`, then the robot's sensor rows among `sensors`
+    (what `Robot.sensors` names)."""
     rows = MODALITIES.values()
-    sensors = set(sensors)
-    return (tuple(m for m in rows if not m.is_image and not m.sensor) + (images() if image else ())
+    sensors = list(dict.fromkeys(sensors))
+    cameras = tuple(m for m in images() if not m.camera) + tuple(find(s) for s in sensors if is_image(s)
+                                                                 and find(s).camera)
+    return (tuple(m for m in rows if not m.is_image and not m.sensor) + (cameras if image else ())
             + tuple(m for m in rows if m.sensor and m.name in sensors))
 
 
@@ -125,14 +153,17 @@ def get(name: str) -> Modality:
     by_array = {m.array: m for m in MODALITIES.values() if m.array}
     if name in by_array:
         return by_array[name]
-    if name not in MODALITIES:
-        raise ValueError(f"Modality {name!r} is not known. Choose one of {list(MODALITIES)}.")
-    return MODALITIES[name]
+    row = find(name)
+    if row is None:
+        raise ValueError(f"Modality {name!r} is not known. Choose one of {list(MODALITIES)} or "
+                         f"{CAMERA_PREFIX}<camera> for a robot's further camera.")
+    return row
 
 
 def unit(name: str, default: str = "") -> str:
     """The unit models predict `name` in, or `default` for a name outside the table."""
-    return MODALITIES[name].model_unit if name in MODALITIES else default
+    row = find(name)
+    return row.model_unit if row is not None else default
 
 
 def shape_of(name: str, dq: int, image_shape: tuple[int, ...] | None = None) -> tuple[int, ...]:

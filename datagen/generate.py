@@ -205,13 +205,15 @@ def _checked(config: DatagenConfig, path: Path) -> tuple[dict, dict]:
 
 
 def report_observability(robot: Robot, ranges: np.ndarray) -> None:
-    """Log the camera's observability table (pixels changed, ee mm per degree of each joint) and a house warning per
-    joint under the threshold: a warning, not an error (the store is still worth making for the joints it sees)."""
+    """Log each camera's observability table (pixels changed, ee mm per degree of each joint) and a house warning
+    per joint under the threshold: a warning, not an error (the store is still worth making for the joints it
+    sees)."""
     from bodyschema.datagen.body.observability import observability
-    seen = observability(robot, ranges, np.random.default_rng(0))
-    logger.info(seen.table())
-    for warning in seen.warnings():
-        logger.warning(warning)
+    for modality in robot.cameras:
+        seen = observability(robot, ranges, np.random.default_rng(0), modality=modality)
+        logger.info(seen.table())
+        for warning in seen.warnings():
+            logger.warning(warning)
 
 
 def _run(path: Path, config: DatagenConfig, feats: dict, attrs: dict, run_jobs: Runner, progress: bool) -> None:

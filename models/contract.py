@@ -72,7 +72,7 @@ class BaseSensoryModel(Estimator, Capabilities):
         image, a modality outside the table): what perception uses instead of a Π that varies with the pose
         (aif/precisions.py)."""
         from bodyschema.base import modalities
-        row = modalities.MODALITIES.get(self.modality)
+        row = modalities.find(self.modality)
         return None if row is None else row.precision
 
     @property

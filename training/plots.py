@@ -41,7 +41,8 @@ def component_names(modality: str, n: int, joint_names: Sequence[str] = ()) -> t
     if modality in ("joints", "q"):                 # the table says only "joint": the body names them
         names = tuple(joint_names)
     else:
-        names = modalities.MODALITIES[modality].names if modality in modalities.MODALITIES else ()
+        row = modalities.find(modality)
+        names = row.names if row is not None else ()
     return names if len(names) == n else tuple(f"output {i}" for i in range(n))
 
 

@@ -48,6 +48,7 @@ class Built:
     source: Source
     ee_site: str
     camera: str
+    cameras: tuple[str, ...] = ()          # the record's further cameras, each checked to be the model's
 
 
 def read_source(record: RobotRecord, text: str | None = None) -> tuple[mujoco.MjSpec, Source]:
@@ -81,6 +82,8 @@ def build_model(record: RobotRecord, actuators: str = "position", text: str | No
         _no_collisions(spec)
     site = _ee_site(spec, record.ee, record.name)
     camera = _camera(spec, record.camera, record.name)
+    for further in record.cameras:
+        _model_camera(spec, further, record.name, "cameras")
     if record.actuators["kind"] == "servos":
         _add_servos(spec, joints, record.actuators)
         _implicit_servo_damping(spec)
@@ -94,7 +97,7 @@ def build_model(record: RobotRecord, actuators: str = "position", text: str | No
                                  f"per joint of {joints}", (len(record.pd["kp"]), len(record.pd["kd"]))))
     model = compile_spec(spec, source.path)
     _check_ee_moves(model, site, record.name)
-    return Built(model, source, site, camera)
+    return Built(model, source, site, camera, record.cameras)
 
 
 def _check_ee_moves(model: mujoco.MjModel, site: str, robot: str) -> None:
@@ -228,14 +231,20 @@ def _ee_site(spec: mujoco.MjSpec, ee: dict, robot: str) -> str:
     return EE_SITE
 
 
+def _model_camera(spec: mujoco.MjSpec, name: str, robot: str, key: str = "camera") -> str:
+    """name, when the model file has a camera of that name; else the house error listing the file's cameras."""
+    if spec.camera(name) is None:
+        names = [c.name for c in spec.cameras if c.name]
+        hint = f"Or let `bodyschema robot init` place one (name = {AUTO_CAMERA!r})." if key == "camera" else \
+            "Add the camera to the model file, or leave it out of the record's `cameras`."
+        raise ValueError(must_be(key, f"one of the model's cameras {names} for {robot}", name, hint))
+    return name
+
+
 def _camera(spec: mujoco.MjSpec, camera: dict, robot: str) -> str:
     name = camera["name"]
     if "pos" not in camera:
-        if spec.camera(name) is None:
-            names = [c.name for c in spec.cameras if c.name]
-            raise ValueError(must_be("camera", f"one of the model's cameras {names} for {robot}", name,
-                                     f"Or let `bodyschema robot init` place one (name = {AUTO_CAMERA!r})."))
-        return name
+        return _model_camera(spec, name, robot)
     x, y = np.array(camera["xyaxes"][:3], float), np.array(camera["xyaxes"][3:], float)
     x /= np.linalg.norm(x)
     y = y - (y @ x) * x

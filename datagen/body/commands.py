@@ -164,10 +164,11 @@ def run_show(args: RobotShowArgs) -> int:
         print(f"record{note}:\n{dumps_toml(record.to_toml_dict())}")
         fraction = check_view(robot, robot.sampling_ranges)
         print(f"ee in view: {fraction:.1%} of uniform poses in workspace {robot.workspace!r}")
-        seen = observability(robot, robot.sampling_ranges, np.random.default_rng(0))
-        print(seen.table())
-        for warning in seen.warnings():
-            logger.warning(warning)
+        for modality in robot.cameras:                    # the robot's own camera, then the record's further ones
+            seen = observability(robot, robot.sampling_ranges, np.random.default_rng(0), modality=modality)
+            print(seen.table())
+            for warning in seen.warnings():
+                logger.warning(warning)
         out = args.out or Path(f"{robot_label(args.robot)}_robot_sheet.png")
         print(f"contact sheet: {robot_sheet(robot, out, args.n)}")
     return 0

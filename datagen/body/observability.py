@@ -59,7 +59,7 @@ class JointView:
 class Observability:
     joints: tuple[JointView, ...]
     arm_fraction: float         # mean fraction of the image's pixels showing the moving arm
-    in_view: float              # fraction of poses whose ee projects inside the image
+    in_view: float | None       # fraction of poses whose ee projects inside the image (the robot's own camera)
     image_size: tuple[int, int]
     camera: str
     poses: int
@@ -75,8 +75,9 @@ class Observability:
     def table(self) -> str:
         h, w = self.image_size
         width = max(len(j.name) for j in self.joints)
+        in_view = "" if self.in_view is None else f", ee in view {self.in_view:.1%}"
         lines = [f"observability: camera {self.camera!r}, {h}×{w} px, {self.poses} poses, ±{DELTA_DEG:g}°: the arm "
-                 f"covers {self.arm_fraction:.1%} of the image, ee in view {self.in_view:.1%}",
+                 f"covers {self.arm_fraction:.1%} of the image{in_view}",
                  f"  {'joint':<{width}}   px/°    mm/°",
                  *(f"  {j.name:<{width}} {j.px_per_deg:7.1f} {j.mm_per_deg:7.2f}"
                    f"{'   < ' + format(MIN_PX_PER_DEG, 'g') + ' px/°: not seen' if j.weak else ''}"
@@ -94,9 +95,10 @@ class Observability:
 
 
 def observability(robot, ranges: np.ndarray | None = None, rng: np.random.Generator | None = None,
-                  n: int = POSES, delta_deg: float = DELTA_DEG) -> Observability:
-    """Per chosen joint of `robot` (its camera, image size and colour), the image change and ee motion per degree
-    at n poses uniform in `ranges` (Dq, 2) rad (None: its sampling ranges), seed from `rng` (None: seed 0)."""
+                  n: int = POSES, delta_deg: float = DELTA_DEG, modality: str = "image") -> Observability:
+    """Per chosen joint of `robot` (the camera of `modality`: its own, or a further camera's image_<name>; its image
+    size and colour), the image change and ee motion per degree at n poses uniform in `ranges` (Dq, 2) rad (None:
+    its sampling ranges), seed from `rng` (None: seed 0)."""
     from bodyschema.datagen.body.infer import view_fraction
 
     ranges = np.asarray(robot.sampling_ranges if ranges is None else ranges, dtype=np.float64)   # (Dq, 2) rad
@@ -107,8 +109,8 @@ def observability(robot, ranges: np.ndarray | None = None, rng: np.random.Genera
     q = rng.uniform(inner[:, 0], inner[:, 1], (n, robot.dq))                     # (n, Dq) rad
     steps = np.concatenate([np.eye(robot.dq), -np.eye(robot.dq)]) * delta        # (2Dq, Dq)
     moved = (q[:, None, :] + steps[None]).reshape(-1, robot.dq)                  # (n·2Dq, Dq)
-    base = _grey(robot.render(q, check=False))                                   # (n, H, W)
-    other = _grey(robot.render(moved, check=False)).reshape(n, 2, robot.dq, *base.shape[1:])  # (n, ±, Dq, H, W)
+    base = _grey(robot.render(q, check=False, modality=modality))                # (n, H, W)
+    other = _grey(robot.render(moved, check=False, modality=modality)).reshape(n, 2, robot.dq, *base.shape[1:])
     changed = (np.abs(other - base[:, None, None]) > CHANGED_GREY).sum(axis=(-2, -1))         # (n, ±, Dq)
     px = changed.mean(axis=(0, 1)) / delta_deg                                                # (Dq,)
     jac = robot.jacobian(q, check=False)                                          # (n, 3, Dq) m/rad
@@ -116,13 +118,16 @@ def observability(robot, ranges: np.ndarray | None = None, rng: np.random.Genera
     mm = arm.mean(axis=0) * 1e3 * np.pi / 180                                     # (Dq,) mm/°
     joints = tuple(JointView(name, float(p), float(m), float(a)) for name, p, m, a
                    in zip(robot.joint_names, px, mm, arm.mean(axis=0) * 1e3))
-    return Observability(joints, arm_fraction(robot, q), view_fraction(robot, ranges), tuple(robot.image_size),
-                         robot.camera_name, n)
+    own = modality == "image"
+    camera = robot.camera_name if own else robot.model.camera(robot.cameras[modality]).name
+    return Observability(joints, arm_fraction(robot, q, modality), view_fraction(robot, ranges) if own else None,
+                         tuple(robot.image_size), camera, n)
 
 
-def arm_fraction(robot, q: np.ndarray) -> float:
-    """The mean fraction of image pixels that show a body moved by a chosen joint, at poses q (n, Dq) rad."""
-    view = robot._ensure_renderer()
+def arm_fraction(robot, q: np.ndarray, modality: str = "image") -> float:
+    """The mean fraction of image pixels that show a body moved by a chosen joint, at poses q (n, Dq) rad, through
+    the camera of `modality`."""
+    view = robot._ensure_renderer(modality)
     renderer, camera = view.renderer, view.camera
     model = robot.model
     moving = model.body_weldid[model.geom_bodyid] != 0                 # (ngeom,): held bodies are welded to world

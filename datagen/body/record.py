@@ -2,7 +2,8 @@
 
 A record names the model file (MJCF .xml or URDF .urdf, relative to the record) and adds: the end effector (a site,
 or a body plus an offset), the joints used (hinges; every other joint is held at `hold` or its reference pose), the
-camera (one of the model's, or a pose placed to frame the ee workspace), the image size, named joint boxes
+camera (one of the model's, or a pose placed to frame the ee workspace) and further cameras of the model's
+(`cameras`: each one more image modality, image_<camera>, rendered at the same size), the image size, named joint boxes
 (`workspaces`, rad), the actuators (the model's own, or position servos with the gains given), the PD baseline's
 gains, and the tables benchmarks read ([reaching], held as given: its keys are the reaching benchmark's to check).
 The shipped robots are the records beside their MJCF (datagen/robots/<name>.toml). What each value may be:
@@ -34,7 +35,7 @@ EE_SITE = "bodyschema_ee"                    # the site added for an ee given as
 SECTIONS = {"ee": ("site", "body", "offset"), "camera": ("name", "pos", "xyaxes", "fovy"),
             "actuators": ("kind", "kp", "kv"), "pd": ("kp", "kd")}
 TOP_KEYS = ("name", "model", "joints", "image_size", "mesh_dir", "visual", "collisions", "hold", "workspaces",
-            *SECTIONS, *BENCHMARK_SECTIONS)
+            "cameras", *SECTIONS, *BENCHMARK_SECTIONS)
 
 @dataclass(frozen=True)
 class RobotRecord:
@@ -48,6 +49,7 @@ class RobotRecord:
     joints: tuple[str, ...] = ()                       # the hinges used, in order; () = every joint of the model
     hold: dict[str, float] = field(default_factory=dict)   # other joints' held values (rad | m); else reference
     camera: dict[str, Any] = field(default_factory=dict)   # {name} of the model's | {name="auto", pos, xyaxes, fovy}
+    cameras: tuple[str, ...] = ()                      # further cameras of the model file, each an image modality
     actuators: dict[str, Any] = field(default_factory=lambda: {"kind": "model"})   # {kind, kp, kv (servos)}
     pd: dict[str, Any] = field(default_factory=dict)   # {kp, kd}: the torque PD baseline's gains per joint
     reaching: dict[str, Any] = field(default_factory=dict)   # the reaching benchmark's table, as given (its keys:
@@ -86,6 +88,8 @@ class RobotRecord:
         out = {"name": self.name, "model": self.model, "image_size": list(self.image_size)}
         if self.joints:
             out["joints"] = list(self.joints)
+        if self.cameras:
+            out["cameras"] = list(self.cameras)
         if self.mesh_dir:
             out["mesh_dir"] = self.mesh_dir
         if self.visual != "mesh":
@@ -195,6 +199,8 @@ def record_from_dict(values: dict[str, Any], base: Path, where: str = "robot rec
     kwargs["image_size"] = tuple(values["image_size"]) if isinstance(values["image_size"], list) else None
     joints = values.get("joints", [])
     kwargs["joints"] = tuple(joints) if isinstance(joints, list) else joints    # a string is refused, not split
+    cameras = values.get("cameras", [])
+    kwargs["cameras"] = tuple(cameras) if isinstance(cameras, list) else cameras
     kwargs["workspaces"] = {k: _tuples(v) for k, v in values["workspaces"].items()}
     return RobotRecord(**kwargs, base=base)
 

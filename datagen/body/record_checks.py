@@ -50,6 +50,7 @@ def record_problems(r) -> list[str]:
     if not (all(isinstance(k, str) for k in r.hold) and _finite(r.hold.values())):
         p.append(must_be("record [hold]", "joint = finite value (rad or m)", r.hold))
     p += _camera_problems(r.camera)
+    p += _further_camera_problems(r.cameras, r.camera)
     p += _workspace_problems(r.workspaces)
     if r.actuators.get("kind") not in ACTUATORS:
         p.append(must_be("record [actuators] kind", f"one of {ACTUATORS}", r.actuators.get("kind")))
@@ -81,6 +82,18 @@ def _ee_problems(ee: dict) -> list[str]:
     offset = ee.get("offset", [0.0, 0.0, 0.0])
     if not (isinstance(offset, (list, tuple)) and len(offset) == 3 and _finite(offset)):
         return [must_be("record [ee] offset", "[x, y, z] in m in the body's frame", offset)]
+    return []
+
+
+def _further_camera_problems(cameras, camera: dict) -> list[str]:
+    """`cameras`: distinct names of the model file's cameras (each names a store array), not the main camera."""
+    from bodyschema.base.modalities import CAMERA_NAME
+    if not isinstance(cameras, tuple) or not all(isinstance(c, str) and CAMERA_NAME.fullmatch(c) for c in cameras) \
+            or len(set(cameras)) != len(cameras):
+        return [must_be("record `cameras`", "a list of distinct camera names of the model file (letters, digits, _ "
+                        "or -)", cameras, 'e.g. cameras = ["wrist"]; each becomes the image modality image_<name>.')]
+    if isinstance(camera, dict) and camera.get("name") in cameras:
+        return [must_be("record `cameras`", "further cameras, without the record's [camera]", camera["name"])]
     return []
 
 

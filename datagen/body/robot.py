@@ -20,6 +20,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
+from bodyschema.base.modalities import IMAGE, camera_modality
 from bodyschema.datagen.body.build import ACTUATOR_KINDS, Built, build_model
 from bodyschema.datagen.body.infer import robot_record
 from bodyschema.datagen.body.kinematics import ArmKinematics, fixed_camera
@@ -59,6 +60,8 @@ class Robot:
         self._kinematics = ArmKinematics(model, model.site(self.ee_site).id)
         self._kin = self._kinematics.data                 # private: kinematic queries, renders, touch
         self._cam = model.camera(self.camera_name).id
+        # image modality → camera id: the robot's own ("image"), then the record's further cameras (image_<name>)
+        self.cameras = {IMAGE: self._cam, **{camera_modality(c): model.camera(c).id for c in built.cameras}}
         self._touch_adr = touch_address(model)
         self._position_actuated = bool(model.nu) and bool(np.all(model.actuator_biastype ==
                                                                  mujoco.mjtBias.mjBIAS_AFFINE))
@@ -67,16 +70,16 @@ class Robot:
         self.workspaces = {k: np.array(box, dtype=np.float64) for k, box in record.workspaces.items()}  # (Dq, 2) rad
         self.workspace = workspace                                                  # the one sampled from
         self.sampling_ranges = self.workspaces[workspace].copy()                    # (Dq, 2) rad
-        self._renderer: CameraRenderer | None = None
+        self._renderers: dict[str, CameraRenderer] = {}
         self._view = fixed_camera(model, self._kin, self._cam, self.image_size)
 
     # ---- pickling (a worker process gets its own copy) ----------------------------------------------------
     def __getstate__(self) -> dict:
-        return {k: v for k, v in vars(self).items() if k != "_renderer"}     # the renderer holds a GL context
+        return {k: v for k, v in vars(self).items() if k != "_renderers"}    # a renderer holds a GL context
 
     def __setstate__(self, state: dict) -> None:
         vars(self).update(state)
-        self._renderer = None
+        self._renderers = {}
 
     # ---- construction --------------------------------------------------------------------------------
     @classmethod
@@ -181,18 +184,22 @@ class Robot:
         return self._kinematics.fk_and_jacobian(q)
 
     # ---- sensing -------------------------------------------------------------------------------------
-    def render(self, q, check: bool = True) -> np.ndarray:
-        """(N, Dq) rad → (N, H, W) uint8 grayscale or (N, H, W, 3) uint8 RGB from the fixed camera; check as in
-        `fk`."""
-        return self._render(self.check_q(q) if check else np.asarray(q, dtype=np.float64))
+    def render(self, q, check: bool = True, modality: str = IMAGE) -> np.ndarray:
+        """(N, Dq) rad → (N, H, W) uint8 grayscale or (N, H, W, 3) uint8 RGB from the fixed camera of `modality`
+        (the robot's own, or a further camera's image_<name>: `cameras`); check as in `fk`."""
+        if modality not in self.cameras:
+            raise ValueError(must_be("modality", f"one of {self.name}'s cameras {list(self.cameras)}", modality,
+                                     "Name further cameras in the robot record's `cameras`."))
+        return self._render(self.check_q(q) if check else np.asarray(q, dtype=np.float64), modality)
 
-    def _render(self, q: np.ndarray) -> np.ndarray:
-        return self._ensure_renderer().render(self.model, self._kin, q)
+    def _render(self, q: np.ndarray, modality: str = IMAGE) -> np.ndarray:
+        return self._ensure_renderer(modality).render(self.model, self._kin, q)
 
     @property
     def sensors(self) -> tuple[str, ...]:
-        """The sensor modalities (rows of base/modalities.py) `observe` reads for this robot."""
-        return ("touch",) if self._touch_adr is not None else ()
+        """What `observe` reads for this robot beyond its kinematics and its own camera: sensor rows of
+        base/modalities.py and its further cameras' image modalities (those only with images)."""
+        return (*(("touch",) if self._touch_adr is not None else ()), *list(self.cameras)[1:])
 
     def touch(self, q) -> np.ndarray | None:
         """(N, Dq) rad → (N, 1) fingertip touch (N) with the arm held at q at rest; None without a sensor."""
@@ -205,29 +212,30 @@ class Robot:
 
     def observe(self, q, image: bool = True) -> dict[str, np.ndarray]:
         """All observations of a batch: ee_xyz (N,3) m, ee_pixel (N,2) px, jacobian (N,3,Dq) m/rad as float32,
-        image (N,H,W[,3]) uint8 when `image`, touch (N,1) float32 when the robot has a touch sensor."""
+        image (N,H,W[,3]) uint8 and each further camera's image_<name> when `image`, touch (N,1) float32 when the
+        robot has a touch sensor."""
         q = self.check_q(q)
         xyz, jac = self._fk_and_jacobian(q)
         out = {"ee_xyz": xyz.astype(np.float32), "ee_pixel": self.project(xyz).astype(np.float32),
                "jacobian": jac.astype(np.float32)}
         if image:
-            out["image"] = self._render(q)
+            out.update({modality: self._render(q, modality) for modality in self.cameras})
         if self._touch_adr is not None:
             out["touch"] = self._touch(q).astype(np.float32)
         return out
 
-    def _ensure_renderer(self) -> CameraRenderer:
-        if self._renderer is None:
+    def _ensure_renderer(self, modality: str = IMAGE) -> CameraRenderer:
+        if modality not in self._renderers:
             shipped = self.record.model_path.parent == shipped_dir().resolve()
-            self._renderer = CameraRenderer(self.model, self._cam, self.image_size, self.channels,
-                                            self.workspaces["full"], simplify=not shipped)
-        return self._renderer
+            self._renderers[modality] = CameraRenderer(self.model, self.cameras[modality], self.image_size,
+                                                       self.channels, self.workspaces["full"], simplify=not shipped)
+        return self._renderers[modality]
 
     def close(self) -> None:
-        """Free the GL context (if one was created)."""
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        """Free the GL contexts (of the renderers created)."""
+        for renderer in self._renderers.values():
+            renderer.close()
+        self._renderers = {}
 
     def __enter__(self):
         return self

@@ -40,8 +40,9 @@ def test_a_second_camera_row_is_an_image_everywhere(rows, tmp_path):
     from bodyschema.evaluation.reaching import goal_pose
     from bodyschema.evaluation.reaching.goals import goal_names
 
-    f = features(2, (8, 12), sensors=(), babble=False)
+    f = features(2, (8, 12), sensors=("wrist_image",), babble=False)    # held for robots that have the camera
     assert list(f)[-2:] == ["image", "wrist_image"] and f["wrist_image"]["dtype"] == "uint8"
+    assert "wrist_image" not in features(2, (8, 12), sensors=(), babble=False)
     assert modalities.images_in(f) == ["image", "wrist_image"]
     root = create_store(tmp_path / "s.zarr", f, n=4, chunk_len=4, n_shards=1,
                         attrs={"joint_names": ["a", "b"], "camera_name": "front"})

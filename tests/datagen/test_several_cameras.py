@@ -1,0 +1,113 @@
+"""Issue 33 item 2: a robot record may name several cameras. Each further camera of the model file is one more image
+modality, image_<camera>, rendered at the robot's image size, held in the store beside the robot's own image,
+reported by the observability table and perceived together with the others (one model per camera, one z)."""
+
+from __future__ import annotations
+
+import logging
+import re
+
+import numpy as np
+import pytest
+import torch
+
+from bodyschema.aif.perception import Perception, PerceptionConfig
+from bodyschema.base import modalities
+from bodyschema.datagen.body.record import read_record, shipped_dir, write_record
+from bodyschema.datagen.body.robot import Robot
+from bodyschema.datagen.config import DatagenConfig
+from bodyschema.datagen.generate import generate
+from bodyschema.datagen.store.schema import features
+from bodyschema.datagen.store.validate import validate_store
+from tests.aif.toys import ToyBlobImage, perturb, planar_poses
+
+SIDE = '<camera name="side" pos="0.8 -0.8 0.6" xyaxes="1 1 0 -0.6 0.6 1.6" fovy="60" mode="fixed"/>'
+
+
+def two_camera_record(tmp_path, cameras=("side",), size=(32, 32)):
+    """planar2 with a second camera `side` in its model file, and a record naming `cameras`."""
+    xml = (shipped_dir() / "planar2.xml").read_text()
+    (tmp_path / "planar2.xml").write_text(re.sub(r"(<camera name=\"eye\"[^>]*/>)", r"\1" + SIDE, xml))
+    shipped = read_record(shipped_dir() / "planar2.toml")
+    from dataclasses import replace
+    record = replace(shipped, name="twocam", image_size=size, cameras=tuple(cameras), reaching={}, base=tmp_path)
+    return write_record(record, tmp_path / "twocam.toml")
+
+
+def test_a_further_camera_is_an_image_modality_by_rule():
+    row = modalities.find("image_wrist")
+    assert row.is_image and row.camera == "wrist" and row.dtype == "uint8" and row.precision is None
+    assert modalities.is_image("image_wrist") and modalities.get("image_wrist") == row
+    assert modalities.unit("image_wrist") == modalities.unit("image")
+    assert modalities.find("image_") is None and modalities.find("imagery") is None
+    assert not modalities.is_image("image_a b")                           # not a camera name
+    with pytest.raises(ValueError, match="camera name must be"):
+        modalities.camera_modality("a/b")
+
+
+def test_the_store_holds_a_further_camera_only_for_robots_that_have_it():
+    with_it = features(2, (8, 12), sensors=("image_side",), babble=False)
+    assert modalities.images_in(with_it) == ["image", "image_side"]
+    assert with_it["image_side"] == with_it["image"]                      # same dtype, shape, unit, names
+    assert "image_side" not in features(2, (8, 12), sensors=(), babble=False)
+    assert "image_side" not in features(2, None, sensors=("image_side",), babble=False)   # no images: no camera
+
+
+def test_a_robot_renders_every_camera_of_its_record(tmp_path):
+    with Robot.load(two_camera_record(tmp_path)) as robot:
+        assert list(robot.cameras) == ["image", "image_side"] and robot.sensors == ("image_side",)
+        q = np.array([[0.3, -0.7], [1.1, 0.4]])
+        seen = robot.observe(q)
+        assert seen["image_side"].shape == seen["image"].shape == (2, 32, 32)
+        assert not np.array_equal(seen["image_side"], seen["image"])     # another view
+        assert not np.array_equal(seen["image_side"][0], seen["image_side"][1])   # the arm moves in it
+        np.testing.assert_array_equal(robot.render(q, modality="image_side"), seen["image_side"])
+        with pytest.raises(ValueError, match=r"modality must be one of twocam's cameras \['image', 'image_side'\]"):
+            robot.render(q, modality="image_top")
+
+
+@pytest.mark.parametrize("cameras, words", [
+    (("top",), r"cameras must be one of the model's cameras \['eye', 'side'\] for twocam. Got 'top'"),
+    (("eye",), "further cameras, without the record's \\[camera\\]"),
+    (("side", "side"), "distinct camera names"),
+    (("a/b",), "distinct camera names"),
+])
+def test_a_record_naming_a_camera_it_cannot_have_is_refused(tmp_path, cameras, words):
+    with pytest.raises(ValueError, match=words):
+        Robot.load(two_camera_record(tmp_path, cameras))
+
+
+def test_datagen_stores_and_reports_each_camera(tmp_path, caplog):
+    record = two_camera_record(tmp_path)
+    with caplog.at_level(logging.INFO):
+        path = generate(DatagenConfig(robot=str(record), n=32, shard_size=16, seed=0, out=tmp_path / "s.zarr"),
+                        progress=False)
+    assert validate_store(path) == []
+    import zarr
+    root = zarr.open_group(str(path), mode="r")
+    with Robot.load(record) as robot:
+        q = root["q"][:].astype(np.float64)
+        np.testing.assert_array_equal(root["image_side"][:], robot.render(q, modality="image_side"))
+    tables = [r.getMessage() for r in caplog.records if r.getMessage().startswith("observability: camera")]
+    assert [t.split("'")[1] for t in tables] == ["eye", "side"]
+
+
+class SideBlob(ToyBlobImage):
+    """The blob toy seen by a second camera: modality image_side, its grid shifted and coarser."""
+
+    def __init__(self):
+        super().__init__()
+        self.modality = "image_side"
+        self.gx, self.gy = 1.5 * self.gx + 0.1, 1.5 * self.gy - 0.1
+
+
+def test_perception_fuses_two_cameras_over_one_z():
+    own, side = ToyBlobImage(), SideBlob()
+    q = planar_poses(12, seed=5)
+    obs = {"image": own.predict(q), "image_side": side.predict(q)}
+    both = Perception([own, side], PerceptionConfig())
+    assert both.config.method == "adam+lm"                             # "auto" reads both as images
+    result = both.infer(obs, perturb(q, seed=6, max_rad=0.3))
+    assert torch.allclose(result.mu, q, atol=1e-4)
+    _, terms = both.energies(obs, q)
+    assert set(terms) == {"image", "image_side"}
