@@ -83,7 +83,10 @@ def build_model(record: RobotRecord, actuators: str = "position", text: str | No
     site = _ee_site(spec, record.ee, record.name)
     camera = _camera(spec, record.camera, record.name)
     for further in record.cameras:
-        _model_camera(spec, further, record.name, "cameras")
+        if isinstance(further, dict):
+            _camera(spec, further, record.name)
+        else:
+            _model_camera(spec, further, record.name, "cameras")
     if record.actuators["kind"] == "servos":
         _add_servos(spec, joints, record.actuators)
         _implicit_servo_damping(spec)
@@ -97,7 +100,7 @@ def build_model(record: RobotRecord, actuators: str = "position", text: str | No
                                  f"per joint of {joints}", (len(record.pd["kp"]), len(record.pd["kd"]))))
     model = compile_spec(spec, source.path)
     _check_ee_moves(model, site, record.name)
-    return Built(model, source, site, camera, record.cameras)
+    return Built(model, source, site, camera, record.further_cameras)
 
 
 def _check_ee_moves(model: mujoco.MjModel, site: str, robot: str) -> None:

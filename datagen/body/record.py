@@ -2,8 +2,9 @@
 
 A record names the model file (MJCF .xml or URDF .urdf, relative to the record) and adds: the end effector (a site,
 or a body plus an offset), the joints used (hinges; every other joint is held at `hold` or its reference pose), the
-camera (one of the model's, or a pose placed to frame the ee workspace) and further cameras of the model's
-(`cameras`: each one more image modality, image_<camera>, rendered at the same size), the image size, named joint boxes
+camera (one of the model's, or a pose placed to frame the ee workspace) and further cameras (`cameras`: each a
+camera of the model's or a placed pose, as [camera], one more image modality image_<name> rendered at the same
+size; a URDF has no cameras of its own), the image size, named joint boxes
 (`workspaces`, rad), the actuators (the model's own, or position servos with the gains given), the PD baseline's
 gains, and the tables benchmarks read ([reaching], held as given: its keys are the reaching benchmark's to check).
 The shipped robots are the records beside their MJCF (datagen/robots/<name>.toml). What each value may be:
@@ -49,7 +50,8 @@ class RobotRecord:
     joints: tuple[str, ...] = ()                       # the hinges used, in order; () = every joint of the model
     hold: dict[str, float] = field(default_factory=dict)   # other joints' held values (rad | m); else reference
     camera: dict[str, Any] = field(default_factory=dict)   # {name} of the model's | {name="auto", pos, xyaxes, fovy}
-    cameras: tuple[str, ...] = ()                      # further cameras of the model file, each an image modality
+    cameras: tuple = ()                                # further cameras: a name of the model's | {name, pos, xyaxes,
+                                                       # fovy} placed; each one more image modality, image_<name>
     actuators: dict[str, Any] = field(default_factory=lambda: {"kind": "model"})   # {kind, kp, kv (servos)}
     pd: dict[str, Any] = field(default_factory=dict)   # {kp, kd}: the torque PD baseline's gains per joint
     reaching: dict[str, Any] = field(default_factory=dict)   # the reaching benchmark's table, as given (its keys:
@@ -79,6 +81,11 @@ class RobotRecord:
         return self.camera["name"]
 
     @property
+    def further_cameras(self) -> tuple[str, ...]:
+        """The names of the further cameras, in the record's order."""
+        return tuple(c["name"] if isinstance(c, dict) else c for c in self.cameras)
+
+    @property
     def placed_camera(self) -> bool:
         """True when the record places the camera itself (a pose), False for a camera of the model file."""
         return "pos" in self.camera
@@ -89,7 +96,7 @@ class RobotRecord:
         if self.joints:
             out["joints"] = list(self.joints)
         if self.cameras:
-            out["cameras"] = list(self.cameras)
+            out["cameras"] = _plain(list(self.cameras))
         if self.mesh_dir:
             out["mesh_dir"] = self.mesh_dir
         if self.visual != "mesh":
@@ -250,6 +257,8 @@ def _value(v: Any) -> str:
         return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
     if isinstance(v, (list, tuple)):
         return "[" + ", ".join(_value(x) for x in v) + "]"
+    if isinstance(v, dict):                               # an inline table: a list's entry (a placed camera)
+        return "{" + ", ".join(f"{_key(k)} = {_value(x)}" for k, x in v.items()) + "}"
     raise TypeError(f"no TOML value for {type(v).__name__}")
 
 

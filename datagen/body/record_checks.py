@@ -86,15 +86,22 @@ def _ee_problems(ee: dict) -> list[str]:
 
 
 def _further_camera_problems(cameras, camera: dict) -> list[str]:
-    """`cameras`: distinct names of the model file's cameras (each names a store array), not the main camera."""
+    """`cameras`: further cameras with distinct names (each names a store array), not the main camera: a name of
+    the model file's, or a placed pose as [camera] takes one."""
     from bodyschema.base.modalities import CAMERA_NAME
-    if not isinstance(cameras, tuple) or not all(isinstance(c, str) and CAMERA_NAME.fullmatch(c) for c in cameras) \
-            or len(set(cameras)) != len(cameras):
-        return [must_be("record `cameras`", "a list of distinct camera names of the model file (letters, digits, _ "
-                        "or -)", cameras, 'e.g. cameras = ["wrist"]; each becomes the image modality image_<name>.')]
-    if isinstance(camera, dict) and camera.get("name") in cameras:
-        return [must_be("record `cameras`", "further cameras, without the record's [camera]", camera["name"])]
-    return []
+    if not isinstance(cameras, tuple):
+        return [must_be("record `cameras`", "a list", cameras)]
+    p = [problem for c in cameras if isinstance(c, dict) for problem in _camera_problems(c) if "pos" in c]
+    p += [must_be("record `cameras` entry", "a camera name of the model file or {name, pos, xyaxes, fovy}", c)
+          for c in cameras if isinstance(c, dict) and "pos" not in c]
+    names = [c.get("name") if isinstance(c, dict) else c for c in cameras]
+    if not all(isinstance(n, str) and CAMERA_NAME.fullmatch(n) for n in names) or len(set(names)) != len(names):
+        p.append(must_be("record `cameras`", "distinct camera names (letters, digits, _ or -)", names,
+                         'e.g. cameras = ["wrist"], or a placed one: cameras = [{name = "side", pos = [x, y, z], '
+                         'xyaxes = [6 numbers], fovy = 45}]; each becomes the image modality image_<name>.'))
+    elif isinstance(camera, dict) and camera.get("name") in names:
+        p.append(must_be("record `cameras`", "further cameras, without the record's [camera]", camera["name"]))
+    return p
 
 
 def _camera_problems(camera: dict) -> list[str]:

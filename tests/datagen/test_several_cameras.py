@@ -66,11 +66,25 @@ def test_a_robot_renders_every_camera_of_its_record(tmp_path):
             robot.render(q, modality="image_top")
 
 
+def test_a_further_camera_may_be_placed_by_the_record(tmp_path):
+    """A URDF has no cameras: a further camera is then a pose, as [camera] places one; written and read back."""
+    placed = {"name": "low", "pos": [0.9, 0.0, 0.4], "xyaxes": [0.0, 1.0, 0.0, -0.4, 0.0, 0.9], "fovy": 50.0}
+    path = two_camera_record(tmp_path, ("side", placed))
+    record = read_record(path)
+    assert record.cameras == ("side", placed) and record.further_cameras == ("side", "low")
+    with Robot.load(record) as robot:
+        assert list(robot.cameras) == ["image", "image_side", "image_low"]
+        seen = robot.observe(np.array([[0.3, -0.7]]))
+        assert seen["image_low"].shape == (1, 32, 32) and seen["image_low"].any()
+
+
 @pytest.mark.parametrize("cameras, words", [
     (("top",), r"cameras must be one of the model's cameras \['eye', 'side'\] for twocam. Got 'top'"),
     (("eye",), "further cameras, without the record's \\[camera\\]"),
     (("side", "side"), "distinct camera names"),
     (("a/b",), "distinct camera names"),
+    (({"name": "low", "pos": [1, 0, 0], "fovy": 50},), r"record \[camera\] must be pos"),
+    (({"name": "low"},), "a camera name of the model file or {name, pos, xyaxes, fovy}"),
 ])
 def test_a_record_naming_a_camera_it_cannot_have_is_refused(tmp_path, cameras, words):
     with pytest.raises(ValueError, match=words):
