@@ -11,6 +11,10 @@ joints; a size that sees no more is not taken (a roll of a round tool is not see
 costs every later render and model). Joints left under the threshold are named with why (`JointView.why`).
 Cost: 1 + len(AZIMUTHS)·len(ELEVATIONS)·2 candidates × SEARCH_POSES·(1 + 2·Dq) renders, then a few sizes
 (README's UR5, 5 joints, 64×64, 2 shared cores: ≈ 10 s).
+
+`choose_further_camera` (`robot camera --add`) places a second view beside the first for the joints the first does
+not see: of the same candidates at the chosen image size, the one whose per-joint best of the two views scores
+highest by the same rule; the record names it in `cameras` (FURTHER), one more image modality.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ COVER_TIGHT = 0.95                              # a tighter framing: 95 % of the
 SEARCH_POSES = 8                                # poses per candidate while searching (the result is re-measured)
 SCALES = (1.25, 1.5, 2.0, 3.0, 4.0)             # image sizes tried, × the record's, up to max_side
 MAX_SIDE = 128                                  # px: the default bound on the image's longer side
+FURTHER = "auto2"                               # the further camera `robot camera --add` places (image_auto2)
 
 
 @dataclass(frozen=True)
@@ -49,24 +54,43 @@ class Choice:
         return [warning.replace("Not seen", tried, 1) for warning in self.seen.warnings()]
 
 
+@dataclass(frozen=True)
+class FurtherChoice:
+    camera: dict                    # the entry of the record's `cameras`: {name, pos, xyaxes, fovy}
+    seen: Observability             # its own view, measured at POSES poses
+    unseen: tuple[str, ...]         # the joints neither view sees (under MIN_PX_PER_DEG in both)
+
+
+def _measure(record, box: np.ndarray, camera: dict, size: tuple[int, int], n: int) -> Observability | None:
+    """The observability of `record` seen through `camera` at `size`; None where the ee is in view in fewer than
+    GOOD_VIEW of the poses."""
+    from bodyschema.datagen.body.robot import Robot
+    placed = dataclasses.replace(record, camera=camera, image_size=size, cameras=())
+    with Robot.load(placed) as robot:
+        if view_fraction(robot, box) < GOOD_VIEW:
+            return None
+        return observability(robot, box, np.random.default_rng(0), n=n)
+
+
+def _framings() -> list[dict]:
+    """place_camera's keywords of every candidate: its own principal-axes view, then the views around and above."""
+    return [{}] + [{"view": _direction(az, el), "cover": cover}
+                   for az in AZIMUTHS for el in ELEVATIONS for cover in (1.0, COVER_TIGHT)]
+
+
 def choose_camera(record, box: np.ndarray, max_side: int = MAX_SIDE) -> Choice:
     """The camera (and image size) of `record` (a RobotRecord) that sees its chosen joints best over the joint box
     `box` (Dq, 2) rad; the image grows only up to `max_side` px a side, and only where it sees more joints."""
     from bodyschema.datagen.body.robot import Robot
 
     def measure(camera: dict, size: tuple[int, int], n: int) -> Observability | None:
-        placed = dataclasses.replace(record, camera=camera, image_size=size)
-        with Robot.load(placed) as robot:
-            if view_fraction(robot, box) < GOOD_VIEW:
-                return None
-            return observability(robot, box, np.random.default_rng(0), n=n)
+        return _measure(record, box, camera, size, n)
 
     with Robot.load(record) as robot:
         points = ee_samples(robot, box)
         before = observability(robot, box, np.random.default_rng(0))
     size = tuple(record.image_size)
-    framings = [{}] + [{"view": _direction(az, el), "cover": cover}
-                       for az in AZIMUTHS for el in ELEVATIONS for cover in (1.0, COVER_TIGHT)]
+    framings = _framings()
     scored = [(framing, seen) for framing in framings
               if (seen := measure(place_camera(points, size, **framing), size, SEARCH_POSES)) is not None]
     if not scored:
@@ -85,6 +109,37 @@ def choose_camera(record, box: np.ndarray, max_side: int = MAX_SIDE) -> Choice:
                 break
     camera = place_camera(points, size, **framing)
     return Choice(camera, size, measure(camera, size, before.poses) or seen, before, len(scored), max_side)
+
+
+def choose_further_camera(record, box: np.ndarray, first: Observability) -> FurtherChoice:
+    """A second placed view of `record` (its image size), beside its camera seen as `first` over `box` (Dq, 2) rad:
+    the candidate whose per-joint best of the two views scores highest (`_score`'s rule on the pair)."""
+    from bodyschema.datagen.body.robot import Robot
+    with Robot.load(record) as robot:
+        points = ee_samples(robot, box)
+    size = tuple(record.image_size)
+    cameras = [place_camera(points, size, **framing) for framing in _framings()]
+    scored = [(camera, seen) for camera in cameras
+              if (seen := _measure(record, box, camera, size, SEARCH_POSES)) is not None]
+    if not scored:
+        raise ValueError(must_be(f"a further camera framing the ee of robot {record.name!r}",
+                                 f"able to see it in at least {GOOD_VIEW:.0%} of the poses", "none of the views"))
+    camera, _ = max(scored, key=lambda pair: _pair_score(first, pair[1]))
+    camera = {**camera, "name": FURTHER}
+    seen = _measure(record, box, camera, size, first.poses)
+    pair = _best_of(first, seen)
+    return FurtherChoice(camera, seen, tuple(j.name for j, px in zip(first.joints, pair) if px < MIN_PX_PER_DEG))
+
+
+def _best_of(first: Observability, second: Observability) -> np.ndarray:
+    """Per joint, px/° of the better of two views. # (Dq,)"""
+    return np.maximum([j.px_per_deg for j in first.joints], [j.px_per_deg for j in second.joints])
+
+
+def _pair_score(first: Observability, second: Observability) -> tuple[int, float]:
+    best = _best_of(first, second)
+    capped = np.minimum(best, MIN_PX_PER_DEG)
+    return -int((best < MIN_PX_PER_DEG).sum()), float(np.log(capped + 0.01).sum())
 
 
 def _direction(azimuth: float, elevation: float) -> np.ndarray:

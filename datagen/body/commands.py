@@ -60,11 +60,14 @@ class RobotCameraArgs:
     """Place a record's camera anew from sampled forward kinematics, framing the ee over one of its workspaces
     (after you narrowed it, or changed image_size): of several views and framings, the one whose image changes most
     for its weakest joints, and a larger image (up to --max-image-size) where that sees more joints; joints still
-    not seen are named with why. Rewrites the record in place (its leading comment kept, other comments not)."""
+    not seen are named with why; --add places a second view for those joints too. Rewrites the record in place
+    (its leading comment kept, other comments not)."""
 
     record: Annotated[Path, Positional("RECORD")]   # a robot record (.toml)
     workspace: str = "camera"          # the joint box whose ee positions the camera frames
     max_image_size: int = 128          # px: the image's longer side may grow up to this (never shrinks)
+    add: bool = False                  # also place a further camera (`cameras`: image_auto2) for the joints the
+                                       # first does not see
 
 
 def run_init(args: RobotInitArgs) -> int:
@@ -93,7 +96,7 @@ def run_camera(args: RobotCameraArgs) -> int:
 
     import numpy as np
 
-    from bodyschema.datagen.body.camera_choice import choose_camera
+    from bodyschema.datagen.body.camera_choice import FURTHER, choose_camera, choose_further_camera
     from bodyschema.datagen.body.infer import check_view
     from bodyschema.datagen.body.record import RECORD_SUFFIX, read_record, write_record
     from bodyschema.datagen.body.robot import Robot
@@ -109,6 +112,10 @@ def run_camera(args: RobotCameraArgs) -> int:
     box = np.array(record.workspaces[args.workspace])
     choice = choose_camera(record, box, max(args.max_image_size, *record.image_size))
     placed = dataclasses.replace(record, camera=choice.camera, image_size=choice.image_size)
+    further = choose_further_camera(placed, box, choice.seen) if args.add else None
+    if further is not None:
+        kept = tuple(c for c in record.cameras if (c["name"] if isinstance(c, dict) else c) != FURTHER)
+        placed = dataclasses.replace(placed, cameras=(*kept, further.camera))
     with Robot.load(placed) as robot:
         fraction = check_view(robot, box)                    # refused before the record is touched
     lines = args.record.read_text().splitlines()
@@ -119,8 +126,17 @@ def run_camera(args: RobotCameraArgs) -> int:
     print(f"camera {record.camera.get('pos')} → {choice.camera['pos']} (m), image {tuple(record.image_size)} → "
           f"{choice.image_size} px, the best of {choice.tried} views and framings of the ee over workspace "
           f"{args.workspace!r}: ee in view {fraction:.1%}")
-    for warning in choice.warnings():
-        logger.warning(warning)
+    if further is None:
+        for warning in choice.warnings():
+            logger.warning(warning)
+    else:
+        print(f"further camera {FURTHER!r} (image_{FURTHER}): {further.seen.table()}")
+        unseen = ", ".join(further.unseen) or "none"
+        print(f"joints seen by neither camera (< the threshold in both): {unseen}")
+        if further.unseen:
+            logger.warning(must_be(f"joints {unseen} of {record.name}", "seen by one of the two cameras",
+                                   "under the threshold in both", "A roll about the tool's own axis is not seen by "
+                                   "any camera; else narrow the workspace or raise --max-image-size."))
     print(f"record: {args.record}")
     return 0
 
