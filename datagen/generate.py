@@ -208,9 +208,8 @@ def report_observability(robot: Robot, ranges: np.ndarray) -> None:
     """Log each camera's observability table (pixels changed, ee mm per degree of each joint) and a house warning
     per joint under the threshold: a warning, not an error (the store is still worth making for the joints it
     sees)."""
-    from bodyschema.datagen.body.observability import observability
-    for modality in robot.cameras:
-        seen = observability(robot, ranges, np.random.default_rng(0), modality=modality)
+    from bodyschema.datagen.body.observability import every_camera
+    for seen in every_camera(robot, ranges):
         logger.info(seen.table())
         for warning in seen.warnings():
             logger.warning(warning)

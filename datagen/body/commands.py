@@ -161,10 +161,8 @@ def _rebased(record, folder: Path):
 
 
 def run_show(args: RobotShowArgs) -> int:
-    import numpy as np
-
     from bodyschema.datagen.body.infer import check_view, infer_record
-    from bodyschema.datagen.body.observability import observability
+    from bodyschema.datagen.body.observability import every_camera
     from bodyschema.datagen.body.record import dumps_toml, load_record, robot_label
     from bodyschema.datagen.body.robot import Robot
 
@@ -180,8 +178,7 @@ def run_show(args: RobotShowArgs) -> int:
         print(f"record{note}:\n{dumps_toml(record.to_toml_dict())}")
         fraction = check_view(robot, robot.sampling_ranges)
         print(f"ee in view: {fraction:.1%} of uniform poses in workspace {robot.workspace!r}")
-        for modality in robot.cameras:                    # the robot's own camera, then the record's further ones
-            seen = observability(robot, robot.sampling_ranges, np.random.default_rng(0), modality=modality)
+        for seen in every_camera(robot, robot.sampling_ranges):   # its own camera, then the record's further ones
             print(seen.table())
             for warning in seen.warnings():
                 logger.warning(warning)

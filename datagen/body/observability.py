@@ -124,6 +124,11 @@ def observability(robot, ranges: np.ndarray | None = None, rng: np.random.Genera
                          tuple(robot.image_size), camera, n)
 
 
+def every_camera(robot, ranges: np.ndarray | None = None) -> list[Observability]:
+    """`observability` through each camera of `robot` (its own, then the record's further ones), seed 0."""
+    return [observability(robot, ranges, np.random.default_rng(0), modality=modality) for modality in robot.cameras]
+
+
 def arm_fraction(robot, q: np.ndarray, modality: str = "image") -> float:
     """The mean fraction of image pixels that show a body moved by a chosen joint, at poses q (n, Dq) rad, through
     the camera of `modality`."""

@@ -48,22 +48,22 @@ def show_store(path: str | Path, out: str | Path | None = None, n: int = 16) -> 
 
 
 def store_observability(path: Path) -> str:
-    """The observability table of the store's robot and camera over its sampling ranges, warnings logged; "" for a
-    store that does not hold its robot (an import without --robot)."""
+    """The observability table of the store's robot through each of its cameras over its sampling ranges, warnings
+    logged; "" for a store that does not hold its robot (an import without --robot)."""
     import numpy as np
 
     from bodyschema.datagen.body.attrs import RECORD_KEY
-    from bodyschema.datagen.body.observability import observability
+    from bodyschema.datagen.body.observability import every_camera
     from bodyschema.datagen.body.robot import Robot
 
     attrs = dict(open_store(path).attrs)
     if RECORD_KEY not in attrs or not attrs.get("sampling_ranges"):
         return ""
     with Robot.from_attrs(attrs) as robot:
-        seen = observability(robot, np.array(attrs["sampling_ranges"]), np.random.default_rng(0))
-    for warning in seen.warnings():
+        seen = every_camera(robot, np.array(attrs["sampling_ranges"]))
+    for warning in (w for table in seen for w in table.warnings()):
         logger.warning(warning)
-    return seen.table()
+    return "\n".join(table.table() for table in seen)
 
 
 def default_sheet_path(store: Path) -> Path:

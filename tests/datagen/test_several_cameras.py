@@ -104,6 +104,9 @@ def test_datagen_stores_and_reports_each_camera(tmp_path, caplog):
         np.testing.assert_array_equal(root["image_side"][:], robot.render(q, modality="image_side"))
     tables = [r.getMessage() for r in caplog.records if r.getMessage().startswith("observability: camera")]
     assert [t.split("'")[1] for t in tables] == ["eye", "side"]
+    from bodyschema.datagen.store.show import store_observability
+    shown = store_observability(path)                                    # `bodyschema show`: each camera too
+    assert "observability: camera 'eye'" in shown and "observability: camera 'side'" in shown
 
 
 class SideBlob(ToyBlobImage):
