@@ -32,7 +32,7 @@ from bodyschema.evaluation.report.headers import readable_tables
 from bodyschema.evaluation.report.headline import headline
 from bodyschema.evaluation.report.markdown_html import LINK, embedded_image, html_page, markdown_to_html, slug
 from bodyschema.evaluation.report.pipeline import order_key
-from bodyschema.evaluation.report.sections import Section, find_sections
+from bodyschema.evaluation.report.sections import Section, find_sections, refuse_incomplete
 from bodyschema.evaluation.report.trained import trained_sections
 
 NO_RESULTS_HINT = "Run `bodyschema evaluate levels` first."
@@ -56,6 +56,7 @@ class ReportConfig:
         if not self.stale_after_s >= 0:
             raise ValueError(must_be("stale_after_s", "a number of seconds ≥ 0", self.stale_after_s))
         for run in self.runs:
+            refuse_incomplete(Path(run))
             if not (Path(run).is_dir() and (Path(run) / "summary.md").is_file()):
                 raise ValueError(must_be("runs", "run folders holding a summary.md", str(run),
                                          "Name a folder such as results/levels/<run-id>."))

@@ -169,13 +169,19 @@ def _incomplete(results: Path, depth: int = 1) -> list[Path]:
     return found
 
 
+def refuse_incomplete(run: Path) -> None:
+    """The house error for a run folder named with --runs that was killed (or is still running), whatever it holds
+    yet (a run killed early has no summary.md)."""
+    if is_run_folder(Path(run)) and not is_complete(Path(run)):
+        raise ValueError(must_be("runs", "complete runs", str(run), "It was killed (or is still running) before "
+                                 "its last write; rerun the benchmark, or name another run."))
+
+
 def _check_runs(runs, folders: list[Path], results: Path) -> None:
     """Every run named with --runs is one the report shows: the house error, never a silent fallback to latest."""
     chosen = {resolved(f) for f in folders}
     for run in runs:
-        if is_run_folder(Path(run)) and not is_complete(Path(run)):
-            raise ValueError(must_be("runs", "complete runs", str(run), "It was killed (or is still running) before "
-                                     "its last write; rerun the benchmark, or name another run."))
+        refuse_incomplete(run)
         if resolved(run) not in chosen:
             hint = ("Name one run per benchmark and robot, as results/<benchmark>/<run-id>." if is_inside(run, results)
                     else f"It is outside {results.as_posix()!r}: pass --results with the folder that holds it.")

@@ -106,3 +106,21 @@ def test_a_run_still_going_and_a_run_from_before_the_marker_are_left_alone(tmp_p
     assert remove_abandoned(tmp_path) == []
     assert not is_complete(mine) and is_complete(old) and not is_complete(other_host)
     assert latest_run(tmp_path) == old, "the newest complete run, never an incomplete one"
+
+
+def test_runs_refuses_a_run_killed_before_its_summary_as_incomplete(tmp_path, capsys):
+    """The window the kill test can land in under load: run.json written, summary.md not yet. --runs names it an
+    incomplete run, as it does one killed later, not a folder that is no run."""
+    from dataclasses import dataclass
+
+    from bodyschema.cli import main
+
+    @dataclass(frozen=True)
+    class Config:
+        out: Path
+        seed: int = 0
+
+    early = new_run(Config(tmp_path / "results" / "levels"))
+    assert not (early / "summary.md").exists() and not is_complete(early)
+    assert main(["report", "--results", str(tmp_path / "results"), "--runs", str(early)]) == 2
+    assert "runs must be complete runs" in capsys.readouterr().err
