@@ -142,8 +142,8 @@ def stored(image: bool, sensors: Iterable[str] = ()) -> tuple[Modality, ...]:
     (what `Robot.sensors` names)."""
     rows = MODALITIES.values()
     sensors = list(dict.fromkeys(sensors))
-    cameras = tuple(m for m in images() if not m.camera) + tuple(find(s) for s in sensors if is_image(s)
-                                                                 and find(s).camera)
+    further = tuple(row for s in sensors if (row := find(s)) is not None and row.is_image and row.camera)
+    cameras = tuple(m for m in images() if not m.camera) + further
     return (tuple(m for m in rows if not m.is_image and not m.sensor) + (cameras if image else ())
             + tuple(m for m in rows if m.sensor and m.name in sensors))
 

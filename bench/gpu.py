@@ -98,9 +98,8 @@ def before_after(model, q, images, trials: int, commit: str, repeats: int) -> No
     current = {name: getattr(descent, name) for name in names}
     plain = former.adam_then_lm
 
-    def before(*args, check_every=1, **kwargs):                           # the former: Adam's period only
-        return plain(*args, check_every=check_every, **kwargs) if "check_every" in plain.__kwdefaults__ else \
-            plain(*args, **kwargs)
+    def before(*args, check_every=1, **kwargs):                           # run at K = 1, the former's default
+        return plain(*args, **kwargs)
 
     former.adam_then_lm = before
     obs, mu0 = {"image": images[:trials]}, q[:trials] + 0.1
@@ -122,7 +121,7 @@ def before_after(model, q, images, trials: int, commit: str, repeats: int) -> No
     base = results["before"]
     rounds = int(base.steps.max())
     print(f"[2] cpu, levels' inference (adam+lm) of {trials} trials, {rounds} rounds, before = {commit}'s descent.py "
-          f"(its check_every ignored), min of {repeats} interleaved runs")
+          f"(at its defaults), min of {repeats} interleaved runs")
     for name, r in results.items():
         t = min(times[name])
         print(f"    {name:24s} {t / rounds * 1e3:6.2f} ms per round, /before {t / min(times['before']):.2f}; "

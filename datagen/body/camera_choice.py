@@ -78,37 +78,44 @@ def _framings() -> list[dict]:
                    for az in AZIMUTHS for el in ELEVATIONS for cover in (1.0, COVER_TIGHT)]
 
 
+def _scored(record, box: np.ndarray, points: np.ndarray, size: tuple[int, int], what: str
+            ) -> list[tuple[dict, Observability]]:
+    """(framing, its observability at SEARCH_POSES poses) of every candidate that keeps the ee in view; the house
+    error naming `what` where none does."""
+    scored = [(framing, seen) for framing in _framings()
+              if (seen := _measure(record, box, place_camera(points, size, **framing), size, SEARCH_POSES))
+              is not None]
+    if not scored:
+        raise ValueError(must_be(f"{what} framing the ee of robot {record.name!r}",
+                                 f"able to see it in at least {GOOD_VIEW:.0%} of the poses", "none of "
+                                 f"{len(_framings())} views and framings",
+                                 "Narrow the workspace to where the arm works."))
+    return scored
+
+
 def choose_camera(record, box: np.ndarray, max_side: int = MAX_SIDE) -> Choice:
     """The camera (and image size) of `record` (a RobotRecord) that sees its chosen joints best over the joint box
     `box` (Dq, 2) rad; the image grows only up to `max_side` px a side, and only where it sees more joints."""
     from bodyschema.datagen.body.robot import Robot
 
-    def measure(camera: dict, size: tuple[int, int], n: int) -> Observability | None:
-        return _measure(record, box, camera, size, n)
-
     with Robot.load(record) as robot:
         points = ee_samples(robot, box)
         before = observability(robot, box, np.random.default_rng(0))
     size = tuple(record.image_size)
-    framings = _framings()
-    scored = [(framing, seen) for framing in framings
-              if (seen := measure(place_camera(points, size, **framing), size, SEARCH_POSES)) is not None]
-    if not scored:
-        raise ValueError(must_be(f"a camera framing the ee of robot {record.name!r}",
-                                 f"able to see it in at least {GOOD_VIEW:.0%} of the poses", "none of "
-                                 f"{len(framings)} views and framings", "Narrow the workspace to where the arm works."))
+    scored = _scored(record, box, points, size, "a camera")
     framing, seen = max(scored, key=lambda pair: _score(pair[1]))
     for scale in SCALES:                       # the smallest larger image that sees more joints, if any does
         bigger = (round(record.image_size[0] * scale), round(record.image_size[1] * scale))
         if max(bigger) > max_side:
             break
-        larger = measure(place_camera(points, bigger, **framing), bigger, SEARCH_POSES)
+        larger = _measure(record, box, place_camera(points, bigger, **framing), bigger, SEARCH_POSES)
         if larger is not None and len(larger.weak) < len(seen.weak):
             size, seen = bigger, larger
             if not seen.weak:
                 break
     camera = place_camera(points, size, **framing)
-    return Choice(camera, size, measure(camera, size, before.poses) or seen, before, len(scored), max_side)
+    return Choice(camera, size, _measure(record, box, camera, size, before.poses) or seen, before, len(scored),
+                  max_side)
 
 
 def choose_further_camera(record, box: np.ndarray, first: Observability) -> FurtherChoice:
@@ -118,14 +125,9 @@ def choose_further_camera(record, box: np.ndarray, first: Observability) -> Furt
     with Robot.load(record) as robot:
         points = ee_samples(robot, box)
     size = tuple(record.image_size)
-    cameras = [place_camera(points, size, **framing) for framing in _framings()]
-    scored = [(camera, seen) for camera in cameras
-              if (seen := _measure(record, box, camera, size, SEARCH_POSES)) is not None]
-    if not scored:
-        raise ValueError(must_be(f"a further camera framing the ee of robot {record.name!r}",
-                                 f"able to see it in at least {GOOD_VIEW:.0%} of the poses", "none of the views"))
-    camera, _ = max(scored, key=lambda pair: _pair_score(first, pair[1]))
-    camera = {**camera, "name": FURTHER}
+    framing, _ = max(_scored(record, box, points, size, "a further camera"),
+                     key=lambda pair: _pair_score(first, pair[1]))
+    camera = {**place_camera(points, size, **framing), "name": FURTHER}
     seen = _measure(record, box, camera, size, first.poses)
     pair = _best_of(first, seen)
     return FurtherChoice(camera, seen, tuple(j.name for j, px in zip(first.joints, pair) if px < MIN_PX_PER_DEG))
@@ -137,9 +139,7 @@ def _best_of(first: Observability, second: Observability) -> np.ndarray:
 
 
 def _pair_score(first: Observability, second: Observability) -> tuple[int, float]:
-    best = _best_of(first, second)
-    capped = np.minimum(best, MIN_PX_PER_DEG)
-    return -int((best < MIN_PX_PER_DEG).sum()), float(np.log(capped + 0.01).sum())
+    return _px_score(_best_of(first, second))
 
 
 def _direction(azimuth: float, elevation: float) -> np.ndarray:
@@ -148,5 +148,9 @@ def _direction(azimuth: float, elevation: float) -> np.ndarray:
 
 
 def _score(seen: Observability) -> tuple[int, float]:
-    capped = np.minimum([j.px_per_deg for j in seen.joints], MIN_PX_PER_DEG)
-    return -len(seen.weak), float(np.log(capped + 0.01).sum())
+    return _px_score(np.array([j.px_per_deg for j in seen.joints]))
+
+
+def _px_score(px: np.ndarray) -> tuple[int, float]:
+    """A view's rank from its px/° per joint (Dq,): first how many joints are seen, then Σ log min(px/°, threshold)."""
+    return -int((px < MIN_PX_PER_DEG).sum()), float(np.log(np.minimum(px, MIN_PX_PER_DEG) + 0.01).sum())

@@ -114,7 +114,7 @@ def run_camera(args: RobotCameraArgs) -> int:
     placed = dataclasses.replace(record, camera=choice.camera, image_size=choice.image_size)
     further = choose_further_camera(placed, box, choice.seen) if args.add else None
     if further is not None:
-        kept = tuple(c for c in record.cameras if (c["name"] if isinstance(c, dict) else c) != FURTHER)
+        kept = tuple(c for c, name in zip(record.cameras, record.further_cameras) if name != FURTHER)
         placed = dataclasses.replace(placed, cameras=(*kept, further.camera))
     with Robot.load(placed) as robot:
         fraction = check_view(robot, box)                    # refused before the record is touched
