@@ -98,14 +98,14 @@ class MDNConfig(ModelConfig):
 @dataclass(frozen=True)
 class PixelConfig(ModelConfig):
     kind: ClassVar[str] = "pixel"
-    size: Literal["lean", "pixel_aif"] = "lean"  # capacity preset (models/pixel.py SIZES)
+    size: Literal["lean", "pixel_aif", "splat"] = "lean"  # capacity preset, splat: blobs placed by the joints (SIZES)
     fc_hidden: int | None = None  # width of the fully connected layer; None: the preset's
     channels: tuple[int, ...] | None = None  # one ×2 upsampling per entry; None: the preset's
     refine: bool | None = None  # a 3×3 conv after each upsampling; None: the preset's
     precision: float | None = None  # fixed Π_x per pixel; None: 1/σ² of the validation residuals
     epochs: int = 100  # at most this many passes over the training set
     batch_size: int = 64  # images per gradient step
-    lr: float | None = None  # Adam learning rate; None: the preset's (lean 2e-3, pixel_aif 5e-4)
+    lr: float | None = None  # Adam learning rate; None: the preset's (lean 2e-3, pixel_aif 5e-4, splat 3e-3)
     patience: int = 10  # stop after this many epochs without a better validation loss
     weight_decay: float = 0.0  # Adam's L2 penalty
 

@@ -44,6 +44,12 @@ def _pixel(rgb: bool = False):
     return PixelDecoder(BODY, "image", shape, channels=(8, 4), fc_hidden=16, epochs=2).fit(q, image, progress=False)
 
 
+def _splat():
+    from bodyschema.models.pixel import PixelDecoder
+    q, _, image = _data()
+    return PixelDecoder(BODY, "image", IMAGE, size="splat", epochs=2).fit(q, image, progress=False)
+
+
 def _member(decoder):
     from bodyschema.models.multimodal import MultimodalModel
     q, xyz, image = _data()
@@ -66,12 +72,13 @@ def _gpr(kernel: str = "rbf"):
 
 
 KINDS = {"mdn-mean": lambda: _mdn("mean"), "mdn-max": lambda: _mdn("max"), "pixel": _pixel,
-         "pixel-rgb": lambda: _pixel(rgb=True),
+         "pixel-rgb": lambda: _pixel(rgb=True), "pixel-splat": _splat,
          "multimodal-mlp": lambda: _member("mlp"), "multimodal-pixel": lambda: _member("pixel"),
          "encoder": _encoder, "gpr": _gpr, "gpr-kinematic": lambda: _gpr("kinematic")}
 
 
 UNITS = {"mdn-mean": "in px", "mdn-max": "in px", "pixel": "in intensity [0, 1]", "pixel-rgb": "in intensity [0, 1]",
+         "pixel-splat": "in intensity [0, 1]",
          "multimodal-mlp": "in m", "multimodal-pixel": "in intensity [0, 1]", "encoder": "rad", "gpr": "in px",
          "gpr-kinematic": "in px"}
 

@@ -87,7 +87,7 @@ def test_size_is_saved_and_explicit_values_override_the_preset(tmp_path):
     assert (loaded.size, loaded.fc_hidden, loaded.channels, loaded.refine) == ("pixel_aif", 512, (16, 64, 16), True)
     override = PixelDecoder(ToyPlanarArm().body, "image", HW, size="pixel_aif", fc_hidden=32, refine=False)
     assert (override.fc_hidden, override.channels, override.refine) == (32, (16, 64, 16), False)
-    with pytest.raises(ValueError, match=r"size must be one of \['lean', 'pixel_aif'\]. Got 'huge'"):
+    with pytest.raises(ValueError, match=r"size must be one of \['lean', 'pixel_aif', 'splat'\]. Got 'huge'"):
         PixelDecoder(ToyPlanarArm().body, "image", HW, size="huge")
 
 
