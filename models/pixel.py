@@ -26,8 +26,8 @@ import torch.nn.functional as F
 from torch import nn
 
 from bodyschema.errors import must_be
-from bodyschema.models._nn_fit import TrainSettings, build, check_fit_data, check_val, evaluate, train
 from bodyschema.models import splat
+from bodyschema.models._nn_fit import TrainSettings, build, check_fit_data, check_val, evaluate, train
 from bodyschema.models._nn_model import NetModel
 from bodyschema.models.contract import BaseSensoryModel, register_kind
 from bodyschema.models.scaling import BodySpec

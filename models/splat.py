@@ -100,7 +100,7 @@ class SplatNet(nn.Module):
         gx_slope = (gx * dx * 2 * inv[:, None])[:, None]                   # ∂gx/∂px (B, 1, K, W)
         gy_slope = (gy * dy * 2 * inv[:, None])[:, None]
         per_channel = []
-        for a in self.look.intensity.T:                                    # d(gy ⊗ gx) = dgy ⊗ gx + gy ⊗ dgx, one product
+        for a in self.look.intensity.T:          # d(gy ⊗ gx) = dgy ⊗ gx + gy ⊗ dgx: both in one product
             left = torch.cat([gy_slope * (a[:, None] * dpy[..., None]),
                               (gy * a[:, None])[:, None].expand(b, dz, -1, -1)], 2)        # (B, Dz, 2K, H)
             right = torch.cat([gx[:, None].expand(b, dz, -1, -1), gx_slope * dpx[..., None]], 2)   # (B, Dz, 2K, W)

@@ -1,7 +1,6 @@
 """The splat size of the pixel decoder (models/splat.py): the shared contract, what it learns, what it refuses."""
 
 import pytest
-import torch
 
 from bodyschema.models.pixel import PixelDecoder
 from bodyschema.models.scaling import BodySpec
