@@ -13,7 +13,8 @@ Two named capacities (`size`), each with its Adam step: "lean" (FC 64, channels 
 NAO decoder (FC 4→512→1120 = 16×7×10 at 56×80, transposed convolutions 16→64→16→C, each but the last
 followed by a 3×3 convolution of the same width, which Pixel-AIF adds against checkerboard artifacts).
 Unlike Pixel-AIF it keeps ELU for ReLU and has no dropout: the AIF update differentiates g, and a seed must
-give one model.
+give one model. A third size, "splat", is not a conv stack: blobs placed by the joints' trig features
+(models/splat.py), for arms seen small in a frame of their whole reach.
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ SIZES = {   # name → capacity and its Adam step; an explicit fc_hidden / chann
     # at 56×80 too): not the image size, the step size
     "pixel_aif": {"fc_hidden": 512, "channels": (16, 64, 16), "refine": True, "lr": 5e-4},  # 56×80: 7×10×16 = 1120
     # not a conv stack: K blobs placed by the joints' trig features (models/splat.py); ≤ 7 joints. SO-101 URDF,
-    # 3 000 images 128×128, 40 epochs: floors 3.6–11.6° per joint where lean's were 10.8–159° (README)
+    # 3 000 images 128×128, 40 epochs: floors 2.5–12° per joint where lean's were 10.8–159° (README)
     "splat": {"points": 128, "lr": 3e-3},
 }
 

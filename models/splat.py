@@ -47,14 +47,14 @@ class SplatNet(nn.Module):
     @torch.no_grad()
     def start_from(self, x: torch.Tensor, gen: torch.Generator) -> None:
         """Background = the per-pixel median of the training images x (N, *output_shape) in [0, 1] (the arm covers
-        a pixel in under half of them); blobs start still, at pixels where an image differs from it."""
+        a pixel in under half of them); blobs start still, at pixels where an image differs from it, with one
+        intensity that gives them the arm's mean mass."""
         x = x.reshape(x.shape[0], self.h, self.w, self.c)
         background = x[:1000].median(0).values                                  # (H, W, C)
         self.look.background.copy_(background.permute(2, 0, 1))
         arm = ((x[:1000] - background).abs().amax(-1) > FOREGROUND).nonzero()  # (M, 3): image, row, col
         if len(arm) == 0:                                                        # a blank store: anywhere
-            arm = torch.stack(torch.meshgrid(torch.zeros(1), torch.arange(self.h), torch.arange(self.w),
-                                             indexing="ij"), -1).reshape(-1, 3).long()
+            arm = torch.cartesian_prod(torch.zeros(1, dtype=torch.long), torch.arange(self.h), torch.arange(self.w))
         pick = arm[torch.randint(len(arm), (self.k,), generator=gen)]
         self.place.weight.normal_(0, 1e-3, generator=gen)
         start = self.place.bias.view(self.k, 3)
@@ -62,7 +62,10 @@ class SplatNet(nn.Module):
         start[:, 1] = _unit_grid(self.h, start)[pick[:, 1]]
         start[:, 2] = 0.0
         self.look.log_width.fill_(math.log(START_WIDTH_PX * 2 / max(self.h, self.w)))
-        self.look.intensity.fill_(0.3)
+        # together the blobs start with the arm's mean mass (its contrast summed over an image), not far over it:
+        # a blob holds 2πσ² pixels of its intensity
+        arm_mass = (x[:1000] - background).sum((1, 2)).mean(0)                 # (C,)
+        self.look.intensity.copy_((arm_mass / (self.k * 2 * math.pi * START_WIDTH_PX ** 2)).expand(self.k, -1))
 
     def _q(self, u: torch.Tensor) -> torch.Tensor:
         return _like(self.q_center, u) + _like(self.q_half, u) * u
@@ -90,7 +93,7 @@ class SplatNet(nn.Module):
         """g(u) and ∂g/∂u. # u (B, Dz) → (B, *output_shape), (B, O, Dz), O in (H, W, C) order"""
         b, dz = u.shape
         phi, dphi = features_and_derivatives(self._q(u))                   # (B, P), (B, Dz, P) per rad
-        dphi = dphi * _like(self.q_half, u)[:, None]   # per unit of u
+        dphi = dphi * _like(self.q_half, u)[:, None]                       # per unit of u
         raw = self.place(phi).view(b, self.k, 3)
         draw = (dphi @ self.place.weight.T).view(b, dz, self.k, 3)         # the bias moves no tangent
         depth, dx, dy, inv, gx, gy = self._blobs(raw)

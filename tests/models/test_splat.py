@@ -1,6 +1,7 @@
 """The splat size of the pixel decoder (models/splat.py): the shared contract, what it learns, what it refuses."""
 
 import pytest
+import torch
 
 from bodyschema.models.pixel import PixelDecoder
 from bodyschema.models.scaling import BodySpec
@@ -56,3 +57,11 @@ def test_more_than_seven_joints_is_refused_with_the_house_error():
     with pytest.raises(ValueError, match=r"size 'splat' must be used on at most 7 joints .* Got 8\. "
                                          r"Use size 'lean' or 'pixel_aif'\."):
         PixelDecoder(body, "image", HW, size="splat")
+
+
+def test_images_without_an_arm_still_fit_to_their_background():
+    """No pixel differs from the median: the blobs start anywhere, and the prediction stays the blank image's."""
+    q = joint_angles(32, seed=0)
+    with one_thread():
+        model = splat_decoder(epochs=3).fit(q, torch.full((32, *HW), 0.25), progress=False)
+    assert (model.predict(joint_angles(4, seed=1).double()) - 0.25).abs().max() < 0.05
