@@ -206,8 +206,8 @@ class PixelDecoder(NetModel, BaseSensoryModel):
 
     def _factory(self) -> PixelDecoderNet | splat.SplatNet:
         if self.size == "splat":
-            return splat.SplatNet(self.latent_dim, self.output_shape, self.body.q_low, self.body.q_high,
-                                  SIZES["splat"]["points"], image_layout(self.output_shape)[2])
+            return splat.SplatNet(self.body, self.output_shape, SIZES["splat"]["points"],
+                                  image_layout(self.output_shape)[2])
         return PixelDecoderNet(self.latent_dim, self.output_shape, self.fc_hidden, self.channels, refine=self.refine)
 
     # ---- hooks ----------------------------------------------------------------------------------------

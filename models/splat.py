@@ -26,6 +26,7 @@ from torch import nn
 
 from bodyschema.models._gp_trig import MAX_FEATURES, feature_count, features, features_and_derivatives
 from bodyschema.models._nn_fit import LeafParams
+from bodyschema.models.scaling import BodySpec
 
 DEPTH_SHARPNESS = 5.0     # softplus(β = 5) keeps the depth 1 + c·φ positive, ≈ identity above 0.5
 FOREGROUND = 0.1          # an intensity this far from the background's marks the arm, where blobs start
@@ -36,13 +37,12 @@ START_INTENSITY = 0.3     # each blob's starting intensity (start_from says why)
 class SplatNet(nn.Module):
     """u (B, Dz) in [-1, 1] → image (B, *output_shape), K blobs placed by the trig features of q = from_unit(u)."""
 
-    def __init__(self, latent_dim: int, output_shape: tuple[int, ...], q_low, q_high, points: int, channels: int):
+    def __init__(self, body: BodySpec, output_shape: tuple[int, ...], points: int, channels: int):
         super().__init__()
         self.output_shape, self.k, self.c = tuple(output_shape), points, channels
         self.h, self.w = self.output_shape[:2]
-        self.q_center = tuple((lo + hi) / 2 for lo, hi in zip(q_low, q_high))   # rad; plain numbers, not buffers:
-        self.q_half = tuple((hi - lo) / 2 for lo, hi in zip(q_low, q_high))     # `build` leaves buffers empty
-        self.place = nn.Linear(feature_count(latent_dim), 3 * points)           # φ → (a·φ, b·φ, c·φ) per blob
+        self.body = body                                                         # u ↔ q: its from_unit
+        self.place = nn.Linear(feature_count(body.latent_dim), 3 * points)      # φ → (a·φ, b·φ, c·φ) per blob
         self.look = LeafParams(log_width=(points,), intensity=(points, channels), background=(channels, self.h, self.w))
 
     @torch.no_grad()
@@ -68,9 +68,6 @@ class SplatNet(nn.Module):
         # nao_arm, worse on four foreign arms (issue 33's closing note). A store with no arm in view starts blank.
         self.look.intensity.fill_(START_INTENSITY if found else 0.0)
 
-    def _q(self, u: torch.Tensor) -> torch.Tensor:
-        return _like(self.q_center, u) + _like(self.q_half, u) * u
-
     def _blobs(self, raw: torch.Tensor):
         """raw (B, K, 3) → depth (B, K), the offsets of every column/row from each blob (B, K, W), (B, K, H) in
         unit image coordinates, 1/(2σ²) (K,), and the separable Gaussians (B, K, W), (B, K, H)."""
@@ -86,15 +83,15 @@ class SplatNet(nn.Module):
         return (img + self.look.background).permute(0, 2, 3, 1).reshape(-1, *self.output_shape)
 
     def forward(self, u: torch.Tensor) -> torch.Tensor:
-        raw = self.place(features(self._q(u))).view(-1, self.k, 3)
+        raw = self.place(features(self.body.from_unit(u))).view(-1, self.k, 3)
         *_, gx, gy = self._blobs(raw)
         return self._image(gx, gy)
 
     def forward_and_jacobian(self, u: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """g(u) and ∂g/∂u. # u (B, Dz) → (B, *output_shape), (B, O, Dz), O in (H, W, C) order"""
         b, dz = u.shape
-        phi, dphi = features_and_derivatives(self._q(u))                   # (B, P), (B, Dz, P) per rad
-        dphi = dphi * _like(self.q_half, u)[:, None]                       # per unit of u
+        phi, dphi = features_and_derivatives(self.body.from_unit(u))       # (B, P), (B, Dz, P) per rad
+        dphi = dphi / self.body.unit_per_rad(u)[:, None]                   # per unit of u
         raw = self.place(phi).view(b, self.k, 3)
         draw = (dphi @ self.place.weight.T).view(b, dz, self.k, 3)         # the bias moves no tangent
         depth, dx, dy, inv, gx, gy = self._blobs(raw)
@@ -120,7 +117,3 @@ def fits(latent_dim: int) -> bool:
 def _unit_grid(n: int, like: torch.Tensor) -> torch.Tensor:
     """Pixel centres across one image side in [-1, 1], of like's dtype and device."""
     return torch.linspace(-1.0, 1.0, n, dtype=like.dtype, device=like.device)
-
-
-def _like(values: tuple[float, ...], like: torch.Tensor) -> torch.Tensor:
-    return torch.as_tensor(values, dtype=like.dtype, device=like.device)
