@@ -13,8 +13,12 @@ Cost: 1 + len(AZIMUTHS)·len(ELEVATIONS)·2 candidates × SEARCH_POSES·(1 + 2·
 (README's UR5, 5 joints, 64×64, 2 shared cores: ≈ 10 s).
 
 `choose_further_camera` (`robot camera --add`) places a second view beside the first for the joints the first does
-not see: of the same candidates at the chosen image size, the one whose per-joint best of the two views scores
-highest by the same rule; the record names it in `cameras` (FURTHER), one more image modality.
+not see: of the same candidates at the chosen image size, and closer ones (framing FURTHER_COVERS of the ee
+positions), the one whose per-joint best of the two views scores highest by the same rule; the record names it in
+`cameras` (FURTHER), one more image modality. A second view need not keep the ee in view in GOOD_VIEW of the poses
+(the first does): a close-up of the wrists that loses them in some poses is a candidate down to MIN_VIEW, the house
+bound of any camera, and its px/° (a mean over poses, out-of-view ones counting 0) weighs what it sees against what
+it loses.
 """
 
 from __future__ import annotations
@@ -24,13 +28,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bodyschema.datagen.body.infer import GOOD_VIEW, ee_samples, place_camera, view_fraction
+from bodyschema.datagen.body.infer import GOOD_VIEW, MIN_VIEW, ee_samples, place_camera, view_fraction
 from bodyschema.datagen.body.observability import MIN_PX_PER_DEG, Observability, observability
 from bodyschema.errors import must_be
 
 AZIMUTHS = np.deg2rad(np.arange(0, 360, 60))   # views around the workspace's vertical axis (6)
 ELEVATIONS = np.deg2rad([20.0, 55.0])           # above the horizontal: from the side, and from above
 COVER_TIGHT = 0.95                              # a tighter framing: 95 % of the ee positions inside the margin
+COVERS = (1.0, COVER_TIGHT)                     # the framings of a first camera (it must see the ee)
+FURTHER_COVERS = (1.0, COVER_TIGHT, 0.75, 0.5)  # a second view's: close-ups too (the first sees the ee)
 SEARCH_POSES = 8                                # poses per candidate while searching (the result is re-measured)
 SCALES = (1.25, 1.5, 2.0, 3.0, 4.0)             # image sizes tried, × the record's, up to max_side
 MAX_SIDE = 128                                  # px: the default bound on the image's longer side
@@ -61,34 +67,37 @@ class FurtherChoice:
     unseen: tuple[str, ...]         # the joints neither view sees (under MIN_PX_PER_DEG in both)
 
 
-def _measure(record, box: np.ndarray, camera: dict, size: tuple[int, int], n: int) -> Observability | None:
+def _measure(record, box: np.ndarray, camera: dict, size: tuple[int, int], n: int,
+             min_view: float = GOOD_VIEW) -> Observability | None:
     """The observability of `record` seen through `camera` at `size`; None where the ee is in view in fewer than
-    GOOD_VIEW of the poses."""
+    min_view of the poses."""
     from bodyschema.datagen.body.robot import Robot
     placed = dataclasses.replace(record, camera=camera, image_size=size, cameras=())
     with Robot.load(placed) as robot:
-        if view_fraction(robot, box) < GOOD_VIEW:
+        if view_fraction(robot, box) < min_view:
             return None
         return observability(robot, box, np.random.default_rng(0), n=n)
 
 
-def _framings() -> list[dict]:
-    """place_camera's keywords of every candidate: its own principal-axes view, then the views around and above."""
+def _framings(covers: tuple[float, ...] = COVERS) -> list[dict]:
+    """place_camera's keywords of every candidate: its own principal-axes view, then the views around and above,
+    each framing each fraction `covers` of the ee positions."""
     return [{}] + [{"view": _direction(az, el), "cover": cover}
-                   for az in AZIMUTHS for el in ELEVATIONS for cover in (1.0, COVER_TIGHT)]
+                   for az in AZIMUTHS for el in ELEVATIONS for cover in covers]
 
 
-def _scored(record, box: np.ndarray, points: np.ndarray, size: tuple[int, int], what: str
-            ) -> list[tuple[dict, Observability]]:
-    """(framing, its observability at SEARCH_POSES poses) of every candidate that keeps the ee in view; the house
-    error naming `what` where none does."""
-    scored = [(framing, seen) for framing in _framings()
-              if (seen := _measure(record, box, place_camera(points, size, **framing), size, SEARCH_POSES))
-              is not None]
+def _scored(record, box: np.ndarray, points: np.ndarray, size: tuple[int, int], what: str,
+            covers: tuple[float, ...] = COVERS, min_view: float = GOOD_VIEW) -> list[tuple[dict, Observability]]:
+    """(framing, its observability at SEARCH_POSES poses) of every candidate that keeps the ee in view in min_view
+    of the poses; the house error naming `what` where none does."""
+    framings = _framings(covers)
+    scored = [(framing, seen) for framing in framings
+              if (seen := _measure(record, box, place_camera(points, size, **framing), size, SEARCH_POSES,
+                                   min_view)) is not None]
     if not scored:
         raise ValueError(must_be(f"{what} framing the ee of robot {record.name!r}",
-                                 f"able to see it in at least {GOOD_VIEW:.0%} of the poses", "none of "
-                                 f"{len(_framings())} views and framings",
+                                 f"able to see it in at least {min_view:.0%} of the poses", "none of "
+                                 f"{len(framings)} views and framings",
                                  "Narrow the workspace to where the arm works."))
     return scored
 
@@ -125,10 +134,10 @@ def choose_further_camera(record, box: np.ndarray, first: Observability) -> Furt
     with Robot.load(record) as robot:
         points = ee_samples(robot, box)
     size = tuple(record.image_size)
-    framing, _ = max(_scored(record, box, points, size, "a further camera"),
+    framing, _ = max(_scored(record, box, points, size, "a further camera", FURTHER_COVERS, MIN_VIEW),
                      key=lambda pair: _pair_score(first, pair[1]))
     camera = {**place_camera(points, size, **framing), "name": FURTHER}
-    seen = _measure(record, box, camera, size, first.poses)
+    seen = _measure(record, box, camera, size, first.poses, MIN_VIEW)
     pair = _best_of(first, seen)
     return FurtherChoice(camera, seen, tuple(j.name for j, px in zip(first.joints, pair) if px < MIN_PX_PER_DEG))
 
