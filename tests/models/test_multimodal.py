@@ -144,3 +144,24 @@ def test_fit_rejects_bad_modalities_lengths_and_nan():
         MultimodalModel(BODY, SHAPES, precisions={"touch": 1.0})
     with pytest.raises(FileNotFoundError, match="multimodal.json"):
         MultimodalModel.load("/nonexistent/mm")
+
+
+def test_one_model_with_an_output_per_camera_is_perceived_over_one_z():
+    """Two cameras of one arm (`image` and a further camera's `image_side`, another size) as members of one
+    multimodal model: fitted together, perceived together (each camera's error a term of F), the pose is recovered
+    from a start 0.3 rad off to within 0.3 of the start's error."""
+    from bodyschema.aif.perception import Perception, PerceptionConfig
+    from tests.aif.toys import perturb
+    shapes = {"image": (8, 12), "image_side": (10, 10)}
+    q = joint_angles(256, seed=0)
+    views = {"image": blob_images(q), "image_side": blob_images(q, shapes["image_side"], width_px=2.0)}
+    model = MultimodalModel(BODY, shapes, **{**TINY, "epochs": 40})
+    with one_thread():
+        model.fit(q, views, progress=False)
+    truth = joint_angles(8, seed=3).double()
+    obs = {"image": blob_images(truth).double(), "image_side": blob_images(truth, shapes["image_side"], 2.0).double()}
+    both = Perception(list(model.members.values()), PerceptionConfig())
+    start = perturb(truth, seed=4, max_rad=0.3)
+    result = both.infer(obs, start)
+    assert set(both.energies(obs, truth)[1]) == {"image", "image_side"}
+    assert (result.mu - truth).abs().mean() < 0.3 * (start - truth).abs().mean()
