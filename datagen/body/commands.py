@@ -67,7 +67,7 @@ class RobotCameraArgs:
     workspace: str = "camera"          # the joint box whose ee positions the camera frames
     max_image_size: int = 128          # px: the image's longer side may grow up to this (never shrinks)
     add: bool = False                  # also place a further camera (`cameras`: image_auto2) for the joints the
-                                       # first does not see
+                                       # first does not see; it may be a close-up that loses the ee in some poses
 
 
 def run_init(args: RobotInitArgs) -> int:
