@@ -18,7 +18,8 @@ positions), the one whose per-joint best of the two views scores highest by the 
 `cameras` (FURTHER), one more image modality. A second view need not keep the ee in view in GOOD_VIEW of the poses
 (the first does): a close-up of the wrists that loses them in some poses is a candidate down to MIN_VIEW, the house
 bound of any camera, and its px/° (a mean over poses, out-of-view ones counting 0) weighs what it sees against what
-it loses.
+it loses. Cost: 1 + len(AZIMUTHS)·len(ELEVATIONS)·len(FURTHER_COVERS) = 49 candidates (the README's UR5 over `robot
+init`'s ranges, 6 joints, 128×128: 64 s).
 """
 
 from __future__ import annotations
