@@ -130,12 +130,31 @@ class TrainSettings:
     lr: float = 1e-3
     patience: int = 20            # epochs without improvement of the validation (else train) loss
     weight_decay: float = 0.0
+    lr_schedule: str = "constant"  # one of LR_SCHEDULES: the step's factor over the fit (`schedule_factor`)
 
     def __post_init__(self):
         if min(self.epochs, self.batch_size, self.patience) < 1 or not self.lr > 0 or self.weight_decay < 0:
             raise ValueError(must_be("(epochs, batch_size, patience, lr, weight_decay)",
                                      "(≥ 1, ≥ 1, ≥ 1, > 0, ≥ 0)",
                                      (self.epochs, self.batch_size, self.patience, self.lr, self.weight_decay)))
+        if self.lr_schedule not in LR_SCHEDULES:
+            raise ValueError(must_be("lr_schedule", f"one of {list(LR_SCHEDULES)}", self.lr_schedule))
+
+
+# "cosine": lr · ½(1 + cos(π t/T)) over the T steps of `epochs` (the cap), from the full step to none (Loshchilov &
+# Hutter 2017, without restarts). "wsd" (warm-up-stable-decay without the warm-up; Hu et al. 2024, MiniCPM): the full
+# step until the last WSD_DECAY share of the steps, then the same half cosine down to none over them.
+LR_SCHEDULES = ("constant", "cosine", "wsd")
+WSD_DECAY = 0.2
+
+
+def schedule_factor(schedule: str, step: int, total_steps: int) -> float:
+    """The learning rate's factor at optimizer step `step` (0-based) of a fit capped at `total_steps`."""
+    if schedule == "constant":
+        return 1.0
+    decay_start = 0 if schedule == "cosine" else (1 - WSD_DECAY) * total_steps
+    done = min(max(step - decay_start, 0) / (total_steps - decay_start), 1.0)
+    return 0.5 * (1.0 + math.cos(math.pi * done))
 
 
 def train(module: nn.Module, loss_fn: Callable[..., torch.Tensor], data: tuple[torch.Tensor, ...],
@@ -185,9 +204,11 @@ def train(module: nn.Module, loss_fn: Callable[..., torch.Tensor], data: tuple[t
         perm = torch.randperm(n, generator=gen)
         total = torch.zeros((), dtype=torch.float64, device=device)
         for step, i in enumerate(range(0, n, plan.batch_size), start=epoch * steps_per_epoch):
-            if plan.lr_scale != 1.0:
+            if plan.lr_scale != 1.0 or settings.lr_schedule != "constant":
+                factor = warmup_factor(plan, step, steps_per_epoch) * schedule_factor(
+                    settings.lr_schedule, step, settings.epochs * steps_per_epoch)
                 for group, lr in zip(opt.param_groups, base_lrs):
-                    group["lr"] = lr * warmup_factor(plan, step, steps_per_epoch)
+                    group["lr"] = lr * factor
             idx = perm[i:i + plan.batch_size]
             with _autocast(device, plan.autocast):
                 loss = loss_fn(module, *(d[idx] for d in data))

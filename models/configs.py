@@ -93,6 +93,7 @@ class MDNConfig(ModelConfig):
     lr: float = 3e-3  # Adam learning rate
     patience: int = 30  # stop after this many epochs without a better validation loss
     weight_decay: float = 0.0  # Adam's L2 penalty
+    lr_schedule: Literal["constant", "cosine", "wsd"] = "constant"  # cosine: to 0 over epochs; wsd: in the last 20 %
 
 
 @dataclass(frozen=True)
@@ -108,6 +109,7 @@ class PixelConfig(ModelConfig):
     lr: float | None = None  # Adam learning rate; None: the preset's (lean 2e-3, pixel_aif 5e-4, splat 3e-3)
     patience: int = 10  # stop after this many epochs without a better validation loss
     weight_decay: float = 0.0  # Adam's L2 penalty
+    lr_schedule: Literal["constant", "cosine", "wsd"] = "constant"  # cosine: to 0 over epochs; wsd: in the last 20 %
 
 
 @dataclass(frozen=True)
@@ -127,6 +129,7 @@ class MultimodalConfig(ModelConfig):
     lr: float = 2e-3  # Adam learning rate of the networks
     patience: int = 15  # stop after this many epochs without a better validation loss
     weight_decay: float = 0.0  # Adam's L2 penalty
+    lr_schedule: Literal["constant", "cosine", "wsd"] = "constant"  # cosine: to 0 over epochs; wsd: in the last 20 %
     precision_lr: float = 1e-2  # learning rate of the learned log-precisions λ
 
 
@@ -140,6 +143,7 @@ class EncoderConfig(ModelConfig):
     lr: float | None = None  # Adam learning rate; None: 2e-3 up to 80 px a side, 5e-4 above
     patience: int = 10  # stop after this many epochs without a better validation loss
     weight_decay: float = 0.0  # Adam's L2 penalty
+    lr_schedule: Literal["constant", "cosine", "wsd"] = "constant"  # cosine: to 0 over epochs; wsd: in the last 20 %
 
 
 # ---- value checks by annotation --------------------------------------------------------------------------

@@ -89,7 +89,7 @@ class ImageEncoder(NetHolder, Estimator):
                  epochs: int = 100, batch_size: int = 64,
                  lr: float | None = None,                   # None: `lr_for(image_shape)`
                  patience: int = 10,
-                 weight_decay: float = 0.0):
+                 weight_decay: float = 0.0, lr_schedule: str = "constant"):
         self.body, self.latent_dim, self.modality = check_body(body), body.latent_dim, modality
         self.image_shape = tuple(int(s) for s in image_shape)
         self.input_shape = self.image_shape                  # per-sample input x (the pyfunc's signature)
@@ -101,7 +101,7 @@ class ImageEncoder(NetHolder, Estimator):
                                      (channels, fc_hidden)))
         self.channels, self.fc_hidden = tuple(channels), fc_hidden
         lr = lr_for(self.image_shape) if lr is None else lr
-        self.settings = TrainSettings(epochs, batch_size, lr, patience, weight_decay)
+        self.settings = TrainSettings(epochs, batch_size, lr, patience, weight_decay, lr_schedule)
         self.fit_info_: dict = {}
 
     # ---- fit ------------------------------------------------------------------------------------------
@@ -173,7 +173,8 @@ class ImageEncoder(NetHolder, Estimator):
     def _config(self) -> dict:
         return {"image_shape": list(self.image_shape), "channels": list(self.channels), "fc_hidden": self.fc_hidden,
                 "epochs": self.settings.epochs, "batch_size": self.settings.batch_size, "lr": self.settings.lr,
-                "patience": self.settings.patience, "weight_decay": self.settings.weight_decay}
+                "patience": self.settings.patience, "weight_decay": self.settings.weight_decay,
+                "lr_schedule": self.settings.lr_schedule}
 
     @classmethod
     def _from_saved(cls, body, modality, output_shape, config, state):

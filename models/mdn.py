@@ -65,14 +65,14 @@ class MDNModel(NetModel, BaseSensoryModel):
                  min_std: float = 1e-3,       # std floor in standardized units: bounds the precision
                  mode: str = "mean",
                  epochs: int = 300, batch_size: int = 128, lr: float = 3e-3, patience: int = 30,
-                 weight_decay: float = 0.0):
+                 weight_decay: float = 0.0, lr_schedule: str = "constant"):
         super().__init__(body, modality, output_shape)
         if mode not in MODES:
             raise ValueError(must_be("mode", f"one of {MODES}", mode))
         if n_components < 1 or min_std <= 0:
             raise ValueError(must_be("n_components and min_std", "≥ 1 and > 0", (n_components, min_std)))
         self.hidden, self.n_components, self.min_std, self.mode = tuple(hidden), n_components, min_std, mode
-        self.settings = TrainSettings(epochs, batch_size, lr, patience, weight_decay)
+        self.settings = TrainSettings(epochs, batch_size, lr, patience, weight_decay, lr_schedule)
         self.x_mean_ = self.x_scale_ = None
         self.fit_info_: dict = {}
 
@@ -171,7 +171,7 @@ class MDNModel(NetModel, BaseSensoryModel):
         return {"hidden": list(self.hidden), "n_components": self.n_components, "min_std": self.min_std,
                 "mode": self.mode, "epochs": self.settings.epochs, "batch_size": self.settings.batch_size,
                 "lr": self.settings.lr, "patience": self.settings.patience,
-                "weight_decay": self.settings.weight_decay}
+                "weight_decay": self.settings.weight_decay, "lr_schedule": self.settings.lr_schedule}
 
     def _state(self):
         return {**super()._state(), "x_mean": self.x_mean_, "x_scale": self.x_scale_}

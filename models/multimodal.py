@@ -63,7 +63,8 @@ class MultimodalMember(NetModel, BaseSensoryModel):
                  fc_hidden: int = 64, channels: tuple[int, ...] = (32, 16, 8),   # pixel (see pixel.py)
                  precision: float | None = None,         # None: learned λ; else fixed, in output units⁻²
                  epochs: int = 200, batch_size: int = 64, lr: float = 2e-3, patience: int = 15,
-                 weight_decay: float = 0.0, precision_lr: float = 1e-2):   # λ moves ~precision_lr per step
+                 weight_decay: float = 0.0, precision_lr: float = 1e-2,
+                 lr_schedule: str = "constant"):   # λ moves ~precision_lr per step
         super().__init__(body, modality, output_shape)
         if decoder not in DECODERS:
             raise ValueError(must_be("decoder", f"one of {DECODERS}", decoder))
@@ -73,7 +74,7 @@ class MultimodalMember(NetModel, BaseSensoryModel):
             raise ValueError(must_be("precision", "> 0 or None (learned)", precision))
         self.decoder, self.hidden, self.fc_hidden, self.channels = decoder, tuple(hidden), fc_hidden, tuple(channels)
         self.fixed_precision, self.precision_lr = precision, precision_lr
-        self.settings = TrainSettings(epochs, batch_size, lr, patience, weight_decay)
+        self.settings = TrainSettings(epochs, batch_size, lr, patience, weight_decay, lr_schedule)
         self.x_mean_ = self.x_scale_ = None
         self.fit_info_: dict = {}
 
@@ -137,6 +138,7 @@ class MultimodalMember(NetModel, BaseSensoryModel):
                 "channels": list(self.channels), "precision": self.fixed_precision,
                 "epochs": self.settings.epochs, "batch_size": self.settings.batch_size, "lr": self.settings.lr,
                 "patience": self.settings.patience, "weight_decay": self.settings.weight_decay,
+                "lr_schedule": self.settings.lr_schedule,
                 "precision_lr": self.precision_lr}
 
     def _state(self):

@@ -159,7 +159,7 @@ class PixelDecoder(NetModel, BaseSensoryModel):
                  refine: bool | None = None,                # 3×3 conv after each upsampling; None: the preset's
                  precision: float | None = None,            # None: 1/σ² from the validation residuals
                  epochs: int = 100, batch_size: int = 64, lr: float | None = None, patience: int = 10,
-                 weight_decay: float = 0.0):
+                 weight_decay: float = 0.0, lr_schedule: str = "constant"):
         super().__init__(body, modality, output_shape)
         image_layout(self.output_shape)
         if size not in SIZES:
@@ -178,7 +178,7 @@ class PixelDecoder(NetModel, BaseSensoryModel):
         self.size, self.fc_hidden, self.channels, self.fixed_precision = size, fc_hidden, tuple(channels), precision
         self.refine = bool(preset["refine"] if refine is None else refine)
         lr = preset["lr"] if lr is None else lr                  # None: the preset's
-        self.settings = TrainSettings(epochs, batch_size, lr, patience, weight_decay)
+        self.settings = TrainSettings(epochs, batch_size, lr, patience, weight_decay, lr_schedule)
         self.precision_: float | None = None
         self.fit_info_: dict = {}
 
@@ -238,7 +238,8 @@ class PixelDecoder(NetModel, BaseSensoryModel):
         return {"size": self.size, "fc_hidden": self.fc_hidden, "channels": list(self.channels),
                 "refine": self.refine, "precision": self.fixed_precision,
                 "epochs": self.settings.epochs, "batch_size": self.settings.batch_size, "lr": self.settings.lr,
-                "patience": self.settings.patience, "weight_decay": self.settings.weight_decay}
+                "patience": self.settings.patience, "weight_decay": self.settings.weight_decay,
+                "lr_schedule": self.settings.lr_schedule}
 
     def _state(self):
         return {**super()._state(), "precision": torch.tensor(self.precision_, dtype=torch.float64)}
