@@ -23,6 +23,7 @@ from bodyschema.errors import must_be
 IMAGE_UNIT = "intensity [0, 1]"     # images are stored uint8 0–255; models and sensors see x / 255
 IMAGE = "image"                     # the robot camera's modality: the default of image models and image goals
 CAMERA_PREFIX = "image_"            # a robot's further camera <c> (its record's `cameras`) is the modality image_<c>
+EE_PIXEL = "ee_pixel"               # the ee projected into the robot's camera; into a further camera c: ee_pixel_<c>
 CAMERA_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_\-]*")   # what such a camera may be called (a store array's name)
 KINDS = ("vector", "image")
 
@@ -72,13 +73,13 @@ class Modality:
 MODALITIES: dict[str, Modality] = {m.name: m for m in (
     Modality("joints", "rad", ("Dq",), ("joint",), 1.0 / math.radians(1.0) ** 2, array="q", error_unit="deg"),
     Modality("ee_xyz", "m", (3,), ("x", "y", "z"), 1.0 / 1e-3 ** 2, error_unit="mm"),
-    Modality("ee_pixel", "px", (2,), ("u", "v"), 1.0),
+    Modality(EE_PIXEL, "px", (2,), ("u", "v"), 1.0),
     Modality(IMAGE, "intensity", ("image",), ("row", "col", "channel"), dtype="uint8", kind="image", camera="",
              error_unit="MSE"),
     Modality("touch", "N", (1,), ("contact",), sensor=True),
     Modality("jacobian", "m/rad", (3, "Dq"), ("xyz", "joint")),
 )}
-KINEMATIC = ("ee_xyz", "ee_pixel", "joints")            # what forward kinematics gives (models/analytic.py)
+KINEMATIC = ("ee_xyz", EE_PIXEL, "joints")              # what forward kinematics gives (models/analytic.py)
 SHIPPED = tuple(MODALITIES)
 
 
@@ -111,15 +112,37 @@ def camera_modality(camera: str) -> str:
     return f"{CAMERA_PREFIX}{camera}"
 
 
+def pixel_modality(image_modality: str) -> str:
+    """The ee's projection into the camera of an image modality: ee_pixel (the robot's own), ee_pixel_<c>."""
+    camera = get(image_modality).camera
+    return f"{EE_PIXEL}_{camera}" if camera else EE_PIXEL
+
+
+def pixel_camera(name: str) -> str | None:
+    """The image modality whose camera the projection `name` is taken in (ee_pixel → image, ee_pixel_<c> →
+    image_<c>); None when `name` is no projection."""
+    if name == EE_PIXEL:
+        return IMAGE
+    camera = _suffix(name, EE_PIXEL + "_")
+    return None if camera is None else CAMERA_PREFIX + camera
+
+
 def find(name: str) -> Modality | None:
-    """The row of `name`: the table's, a further camera's (image_<camera>: rows by rule, so every process knows
-    them without registering), or None."""
+    """The row of `name`: the table's, a further camera's (image_<camera>, and ee_pixel_<camera> the ee projected
+    into it: rows by rule, so every process knows them without registering), or None."""
     if name in MODALITIES:
         return MODALITIES[name]
-    camera = name[len(CAMERA_PREFIX):] if isinstance(name, str) and name.startswith(CAMERA_PREFIX) else None
-    if camera is None or not CAMERA_NAME.fullmatch(camera):
-        return None
-    return replace(MODALITIES[IMAGE], name=name, camera=camera)
+    if (camera := _suffix(name, CAMERA_PREFIX)) is not None:
+        return replace(MODALITIES[IMAGE], name=name, camera=camera)
+    if _suffix(name, EE_PIXEL + "_") is not None:
+        return replace(MODALITIES[EE_PIXEL], name=name)
+    return None
+
+
+def _suffix(name, prefix: str) -> str | None:
+    """The camera name after `prefix` in `name`, or None when there is none."""
+    camera = name[len(prefix):] if isinstance(name, str) and name.startswith(prefix) else None
+    return camera if camera is not None and CAMERA_NAME.fullmatch(camera) else None
 
 
 def images_in(names: Iterable[str]) -> list[str]:
@@ -137,14 +160,16 @@ def is_image(name: str) -> bool:
 
 
 def stored(image: bool, sensors: Iterable[str] = ()) -> tuple[Modality, ...]:
-    """The rows a store holds, in its order: those every store has (computed from q), then, when it holds images,
-    the robot's own camera and the further cameras among `sensors`, then the robot's sensor rows among `sensors`
-    (what `Robot.sensors` names)."""
+    """The rows a store holds, in its order: those every store has (computed from q), the ee's projection into
+    each further camera among `sensors` (computed from q too: with or without images), then, when it holds images,
+    the robot's own camera and the further cameras, then the robot's sensor rows among `sensors` (what
+    `Robot.sensors` names)."""
     rows = MODALITIES.values()
     sensors = list(dict.fromkeys(sensors))
     further = tuple(row for s in sensors if (row := find(s)) is not None and row.is_image and row.camera)
     cameras = tuple(m for m in images() if not m.camera) + further
-    return (tuple(m for m in rows if not m.is_image and not m.sensor) + (cameras if image else ())
+    projections = tuple(get(pixel_modality(row.name)) for row in further)
+    return (tuple(m for m in rows if not m.is_image and not m.sensor) + projections + (cameras if image else ())
             + tuple(m for m in rows if m.sensor and m.name in sensors))
 
 
@@ -155,8 +180,8 @@ def get(name: str) -> Modality:
         return by_array[name]
     row = find(name)
     if row is None:
-        raise ValueError(f"Modality {name!r} is not known. Choose one of {list(MODALITIES)} or "
-                         f"{CAMERA_PREFIX}<camera> for a robot's further camera.")
+        raise ValueError(f"Modality {name!r} is not known. Choose one of {list(MODALITIES)}, or "
+                         f"{CAMERA_PREFIX}<camera> and {EE_PIXEL}_<camera> for a robot's further camera.")
     return row
 
 

@@ -24,7 +24,7 @@ from tqdm.auto import tqdm
 from bodyschema import log
 from bodyschema.base.locks import store_lock
 from bodyschema.datagen.backends import Runner, backend
-from bodyschema.datagen.body.attrs import robot_attrs
+from bodyschema.datagen.body.attrs import camera_attrs, robot_attrs
 from bodyschema.datagen.body.infer import check_view
 from bodyschema.datagen.body.reach import arm_reach
 from bodyschema.datagen.body.robot import Robot
@@ -73,8 +73,7 @@ def _attrs(config: DatagenConfig, robot: Robot, ranges: np.ndarray, shards: int,
             "dq": robot.dq, "joint_names": list(robot.joint_names), "joint_limits": robot.joint_limits.tolist(),
             "sampling_ranges": ranges.tolist(),
             "workspace": None if config.ranges is not None else config.workspace_name,  # None: explicit ranges
-            "camera_name": robot.camera_name,
-            "intrinsics": robot.intrinsics().tolist(), "extrinsics": robot.extrinsics().tolist(),
+            **camera_attrs(robot),
             "image_size": list(robot.image_size), "channels": robot.channels, "images": config.images,
             "sampler": config.sampler, "sampler_params": params, "seed": config.seed, "config": config.to_dict(),
             "versions": versions(), "created_at": now(), "n": config.n, "chunk_len": chunk_len(config),

@@ -1,6 +1,7 @@
 """`AnalyticModel`: the robot's exact MuJoCo forward kinematics as a SensoryModel — the oracle.
 
-x = g(z) for z = joint angles (rad): the `ee` site position (ee_xyz, m), its camera projection (ee_pixel, px)
+x = g(z) for z = joint angles (rad): the `ee` site position (ee_xyz, m), its camera projection (ee_pixel, px;
+ee_pixel_<camera> into a further camera of the record)
 or the joints themselves (joints, rad, identity). The Jacobian is closed-form: mj_jacSite (its hinge
 recursion vectorized over the batch for large B, equal to 1e-12), chained with
 the pinhole projection Jacobian for ee_pixel. Precision is fixed. Nothing is learned, so saving stores the
@@ -43,21 +44,26 @@ class AnalyticModel(BaseSensoryModel):
 
     def __init__(self, robot: str | Path | BodySpec, modality: str, image_size: tuple[int, int] | None = None,
                  precision: float | None = None):
-        if modality not in MODALITIES:
-            raise ValueError(must_be("modality", f"one of {MODALITIES}", modality))
-        if precision is None:
-            precision = DEFAULT_PRECISION[modality]
+        projection = modalities.pixel_camera(modality) is not None          # ee_pixel or ee_pixel_<camera>
+        if modality not in MODALITIES and not projection:
+            raise ValueError(must_be("modality", f"one of {MODALITIES} or ee_pixel_<camera>", modality))
+        default = DEFAULT_PRECISION[modalities.EE_PIXEL if projection else modality]
+        precision = default if precision is None else precision
         if not (isinstance(precision, (int, float)) and np.isfinite(precision) and precision > 0):
             raise ValueError(must_be("precision", "a finite number > 0 (1 / variance of x)", precision,
-                                     f"The default for {modality} is {DEFAULT_PRECISION[modality]:.6g}."))
+                                     f"The default for {modality} is {default:.6g}."))
         # cheap: no renderer until render()
         self.robot = (body_robot(robot, image_size) if isinstance(robot, BodySpec)
                       else Robot.load(robot, image_size=image_size))
+        if projection and modality not in self.robot.projections():
+            raise ValueError(must_be("modality", f"one of {self.robot.name}'s projections "
+                                     f"{list(self.robot.projections())}", modality,
+                                     "Name further cameras in the robot record's `cameras`."))
         low, high = self.robot.sampling_ranges.T
         body = BodySpec(self.robot.name, self.robot.joint_names, tuple(map(float, low)), tuple(map(float, high)),
                         robot_source(self.robot))
         super().__init__(body, modality, modalities.shape_of(modality, self.robot.dq))
-        self.image_size = self.robot.image_size if modality == "ee_pixel" else None
+        self.image_size = self.robot.image_size if projection else None
         self.fixed_precision = float(precision)
 
     # ---- hooks ----------------------------------------------------------------------------------------
@@ -66,7 +72,7 @@ class AnalyticModel(BaseSensoryModel):
             return z.clone()
         q = _numpy(z)                                                     # (B, Dz) rad, float64
         xyz = self.robot.fk(q, check=False)                               # (B, 3) m
-        x = self.robot.project(xyz) if self.modality == "ee_pixel" else xyz   # (B, 2) px | (B, 3) m
+        x = self.robot.project(xyz, self.modality) if self.image_size else xyz   # (B, 2) px | (B, 3) m
         return torch.from_numpy(x).to(device=z.device, dtype=z.dtype)
 
     def _jacobian(self, z: torch.Tensor) -> torch.Tensor:
@@ -74,8 +80,8 @@ class AnalyticModel(BaseSensoryModel):
             eye = torch.eye(self.latent_dim, dtype=z.dtype, device=z.device)
             return eye.expand(z.shape[0], -1, -1).clone()                 # (B, Dz, Dz)
         xyz, jac = self.robot.fk_and_jacobian(_numpy(z), check=False)     # (B, 3) m, (B, 3, Dz) m/rad
-        if self.modality == "ee_pixel":
-            jac = self.robot.project_jacobian(xyz) @ jac                  # (B, 2, 3) px/m @ (B, 3, Dz) → (B, 2, Dz)
+        if self.image_size:                                               # a projection: px/m @ m/rad
+            jac = self.robot.project_jacobian(xyz, self.modality) @ jac   # (B, 2, 3) @ (B, 3, Dz) → (B, 2, Dz)
         return torch.from_numpy(jac).to(device=z.device, dtype=z.dtype)
 
     def _precision(self, z: torch.Tensor) -> torch.Tensor:

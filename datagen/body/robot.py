@@ -20,7 +20,7 @@ from pathlib import Path
 import mujoco
 import numpy as np
 
-from bodyschema.base.modalities import IMAGE, camera_modality
+from bodyschema.base.modalities import EE_PIXEL, IMAGE, camera_modality, pixel_modality
 from bodyschema.datagen.body.build import ACTUATOR_KINDS, Built, build_model
 from bodyschema.datagen.body.infer import robot_record
 from bodyschema.datagen.body.kinematics import ArmKinematics, fixed_camera
@@ -71,7 +71,10 @@ class Robot:
         self.workspace = workspace                                                  # the one sampled from
         self.sampling_ranges = self.workspaces[workspace].copy()                    # (Dq, 2) rad
         self._renderers: dict[str, CameraRenderer] = {}
-        self._view = fixed_camera(model, self._kin, self._cam, self.image_size)
+        # ee projection modality → its camera's view: ee_pixel (the robot's own), ee_pixel_<name> (further ones)
+        self._views = {pixel_modality(m): fixed_camera(model, self._kin, cam, self.image_size)
+                       for m, cam in self.cameras.items()}
+        self._view = self._views[EE_PIXEL]
 
     # ---- pickling (a worker process gets its own copy) ----------------------------------------------------
     def __getstate__(self) -> dict:
@@ -131,25 +134,36 @@ class Robot:
         check_ranges(ranges, self.joint_names, self.joint_limits, self.name)
 
     # ---- camera --------------------------------------------------------------------------------------
-    def intrinsics(self) -> np.ndarray:
-        """K (3, 3) in px for the configured image size."""
-        return self._view.K.copy()
+    def intrinsics(self, modality: str = EE_PIXEL) -> np.ndarray:
+        """K (3, 3) in px for the configured image size, of the camera of the projection `modality`
+        (ee_pixel: the robot's own; ee_pixel_<name>: a further camera's)."""
+        return self._view_of(modality).K.copy()
 
-    def extrinsics(self) -> np.ndarray:
-        """(4, 4) world → camera, OpenCV convention (x right, y down, z forward)."""
-        return self._view.extrinsics()
+    def extrinsics(self, modality: str = EE_PIXEL) -> np.ndarray:
+        """(4, 4) world → camera, OpenCV convention (x right, y down, z forward); camera as `intrinsics`."""
+        return self._view_of(modality).extrinsics()
 
-    def project(self, xyz) -> np.ndarray:
-        """(N, 3) m world → (N, 2) px (u = column, v = row)."""
-        return self._view.project(checked_points(xyz))
+    def project(self, xyz, modality: str = EE_PIXEL) -> np.ndarray:
+        """(N, 3) m world → (N, 2) px (u = column, v = row) in the camera of the projection `modality`."""
+        return self._view_of(modality).project(checked_points(xyz))
+
+    def projections(self) -> tuple[str, ...]:
+        """The ee projection modalities of this robot: ee_pixel, then ee_pixel_<name> per further camera."""
+        return tuple(self._views)
+
+    def _view_of(self, modality: str):
+        if modality not in self._views:
+            raise ValueError(must_be("modality", f"one of {self.name}'s projections {list(self._views)}", modality,
+                                     "Name further cameras in the robot record's `cameras`."))
+        return self._views[modality]
 
     def in_view(self, q) -> np.ndarray:
         """(N, Dq) rad → (N,) bool: the ee lies in front of the camera and projects inside the image."""
         return self._view.sees(self._fk_and_jacobian(self.check_q(q))[0])
 
-    def project_jacobian(self, xyz) -> np.ndarray:
+    def project_jacobian(self, xyz, modality: str = EE_PIXEL) -> np.ndarray:
         """(N, 3) m → (N, 2, 3) d px / d m of `project`."""
-        return self._view.project_jacobian(checked_points(xyz))
+        return self._view_of(modality).project_jacobian(checked_points(xyz))
 
     # ---- kinematics ----------------------------------------------------------------------------------
     def fk(self, q, check: bool = True) -> np.ndarray:
@@ -211,12 +225,13 @@ class Robot:
         return touch_at_rest(self.model, self._kin, self._touch_adr, self._position_actuated, q)
 
     def observe(self, q, image: bool = True) -> dict[str, np.ndarray]:
-        """All observations of a batch: ee_xyz (N,3) m, ee_pixel (N,2) px, jacobian (N,3,Dq) m/rad as float32,
-        image (N,H,W[,3]) uint8 and each further camera's image_<name> when `image`, touch (N,1) float32 when the
-        robot has a touch sensor."""
+        """All observations of a batch: ee_xyz (N,3) m, ee_pixel (N,2) px and each further camera's
+        ee_pixel_<name>, jacobian (N,3,Dq) m/rad as float32, image (N,H,W[,3]) uint8 and each further camera's
+        image_<name> when `image`, touch (N,1) float32 when the robot has a touch sensor."""
         q = self.check_q(q)
         xyz, jac = self._fk_and_jacobian(q)
-        out = {"ee_xyz": xyz.astype(np.float32), "ee_pixel": self.project(xyz).astype(np.float32),
+        out = {"ee_xyz": xyz.astype(np.float32), **{m: view.project(xyz).astype(np.float32)
+                                                     for m, view in self._views.items()},
                "jacobian": jac.astype(np.float32)}
         if image:
             out.update({modality: self._render(q, modality) for modality in self.cameras})

@@ -71,12 +71,21 @@ def check_rows(block: dict[str, np.ndarray], attrs: dict, limits: np.ndarray | N
             with np.errstate(over="ignore", invalid="ignore"):
                 norms = np.linalg.norm(block["jacobian"].astype(float), axis=1).max(axis=1)  # (B,) m/rad
             tally.add("reach:jacobian", ~(norms <= reach + REACH_TOL) & ok["jacobian"], start, norms)
-    K, E = attrs.get("intrinsics"), attrs.get("extrinsics")
-    if "ee_xyz" in block and "ee_pixel" in block and K is not None and E is not None:
-        with np.errstate(all="ignore"):
-            err = np.abs(project(np.asarray(K, float), np.asarray(E, float), block["ee_xyz"].astype(float))
-                         - block["ee_pixel"]).max(axis=1)
-        tally.add("pixel", ~(err <= PIXEL_TOL) & ok["ee_xyz"] & ok["ee_pixel"], start, np.nan_to_num(err))
+    for name, (K, E) in _views(attrs).items():
+        if "ee_xyz" in block and name in block and K is not None and E is not None:
+            with np.errstate(all="ignore"):
+                err = np.abs(project(np.asarray(K, float), np.asarray(E, float), block["ee_xyz"].astype(float))
+                             - block[name]).max(axis=1)
+            tally.add(f"pixel:{name}", ~(err <= PIXEL_TOL) & ok["ee_xyz"] & ok[name], start, np.nan_to_num(err))
+
+
+def _views(attrs: dict) -> dict[str, tuple]:
+    """{ee projection array: (K, E) of its camera}: ee_pixel's from the attrs' intrinsics/extrinsics, each further
+    camera's from camera_views (absent in stores made before further cameras had projections)."""
+    views = attrs.get("camera_views")
+    further = {name: (v.get("intrinsics"), v.get("extrinsics")) for name, v in views.items()
+               if isinstance(v, dict)} if isinstance(views, dict) else {}
+    return {"ee_pixel": (attrs.get("intrinsics"), attrs.get("extrinsics")), **further}
 
 
 def _outside(q: np.ndarray, box: np.ndarray) -> np.ndarray:
@@ -125,6 +134,6 @@ def report_rows(tally: RowTally, attrs: dict, problems: list[str]) -> None:
             problems.append(must_be("jacobian", f"columns of norm <= the arm's reach {reach:.4f} m/rad",
                                     f"{where}, up to {worst:.4g} m/rad", REGENERATE_HINT))
         elif kind == "pixel":
-            problems.append(must_be("ee_pixel", f"ee_xyz projected through attrs intrinsics/extrinsics "
-                                    f"(+-{PIXEL_TOL} px)",
+            source = "intrinsics/extrinsics" if name == "ee_pixel" else f"camera_views[{name!r}]"
+            problems.append(must_be(name, f"ee_xyz projected through attrs {source} (+-{PIXEL_TOL} px)",
                                     f"{count} rows off by up to {worst:.3g} px, first at row {row}"))

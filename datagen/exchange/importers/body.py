@@ -56,15 +56,14 @@ def resolve_body(config: ImportConfig, rec: Recording, image_size: tuple[int, in
 
 
 def _robot_body(name: str, image_size: tuple[int, int] | None) -> Body:
-    from bodyschema.datagen.body.attrs import robot_attrs
+    from bodyschema.datagen.body.attrs import camera_attrs, robot_attrs
     from bodyschema.datagen.body.reach import arm_reach
     from bodyschema.datagen.body.robot import Robot
 
     robot = Robot.load(name, image_size=image_size)
     base, reach = arm_reach(robot.model, robot.ee_site)
-    attrs = {"mjcf_sha256": robot.mjcf_sha256, "camera_name": robot.camera_name,
-             "intrinsics": robot.intrinsics().tolist(), "extrinsics": robot.extrinsics().tolist(),
-             "reach_m": reach, "base_m": base.tolist(), **robot_attrs(robot)}   # the store rebuilds its robot
+    attrs = {"mjcf_sha256": robot.mjcf_sha256, **camera_attrs(robot), "reach_m": reach, "base_m": base.tolist(),
+             **robot_attrs(robot)}   # the store rebuilds its robot
     return Body(robot.name, tuple(robot.joint_names), robot.joint_limits.copy(), None, attrs, robot)
 
 
