@@ -2,9 +2,10 @@
 
     joints    q, rad
     ee_xyz    the end-effector (or the visual marker, when its simulated position is given) in the world, m
-    ee_pixel  its projection in the robot camera, px (NaN for a point that left the scene)
+    ee_pixel  its projection in the robot camera, px (NaN for a point that left the scene); ee_pixel_<c> in a
+              further camera c
     image     the camera image as intensity in [0, 1] scaled as the training data, the marker geom moved by
-              per-row offsets (hand frame, m) when given
+              per-row offsets (hand frame, m) when given; image_<c>: a further camera c's
 `Sensors` adds what the loop benchmarks vary: Gaussian noise σ per modality and streams frozen at their first value.
 """
 
@@ -16,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from bodyschema.base.modalities import is_image
+from bodyschema.base.modalities import is_image, pixel_camera
 from bodyschema.models.contract import FUSED_CALLS
 from bodyschema.models.scaling import IMAGE_SCALE
 
@@ -28,40 +29,42 @@ def sense(robot, modality: str, q: np.ndarray, xyz: np.ndarray | None = None,
     if modality == "joints":
         return np.asarray(q, dtype=np.float64)
     if is_image(modality):
-        return _image(robot, q, marker_offsets, image_dtype)
+        return _image(robot, modality, q, marker_offsets, image_dtype)
     xyz = robot.fk(q, check=False) if xyz is None else xyz                # (N, 3) m; q may pass the limits
-    return _project(robot, xyz) if modality == "ee_pixel" else np.asarray(xyz, dtype=np.float64)
+    if pixel_camera(modality) is not None:
+        return _project(robot, modality, xyz)
+    return np.asarray(xyz, dtype=np.float64)
 
 
 def sense_all(robot, modalities: Sequence[str], q: np.ndarray, xyz: np.ndarray | None = None,
               marker_offsets: np.ndarray | None = None) -> dict[str, torch.Tensor]:
     """`sense` for several modalities at once (forward kinematics done once) as float64 tensors."""
-    if xyz is None and {"ee_xyz", "ee_pixel"} & set(modalities):
+    if xyz is None and any(m == "ee_xyz" or pixel_camera(m) is not None for m in modalities):
         xyz = robot.fk(q, check=False)
     return {m: torch.from_numpy(np.asarray(sense(robot, m, q, xyz, marker_offsets), dtype=np.float64))
             for m in modalities}
 
 
-def _project(robot, xyz: np.ndarray) -> np.ndarray:
+def _project(robot, modality: str, xyz: np.ndarray) -> np.ndarray:
     """robot.project, with points that left the scene (non-finite) seen as NaN: their episodes fail."""
     out = np.full((len(xyz), 2), np.nan)
     ok = np.isfinite(xyz).all(axis=1)
     if ok.any():
-        out[ok] = robot.project(xyz[ok])
+        out[ok] = robot.project(xyz[ok], modality)
     return out
 
 
-def _image(robot, q: np.ndarray, offsets: np.ndarray | None, dtype) -> np.ndarray:
+def _image(robot, modality: str, q: np.ndarray, offsets: np.ndarray | None, dtype) -> np.ndarray:
     q = np.clip(q, robot.joint_limits[:, 0], robot.joint_limits[:, 1])    # a simulated arm may pass its limits
     if offsets is None or not np.any(offsets):
-        return robot.render(q).astype(dtype) / dtype(IMAGE_SCALE)
+        return robot.render(q, modality=modality).astype(dtype) / dtype(IMAGE_SCALE)
     geom = robot.model.geom("marker").id
     home = robot.model.geom_pos[geom].copy()
     frames = []
     try:
         for q_i, off in zip(q, offsets):
             robot.model.geom_pos[geom] = home + off
-            frames.append(robot.render(q_i[None])[0])
+            frames.append(robot.render(q_i[None], modality=modality)[0])
     finally:
         robot.model.geom_pos[geom] = home
     return np.stack(frames).astype(dtype) / dtype(IMAGE_SCALE)

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from bodyschema.base.modalities import images_in, is_image
+from bodyschema.base.modalities import images_in, is_image, pixel_camera
 from bodyschema.datagen.samplers import uniform
 from bodyschema.errors import must_be
 from bodyschema.models.scaling import IMAGE_SCALE
@@ -27,7 +27,8 @@ OFFSET_DEG = (5.0, 10.0)           # level 1–2 belief offsets, uniform in magn
 @dataclass
 class Targets:
     q: np.ndarray                          # (N, Dq) rad, true poses
-    observations: dict[str, np.ndarray]    # modality → (N, *out): ee_xyz m, ee_pixel px, joints rad, image [0, 1]
+    observations: dict[str, np.ndarray]    # modality → (N, *out): ee_xyz m, ee_pixel[_<camera>] px, joints rad,
+                                           # image[_<camera>] [0, 1]
 
     def tensors(self, modalities) -> dict[str, torch.Tensor]:
         """Observations of the given modalities as float64 tensors."""
@@ -44,8 +45,8 @@ def make_targets(robot, n: int, rng: np.random.Generator, image: bool = False,
     (standard deviation per modality, in its units: m, px, rad, intensity) added to the observations."""
     q = uniform(rng, robot.sampling_ranges, n)                            # (N, Dq) rad
     sensed = robot.observe(q, image=image)
-    obs = {"ee_xyz": sensed["ee_xyz"].astype(np.float64), "ee_pixel": sensed["ee_pixel"].astype(np.float64),
-           "joints": q.copy()}
+    obs = {m: sensed[m].astype(np.float64) for m in sensed if m == "ee_xyz" or pixel_camera(m) is not None}
+    obs["joints"] = q.copy()                                              # ee_xyz, ee_pixel[_<camera>], joints
     for camera in images_in(sensed):                                      # uint8 → [0, 1]
         obs[camera] = sensed[camera].astype(np.float64) / IMAGE_SCALE
     return Targets(q, add_noise(obs, noise, noise_rng if noise_rng is not None else rng))

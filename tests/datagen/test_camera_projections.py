@@ -69,3 +69,15 @@ def test_a_projection_into_a_camera_the_robot_lacks_is_the_house_error(tmp_path)
         AnalyticModel(str(two_camera_record(tmp_path)), "ee_pixel_top")
     with Robot.load(two_camera_record(tmp_path)) as robot, pytest.raises(ValueError, match="projections"):
         robot.project(np.zeros((1, 3)), "ee_pixel_top")
+
+
+def test_the_levels_sense_a_further_cameras_projection(tmp_path):
+    """The levels' targets hold every projection the robot has, each through its own camera."""
+    from bodyschema.evaluation.levels.targets import make_targets
+
+    with Robot.load(two_camera_record(tmp_path)) as robot:
+        targets = make_targets(robot, 4, np.random.default_rng(0))
+        xyz = robot.fk(targets.q)
+        np.testing.assert_allclose(targets.observations["ee_pixel_side"], robot.project(xyz, "ee_pixel_side"))
+        np.testing.assert_allclose(targets.observations["ee_pixel"], robot.project(xyz))
+        assert set(targets.tensors(["ee_pixel", "ee_pixel_side"])) == {"ee_pixel", "ee_pixel_side"}
