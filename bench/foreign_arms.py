@@ -1,7 +1,8 @@
 """Benchmark: issue 33's table, one arm per row, every step the command a user types, on the defaults.
 
     MUJOCO_GL=egl .venv/bin/python bench/foreign_arms.py [--arms ur5 so_arm ...] [--n 3000] [--epochs 40]
-        [--trials 50] [--pixel-size lean|pixel_aif|splat] [--work bench_out/foreign] [--quick]
+        [--trials 50] [--pixel-size lean|pixel_aif|splat] [--pixel-lr LR] [--pixel-schedule constant|cosine|wsd]
+        [--work bench_out/foreign] [--quick]
 
 Per arm, in a folder of its own (its own MLflow store): `robot init` (a file: the visuals it can load, nothing
 edited by hand) and `robot camera`, then `datagen` (uniform poses, the record's image size), `train gpr` (ee_xyz)
@@ -104,7 +105,8 @@ def measure(name: str, work: Path, o: argparse.Namespace) -> dict[str, str]:
                        "--no-floor", "--out", str(folder / "levels_gpr")], log)
     minutes["levels gpr"] = s / 60
     gpr_l1 = levels_rows(folder / "levels_gpr")["1"]["joint_err_deg"]
-    out, s = bodyschema(["train", "pixel", *train, "--epochs", str(o.epochs), "--size", o.pixel_size], log)
+    out, s = bodyschema(["train", "pixel", *train, "--epochs", str(o.epochs), "--size", o.pixel_size,
+                         *(["--lr", str(o.pixel_lr)] if o.pixel_lr else []), "--lr-schedule", o.pixel_schedule], log)
     pixel, minutes["train pixel"] = registered(out), s / 60
     out, s = bodyschema(["train", "encoder", *train, "--epochs", str(o.epochs)], log)
     encoder, minutes["train encoder"] = registered(out), s / 60
@@ -134,6 +136,8 @@ def main() -> None:
     parser.add_argument("--n", type=int, default=3000)
     parser.add_argument("--epochs", type=int, default=40)
     parser.add_argument("--pixel-size", default="lean", help="train pixel's --size (models/pixel.py SIZES)")
+    parser.add_argument("--pixel-lr", type=float, default=None, help="train pixel's --lr (default: the size's)")
+    parser.add_argument("--pixel-schedule", default="constant", help="train pixel's --lr-schedule")
     parser.add_argument("--trials", type=int, default=50)
     parser.add_argument("--reach-trials", type=int, default=20)
     parser.add_argument("--work", type=Path, default=Path("bench_out/foreign"))
