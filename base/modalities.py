@@ -118,13 +118,9 @@ def pixel_modality(image_modality: str) -> str:
     return f"{EE_PIXEL}_{camera}" if camera else EE_PIXEL
 
 
-def pixel_camera(name: str) -> str | None:
-    """The image modality whose camera the projection `name` is taken in (ee_pixel → image, ee_pixel_<c> →
-    image_<c>); None when `name` is no projection."""
-    if name == EE_PIXEL:
-        return IMAGE
-    camera = _suffix(name, EE_PIXEL + "_")
-    return None if camera is None else CAMERA_PREFIX + camera
+def is_projection(name: str) -> bool:
+    """Whether `name` is the ee projected into a camera: ee_pixel (the robot's own) or ee_pixel_<c> (a further one)."""
+    return name == EE_PIXEL or _suffix(name, EE_PIXEL + "_") is not None
 
 
 def find(name: str) -> Modality | None:

@@ -44,7 +44,7 @@ class AnalyticModel(BaseSensoryModel):
 
     def __init__(self, robot: str | Path | BodySpec, modality: str, image_size: tuple[int, int] | None = None,
                  precision: float | None = None):
-        projection = modalities.pixel_camera(modality) is not None          # ee_pixel or ee_pixel_<camera>
+        projection = modalities.is_projection(modality)          # ee_pixel or ee_pixel_<camera>
         if modality not in MODALITIES and not projection:
             raise ValueError(must_be("modality", f"one of {MODALITIES} or ee_pixel_<camera>", modality))
         default = DEFAULT_PRECISION[modalities.EE_PIXEL if projection else modality]

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from bodyschema.base.modalities import is_image, pixel_camera
+from bodyschema.base.modalities import is_image, is_projection
 from bodyschema.models.contract import FUSED_CALLS
 from bodyschema.models.scaling import IMAGE_SCALE
 
@@ -31,7 +31,7 @@ def sense(robot, modality: str, q: np.ndarray, xyz: np.ndarray | None = None,
     if is_image(modality):
         return _image(robot, modality, q, marker_offsets, image_dtype)
     xyz = robot.fk(q, check=False) if xyz is None else xyz                # (N, 3) m; q may pass the limits
-    if pixel_camera(modality) is not None:
+    if is_projection(modality):
         return _project(robot, modality, xyz)
     return np.asarray(xyz, dtype=np.float64)
 
@@ -39,7 +39,7 @@ def sense(robot, modality: str, q: np.ndarray, xyz: np.ndarray | None = None,
 def sense_all(robot, modalities: Sequence[str], q: np.ndarray, xyz: np.ndarray | None = None,
               marker_offsets: np.ndarray | None = None) -> dict[str, torch.Tensor]:
     """`sense` for several modalities at once (forward kinematics done once) as float64 tensors."""
-    if xyz is None and any(m == "ee_xyz" or pixel_camera(m) is not None for m in modalities):
+    if xyz is None and any(m == "ee_xyz" or is_projection(m) for m in modalities):
         xyz = robot.fk(q, check=False)
     return {m: torch.from_numpy(np.asarray(sense(robot, m, q, xyz, marker_offsets), dtype=np.float64))
             for m in modalities}

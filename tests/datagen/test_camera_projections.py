@@ -24,8 +24,9 @@ def test_a_further_camera_has_its_ee_projection_by_rule():
     assert row == modalities.get("ee_pixel_side") and row.unit == "px" and row.shape == (2,) and not row.is_image
     assert modalities.pixel_modality("image_side") == "ee_pixel_side"
     assert modalities.pixel_modality("image") == "ee_pixel"
-    assert modalities.pixel_camera("ee_pixel_side") == "image_side" and modalities.pixel_camera("ee_pixel") == "image"
-    assert modalities.find("ee_pixel_") is None and modalities.pixel_camera("ee_xyz") is None
+    assert modalities.is_projection("ee_pixel_side") and modalities.is_projection("ee_pixel")
+    assert modalities.find("ee_pixel_") is None and not modalities.is_projection("ee_xyz")
+    assert not modalities.is_projection("ee_pixel_a b")                            # not a camera name
     kinematics_only = features(2, None, sensors=("image_side",), babble=False)   # computed from q: also without images
     assert kinematics_only["ee_pixel_side"] == kinematics_only["ee_pixel"]
     assert "ee_pixel_side" not in features(2, (8, 12), sensors=(), babble=False)
