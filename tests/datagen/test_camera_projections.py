@@ -82,3 +82,18 @@ def test_the_levels_sense_a_further_cameras_projection(tmp_path):
         np.testing.assert_allclose(targets.observations["ee_pixel_side"], robot.project(xyz, "ee_pixel_side"))
         np.testing.assert_allclose(targets.observations["ee_pixel"], robot.project(xyz))
         assert set(targets.tensors(["ee_pixel", "ee_pixel_side"])) == {"ee_pixel", "ee_pixel_side"}
+
+
+def test_the_loop_benchmarks_sense_each_camera_through_itself(tmp_path):
+    """`sense` (reaching, tracking, robustness) reads image_<c> and ee_pixel_<c> from camera c, not the robot's own."""
+    from bodyschema.evaluation.core.sensing import sense, sense_all
+    from bodyschema.models.scaling import IMAGE_SCALE
+
+    with Robot.load(two_camera_record(tmp_path)) as robot:
+        q = np.array([[0.3, -0.7], [1.1, 0.4]])
+        side = robot.render(q, modality="image_side") / IMAGE_SCALE
+        np.testing.assert_array_equal(sense(robot, "image_side", q), side)
+        assert not np.array_equal(sense(robot, "image", q), side)
+        read = sense_all(robot, ["ee_pixel_side", "ee_pixel"], q)
+        np.testing.assert_allclose(read["ee_pixel_side"].numpy(), robot.project(robot.fk(q), "ee_pixel_side"))
+        assert not np.allclose(read["ee_pixel_side"].numpy(), read["ee_pixel"].numpy())
