@@ -167,7 +167,9 @@ def train(module: nn.Module, loss_fn: Callable[..., torch.Tensor], data: tuple[t
 
     The score is the validation loss when `val` is given, else the train loss. `settings.epochs` is a cap: the
     loop stops once the score has not improved for `settings.patience` epochs, restores the best epoch's weights
-    and says so in one INFO line (which epoch, of how many, and whether the cap or the patience ended it).
+    and says so in one INFO line (which epoch, of how many, and whether the cap or the patience ended it). An epoch
+    whose training loss is NaN or inf stops it at once (a WARNING; `diverged_epoch` in the result), its weights
+    and checkpoint those of the last finite epoch.
     `checkpoint` is rewritten atomically after every epoch (before `on_epoch`), and resumed from when it exists
     at the start.
     The module and the data live on `device` while training; the module is back on the CPU on return
@@ -193,7 +195,7 @@ def train(module: nn.Module, loss_fn: Callable[..., torch.Tensor], data: tuple[t
              "best_weights": _clone(module.state_dict()), "metrics": {}}
     if checkpoint is not None and Path(checkpoint).is_file():
         state = _resume(Path(checkpoint), module, opt, gen, fingerprint, device)
-    first, began = state["epoch"] + 1, time.perf_counter()
+    first, began, diverged = state["epoch"] + 1, time.perf_counter(), None
     score_name = "validation" if val is not None else "train"
     bar = tqdm(total=settings.epochs, initial=first, desc=desc, disable=not progress, leave=False)
     for epoch in range(state["epoch"] + 1, settings.epochs):
@@ -217,6 +219,9 @@ def train(module: nn.Module, loss_fn: Callable[..., torch.Tensor], data: tuple[t
             opt.step()
             total += loss.detach().double() * len(idx)   # float64 as the former Python float sum: the same bits
         metrics = {"train_loss": float(total) / n}
+        if not math.isfinite(metrics["train_loss"]):    # the weights are NaN/inf now: no later epoch recovers
+            diverged = epoch
+            break
         if val is not None:
             metrics["val_loss"] = evaluate(module, loss_fn, val, plan.batch_size)
         score = metrics.get("val_loss", metrics["train_loss"])
@@ -236,16 +241,21 @@ def train(module: nn.Module, loss_fn: Callable[..., torch.Tensor], data: tuple[t
     bar.close()
     _log.debug("%s: epochs %d–%d on %d rows (%s) in %.2f s; best epoch %d", desc, first, state["epoch"], n, device,
                time.perf_counter() - began, state["best_epoch"])
-    stopped = state["epoch"] + 1 < settings.epochs   # early: `patience` epochs without a better score
-    _log.info("%s: %s; kept epoch %d's weights (%s loss %.4g)", desc,
-              f"stopped after {state['epoch'] + 1} of at most {settings.epochs} epochs, the {score_name} loss "
-              f"not better for {settings.patience}" if stopped else
-              f"ran all {settings.epochs} epochs (the cap), the last better {score_name} loss "
-              f"{state['bad']} before the end", state["best_epoch"] + 1, score_name, state["best"])
+    stopped = state["epoch"] + 1 < settings.epochs   # early: `patience` epochs without a better score, or diverged
+    if diverged is not None:
+        _log.warning("%s: the training loss became NaN or inf in epoch %d (a smaller --lr may help); stopped there "
+                     "and kept epoch %d's weights (%s loss %.4g)", desc, diverged + 1, state["best_epoch"] + 1,
+                     score_name, state["best"])
+    else:
+        _log.info("%s: %s; kept epoch %d's weights (%s loss %.4g)", desc,
+                  f"stopped after {state['epoch'] + 1} of at most {settings.epochs} epochs, the {score_name} loss "
+                  f"not better for {settings.patience}" if stopped else
+                  f"ran all {settings.epochs} epochs (the cap), the last better {score_name} loss "
+                  f"{state['bad']} before the end", state["best_epoch"] + 1, score_name, state["best"])
     module.load_state_dict(state["best_weights"])
     module.eval().to("cpu")
     return {"best_loss": state["best"], "best_epoch": state["best_epoch"], "epochs_run": state["epoch"] + 1,
-            "stopped_early": stopped}
+            "stopped_early": stopped, "diverged_epoch": diverged}
 
 
 @torch.no_grad()

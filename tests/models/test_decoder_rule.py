@@ -57,3 +57,31 @@ def test_the_cap_ends_a_fit_still_improving_and_a_seed_gives_one_model(caplog):
     assert "ran all 3 epochs (the cap)" in caplog.text
     a, b = _fit(seed=1, patience=5)[0], _fit(seed=1, patience=5)[0]
     assert all(torch.equal(p, q) for p, q in zip(a.state_dict().values(), b.state_dict().values()))
+
+
+def test_a_loss_that_turns_nan_stops_the_fit_with_the_last_finite_epochs_weights(caplog, tmp_path):
+    """NaN weights never recover under Adam: the loop stops in the epoch whose loss is not finite (not `patience`
+    epochs later), keeps the best finite epoch's weights and says so; the checkpoint holds no NaN."""
+    train, val = _noisy_regression()
+    gen = torch.Generator().manual_seed(0)
+    net = _nn_fit.build(lambda: nn.Sequential(nn.Linear(2, 16), nn.ELU(), nn.Linear(16, 1)), gen)
+    calls = {"n": 0}
+    steps_per_epoch = -(-len(train[0]) // 8)
+
+    def poisoned(module, x, y):                          # finite for 3 epochs of training steps, then NaN
+        loss = _mse(module, x, y)
+        if not module.training:                          # the held-out evaluation
+            return loss
+        calls["n"] += 1
+        return loss * float("nan") if calls["n"] > 3 * steps_per_epoch else loss
+
+    seen = []
+    with caplog.at_level(logging.INFO, logger="bodyschema.models._nn_fit"):
+        info = _nn_fit.train(net, poisoned, train, _nn_fit.TrainSettings(50, 8, 1e-2, 20), gen, val=val,
+                             on_epoch=lambda epoch, m: seen.append(m["val_loss"]), checkpoint=tmp_path / "c.pt")
+    assert info["diverged_epoch"] == 3 and info["epochs_run"] == 3 and len(seen) == 3
+    assert all(torch.isfinite(p).all() for p in net.parameters())
+    assert _nn_fit.evaluate(net, _mse, val, 8) == min(seen) == info["best_loss"]
+    assert "the training loss became NaN or inf in epoch 4" in caplog.text
+    saved = torch.load(tmp_path / "c.pt", weights_only=True)
+    assert saved["epoch"] == 2 and all(torch.isfinite(v).all() for v in saved["weights"].values())
