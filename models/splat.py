@@ -31,7 +31,7 @@ from bodyschema.models.scaling import BodySpec
 DEPTH_SHARPNESS = 5.0     # softplus(β = 5) keeps the depth 1 + c·φ positive, ≈ identity above 0.5
 # Blobs learn to leave the image at some poses by a depth near 0 (their position over it far outside): on SO-101's
 # 15 000-image store 1 % of (pose, blob) depths were under 6e-9, the least 5e-20, and position / depth² overflowed
-# float32 at epoch 29 (NaN weights from there). Floored here, such a blob is still 1000× its position away.
+# float32 in its 30th epoch (NaN weights from there). Floored here, such a blob is still 1000× its position away.
 DEPTH_MIN = 1e-3
 FOREGROUND = 0.1          # an intensity this far from the background's marks the arm, where blobs start
 START_WIDTH_PX = 2.5      # a blob's starting σ in pixels
