@@ -63,8 +63,8 @@ class MultimodalMember(NetModel, BaseSensoryModel):
                  fc_hidden: int = 64, channels: tuple[int, ...] = (32, 16, 8),   # pixel (see pixel.py)
                  precision: float | None = None,         # None: learned λ; else fixed, in output units⁻²
                  epochs: int = 200, batch_size: int = 64, lr: float = 2e-3, patience: int = 15,
-                 weight_decay: float = 0.0, precision_lr: float = 1e-2,
-                 lr_schedule: str = "constant"):   # λ moves ~precision_lr per step
+                 weight_decay: float = 0.0, lr_schedule: str = "constant",
+                 precision_lr: float = 1e-2):   # λ moves ~precision_lr per step
         super().__init__(body, modality, output_shape)
         if decoder not in DECODERS:
             raise ValueError(must_be("decoder", f"one of {DECODERS}", decoder))

@@ -36,7 +36,7 @@ def camera_attrs(robot) -> dict[str, Any]:
     """The cameras' projections a store's ee_pixel rows are checked against (`row_checks`): the robot's own camera
     (camera_name, intrinsics, extrinsics), and each further camera's as camera_views {ee_pixel_<name>: {intrinsics,
     extrinsics}} (none: an empty dict)."""
-    further = [m for m in robot.projections() if m != "ee_pixel"]
+    further = robot.projections()[1:]                          # after the robot's own ee_pixel
     return {"camera_name": robot.camera_name, "intrinsics": robot.intrinsics().tolist(),
             "extrinsics": robot.extrinsics().tolist(),
             "camera_views": {m: {"intrinsics": robot.intrinsics(m).tolist(), "extrinsics": robot.extrinsics(m).tolist()}

@@ -74,7 +74,6 @@ class Robot:
         # ee projection modality → its camera's view: ee_pixel (the robot's own), ee_pixel_<name> (further ones)
         self._views = {pixel_modality(m): fixed_camera(model, self._kin, cam, self.image_size)
                        for m, cam in self.cameras.items()}
-        self._view = self._views[EE_PIXEL]
 
     # ---- pickling (a worker process gets its own copy) ----------------------------------------------------
     def __getstate__(self) -> dict:
@@ -159,7 +158,7 @@ class Robot:
 
     def in_view(self, q) -> np.ndarray:
         """(N, Dq) rad → (N,) bool: the ee lies in front of the camera and projects inside the image."""
-        return self._view.sees(self._fk_and_jacobian(self.check_q(q))[0])
+        return self._views[EE_PIXEL].sees(self._fk_and_jacobian(self.check_q(q))[0])
 
     def project_jacobian(self, xyz, modality: str = EE_PIXEL) -> np.ndarray:
         """(N, 3) m → (N, 2, 3) d px / d m of `project`."""
