@@ -3,7 +3,8 @@
 Rows, per device: a decoder epoch at batch 64 and 512 (a small pixel decoder of planar2's camera; on cuda the
 training loop's device rule makes batch 64 a 512, `models/_nn_device.py`, and the row says so), the levels'
 inference of --trials trials at once (adam+lm, ms per round: wall / the rounds the batch ran), one tracker frame of
---trials streams. Then, on the CPU, the levels' descent (Adam, then LM) before/after its batched checks
+--trials streams, and the levels benchmark of 5 runs × --trials (levels 1–3 and the floor, targets rendered) with its
+runs apart and in one batch (evaluation/levels/run_batch.py). Then, on the CPU, the levels' descent (Adam, then LM) before/after its batched checks
 (aif/descent.py, check_every; d78a013: Adam's, 00ac2f9: LM's): the former descent.py read from git (--before), both
 on the same targets in this run, with the largest belief change.
 
@@ -20,6 +21,7 @@ import subprocess
 import sys
 import time
 import types
+from dataclasses import replace
 
 import numpy as np
 import torch
@@ -30,9 +32,13 @@ from bodyschema.aif.perception_config import LMSettings, PerceptionConfig
 from bodyschema.aif.tracker import Tracker
 from bodyschema.aif.tracker_config import TrackerConfig
 from bodyschema.datagen.body.robot import Robot
+from bodyschema.evaluation.levels.benchmark import LevelsConfig, measure_levels
 from bodyschema.models._nn_device import plan_for
 from bodyschema.models.pixel import PixelDecoder
 from bodyschema.models.scaling import BodySpec
+
+
+LEVEL_RUNS = 5                      # issue 36's target: 5 × 500 levels trials
 
 
 def arguments() -> argparse.Namespace:
@@ -81,6 +87,13 @@ def device_rows(device: str, body, q, images, model, trials: int) -> None:
     tracker.step(frame, dt=1 / 30)
     t, _ = timed(lambda: tracker.step(frame, dt=1 / 30))
     print(f"    {device}: tracker frame, {trials} streams: {t * 1e3:.1f} ms")
+    for per_batch in (1, LEVEL_RUNS):                                       # the runs apart, then in one batch
+        config = LevelsConfig(trials=trials, runs=LEVEL_RUNS, multistart=0, run_batch=per_batch, device=device,
+                              mlflow=False, plots=False, progress=False,
+                              perception=replace(LevelsConfig().perception, record=False))
+        t, _ = timed(lambda c=config: measure_levels(c, [model]))
+        print(f"    {device}: levels benchmark, {LEVEL_RUNS} × {trials} trials, levels 1–3 + floor, {per_batch} "
+              f"run(s) per batch: {t:.1f} s")
     model.to("cpu")
 
 

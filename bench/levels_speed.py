@@ -32,7 +32,7 @@ from bodyschema.evaluation.levels.benchmark import (
     LevelsConfig,
     evaluate_level,
     measure_levels,
-    measure_run,
+    measure_runs,
 )
 from bodyschema.evaluation.levels.targets import make_targets
 
@@ -73,8 +73,8 @@ def protocols(config, models, encoder) -> None:
     before = former_protocol(config, perception, robot, targets, encoder)
     t_before = time.perf_counter() - start
     start = time.perf_counter()
-    after = measure_run(replace(config, perception=replace(config.perception, record=False)), models, encoder, 0,
-                        robot)[0]
+    after = measure_runs(replace(config, perception=replace(config.perception, record=False)), models, encoder, (0,),
+                         robot)[0][0]
     t_after = time.perf_counter() - start
     print(f"[1] protocol, {config.trials} trials, run 0: before {t_before:.1f} s, after {t_after:.1f} s "
           f"(incl. rendering), after/before {t_after / t_before:.2f}")

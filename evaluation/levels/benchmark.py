@@ -2,9 +2,9 @@
 
 For every run (seeded, held-out targets: targets.py) and level, all trials are inferred in one batch by
 `aif.Perception` over the given models; level 3 is also run with multi-start (aif/multistart.py), and with an image
-encoder every level also starts from its guess ("+enc" rows: see evaluate_level). A run infers from each start once
-(the levels' own and the guess, which the "+enc" rows share); runs are independent and may go to worker processes
-(`workers`, pool.py). Metrics per
+encoder every level also starts from its guess ("+enc" rows: see evaluate_runs). A run infers from each start once
+(the levels' own and the guess, which the "+enc" rows share); runs are independent, several go into one batch where
+that pays (`run_batch`, run_batch.py) and batches may go to worker processes (`workers`, pool.py). Metrics per
 level and run: joint error (deg, per joint and mean), end-effector error (mm, simulator FK at the belief),
 image MSE (with an image model), success rate (mean |joint error| < success_deg), steps, convergence,
 divergence and wall time. Every run also infers its targets from their true poses: the "floor" row (floor.py),
@@ -40,11 +40,12 @@ from bodyschema.evaluation.core.runs import new_run
 from bodyschema.evaluation.core.seeds import eval_rng
 from bodyschema.evaluation.core.specs import load_robot, models_field, on_device, resolve_encoder, resolve_models
 from bodyschema.evaluation.levels import report as level_report
-from bodyschema.evaluation.levels.floor import FLOOR_LABEL, UNOBSERVABLE_DEG, add_gaps, evaluate_floor
+from bodyschema.evaluation.levels.floor import FLOOR_LABEL, UNOBSERVABLE_DEG, add_gaps, evaluate_floor_runs
 from bodyschema.evaluation.levels.plain import PLAIN_LABEL, PLAIN_STEPS, PlainPixelAIF
 from bodyschema.evaluation.levels.pool import map_runs
 from bodyschema.evaluation.levels.recorded import RecordedTargets, plain_verdict
-from bodyschema.evaluation.levels.scoring import observations, score
+from bodyschema.evaluation.levels.run_batch import RunBatch, chunks, runs_per_batch
+from bodyschema.evaluation.levels.scoring import observations, score_runs
 from bodyschema.evaluation.levels.targets import initial_beliefs, make_targets
 
 DEFAULT_MODELS = ("analytic:planar2:ee_xyz",)
@@ -81,6 +82,7 @@ class LevelsConfig(PerceptionRunConfig):
     targets: Path | None = None        # a store (e.g. imported): score its recorded frames instead of rendering
     plain_steps: int = PLAIN_STEPS     # --targets with an image model: Euler steps of the plain Pixel-AIF row (0: off)
     workers: int = 1                   # processes the runs go to, torch threads split among them (2–3 on 2 cores)
+    run_batch: int = 0                 # runs inferred in one batch; 0: all of a worker's, 1 for image models on CPU
     floor: bool = True                 # the "floor" row: perception started at the true pose, per joint (floor.py);
                                        # one inference per run from the minimum's basin, cheap for every model
     unobservable_deg: float = UNOBSERVABLE_DEG   # a joint whose floor is above this: "not observable" in summary.md
@@ -111,26 +113,41 @@ class LevelsSummary:
 def evaluate_level(perception: Perception, robot, targets, level: int, rng: np.random.Generator,
                    success_deg: float = 1.0, multistart: int = 0, screen_steps: int = 20, keep: int = 2,
                    encoder=None, shared: dict | None = None):
-    """Infer every target from its level-`level` belief; returns (metrics row, per-trial arrays, result).
+    """Infer every target of one run from its level-`level` belief; returns (metrics row, per-trial arrays, result).
+    evaluate_runs with a batch of this one run."""
+    (row, trial, result), = evaluate_runs(perception, robot, RunBatch.of((0,), (targets,)), level, (rng,),
+                                         success_deg, multistart, screen_steps, keep, encoder, shared)
+    return row, trial, result
+
+
+def evaluate_runs(perception: Perception, robot, batch: RunBatch, level: int, rngs: Sequence[np.random.Generator],
+                  success_deg: float = 1.0, multistart: int = 0, screen_steps: int = 20, keep: int = 2,
+                  encoder=None, shared: dict | None = None) -> list[tuple[dict, dict, object]]:
+    """Infer every target of a batch of runs from its level-`level` belief, each run's drawn from its own rng, in
+    one batch; returns per run (metrics row, per-trial arrays, result). The row's evaluations per trial and wall
+    time are the batch's, shared by trials.
 
     encoder: an image encoder; its estimate from the target images is a start. Level 3 (the belief knows nothing
     of the pose): the start, the level's own one becoming the second multi-start seed. Levels 1–2 (the belief is
     near the pose): a second start beside the level's own; both run to convergence and the lower F wins.
-    shared: one dict for the calls of one run (same targets, each level's rng drawn afresh from the same seed): the
-    encoder's guess and the inference from each start are computed once and reused by every row that starts there
-    ("1" and "1+enc" share the level's start, every "+enc" row the guess's). A row's evaluations and wall time are
-    those of the inferences its result needed, reused or not."""
+    shared: one dict for the calls of one batch (same targets, each level's rngs drawn afresh from the same seeds):
+    the encoder's guess and the inference from each start are computed once and reused by every row that starts
+    there ("1" and "1+enc" share the level's start, every "+enc" row the guess's). A row's evaluations and wall time
+    are those of the inferences its result needed, reused or not."""
     shared = {} if shared is None else shared
+    targets = batch.targets
     obs = observations(perception, targets)
-    mu0 = initial_beliefs(level, targets.q, robot.sampling_ranges, rng)   # (N, Dq) rad
+    parts = [batch.part(i) for i in range(len(batch.runs))]
+    mu0s = [initial_beliefs(level, p.q, robot.sampling_ranges, rng) for p, rng in zip(parts, rngs)]
+    mu0 = np.concatenate(mu0s)                                                    # (N, Dq) rad
     label = str(level) + ("+enc" if encoder is not None else "") + ("+ms" if multistart else "")
     guess = None if encoder is None else _encoder_start(shared, encoder, robot, targets)
     if multistart:
         start = time.perf_counter()
         seeds = [mu0] if guess is None else [guess, mu0]
-        extra = uniform(rng, robot.sampling_ranges, len(mu0) * max(multistart - len(seeds), 0))
-        starts = np.concatenate([s[:, None] for s in seeds] + [extra.reshape(len(mu0), -1, mu0.shape[1])],
-                                axis=1)[:, :multistart]                    # (N, S, Dq) rad
+        extra = np.concatenate([uniform(rng, robot.sampling_ranges, len(m) * max(multistart - len(seeds), 0))
+                                .reshape(len(m), -1, mu0.shape[1]) for m, rng in zip(mu0s, rngs)])
+        starts = np.concatenate([s[:, None] for s in seeds] + [extra], axis=1)[:, :multistart]   # (N, S, Dq) rad
         ms = infer_multistart(perception, obs, torch.from_numpy(starts), screen_steps, keep)
         result, evaluations, wall = ms.result, ms.evaluations, time.perf_counter() - start
     else:
@@ -139,11 +156,11 @@ def evaluate_level(perception: Perception, robot, targets, level: int, rng: np.r
             runs.append(_inferred(shared, "encoder", perception, obs, guess))
         result = runs[0][0] if len(runs) == 1 else lowest_free_energy([r for r, _ in runs])[0]
         evaluations, wall = result.evaluations, sum(w for _, w in runs)
-    return (*score(perception.models, robot, targets, label, result, evaluations, wall, success_deg), result)
+    return score_runs(perception.models, robot, batch, label, result, evaluations, wall, success_deg)
 
 
 def _encoder_start(shared: dict, encoder, robot, targets) -> np.ndarray:
-    """The encoder's guess from the target images, clipped to the sampling box; once per run. # (N, Dq) rad"""
+    """The encoder's guess from the target images, clipped to the sampling box; once per batch. # (N, Dq) rad"""
     if "guess" not in shared:
         start = time.perf_counter()
         low, high = robot.sampling_ranges.T
@@ -153,7 +170,7 @@ def _encoder_start(shared: dict, encoder, robot, targets) -> np.ndarray:
 
 
 def _inferred(shared: dict, key, perception: Perception, obs, mu0: np.ndarray):
-    """(result, wall s) of inferring from mu0, the start named `key` in this run; once per run and key."""
+    """(result, wall s) of inferring from mu0, the start named `key` in this batch; once per batch and key."""
     if key not in shared:
         start = time.perf_counter()
         result = perception.infer(obs, torch.from_numpy(mu0))
@@ -190,15 +207,21 @@ def measure_levels(config: LevelsConfig, models: Sequence) -> tuple[LevelsSummar
     encoder = resolve_encoder(config.encoder, robot, config.tracking_uri)
     on_device(models + ([encoder] if encoder else []), config.device)
     workers = min(config.workers, config.runs)
-    done = (map_runs(measure_run, config, models, encoder, workers) if workers > 1 else
-            (measure_run(config, models, encoder, run, robot, recorded) for run in range(config.runs)))
+    batches = chunks(config.runs, workers, runs_per_batch(config.run_batch, models, encoder, config.device))
+    _log.info("levels: %d runs in %d batch(es) of %s runs over %d process(es)", config.runs, len(batches),
+              "/".join(str(len(b)) for b in batches), workers)
+    done = (map_runs(measure_runs, config, models, encoder, batches, workers) if workers > 1 else
+            (measure_runs(config, models, encoder, runs, robot, recorded) for runs in batches))
     rows, per_trial, curves = [], {}, {}
-    for run_rows, run_trials, run_curves in tqdm(done, desc="levels runs", total=config.runs,
-                                                 disable=not config.progress or config.runs < 2):
-        rows += run_rows
-        for label, errors in run_trials:
-            per_trial.setdefault(label, []).append(errors)
-        curves = curves or run_curves
+    bar = tqdm(desc="levels runs", total=config.runs, disable=not config.progress or config.runs < 2)
+    for batch in done:
+        for run_rows, run_trials, run_curves in batch:
+            rows += run_rows
+            for label, errors in run_trials:
+                per_trial.setdefault(label, []).append(errors)
+            curves = curves or run_curves
+        bar.update(len(batch))
+    bar.close()
     floor_rows = [r for r in rows if r["level"] == FLOOR_LABEL]
     rows = [r for r in rows if r["level"] != FLOOR_LABEL]
     summary = LevelsSummary(rows, level_report.aggregate(rows), {k: np.concatenate(v) for k, v in per_trial.items()},
@@ -215,44 +238,54 @@ def _setting(config: LevelsConfig, models: Sequence):
     return (load_robot(models, config.image_size) if recorded is None else recorded.body), recorded
 
 
-def measure_run(config: LevelsConfig, models: Sequence, encoder, run: int, robot=None, recorded=None):
-    """Every level row of run `run`, the floor's first: (rows, [(level label, (N,) mean error deg)], F(t) curves if
-    run 0). Each start is inferred once (evaluate_level's `shared`); only run 0 records trajectories (the curves plot
-    run 0)."""
+def measure_runs(config: LevelsConfig, models: Sequence, encoder, runs: Sequence[int], robot=None, recorded=None):
+    """Every level row of the given runs, inferred in one batch (run_batch.py): per run (rows, the floor's first;
+    [(level label, (N,) mean error deg)]; F(t) curves if run 0). Each start is inferred once (evaluate_runs'
+    `shared`); trajectories are recorded only in the batch holding run 0 (the curves plot run 0)."""
     if robot is None:
         robot, recorded = _setting(config, models)
-    perception = Perception(models, replace(config.perception, record=config.perception.record and run == 0))
-    noise_rng = eval_rng(config.seed, run, "noise")
-    has_image = any(is_image(m.modality) for m in models) or encoder is not None
-    targets = make_targets(robot, config.trials, eval_rng(config.seed, run, "targets"), has_image,
-                           dict(config.noise), noise_rng) if recorded is None else \
-        recorded.run(run, config.trials, dict(config.noise), noise_rng)
-    rows, per_trial, curves, shared = [], [], {}, {}
+    perception = Perception(models, replace(config.perception, record=config.perception.record and 0 in runs))
+    batch = RunBatch.of(runs, [_targets(config, models, encoder, run, robot, recorded) for run in runs])
+    out = [([], [], {}) for _ in runs]
+    shared = {}
     jobs = [(level, ms, enc) for level in config.levels for enc in ((False, True) if encoder else (False,))
             for ms in ((0, config.multistart) if level == 3 and config.multistart else (0,))]
     for level, ms, enc in jobs:
-        rng = eval_rng(config.seed, run, "beliefs", level)                 # same μ0 with and without multi-start
+        rngs = [eval_rng(config.seed, run, "beliefs", level) for run in runs]   # same μ0 with and without ms
         start = time.perf_counter()
-        row, trial, result = evaluate_level(perception, robot, targets, level, rng, config.success_deg, ms,
-                                            config.screen_steps, config.keep, encoder if enc else None, shared)
-        _log.debug("run %d level %s%s%s: %d trials, %.2f s", run, level, f" multistart {ms}" if ms else "",
-                   " +encoder" if enc else "", config.trials, time.perf_counter() - start)
-        rows.append({"run": run, **row})
-        per_trial.append((row["level"], trial["mean_err_deg"]))
-        if result.trajectory is not None and not ms:                       # ms: refinement only
-            curves[row["level"]] = result.trajectory["F"].numpy()          # (T, N)
+        scored = evaluate_runs(perception, robot, batch, level, rngs, config.success_deg, ms, config.screen_steps,
+                               config.keep, encoder if enc else None, shared)
+        _log.debug("runs %s level %s%s%s: %d trials, %.2f s", list(runs), level, f" multistart {ms}" if ms else "",
+                   " +encoder" if enc else "", len(batch.targets.q), time.perf_counter() - start)
+        for (rows, per_trial, curves), run, (row, trial, result) in zip(out, runs, scored):
+            rows.append({"run": run, **row})
+            per_trial.append((row["level"], trial["mean_err_deg"]))
+            if result.trajectory is not None and not ms:                   # ms: refinement only
+                curves[row["level"]] = result.trajectory["F"].numpy()      # (T, N)
         if recorded is not None and not ms and not enc and config.plain_steps and \
                 any(is_image(m.modality) for m in models):               # the reference row, same frames and μ0
-            plain, trial, _ = evaluate_level(PlainPixelAIF(models, level, config.plain_steps), robot, targets,
-                                             level, eval_rng(config.seed, run, "beliefs", level), config.success_deg)
-            rows.append({"run": run, **plain, "level": f"{level} {PLAIN_LABEL}"})
-            per_trial.append((rows[-1]["level"], trial["mean_err_deg"]))
+            plain = evaluate_runs(PlainPixelAIF(models, level, config.plain_steps), robot, batch, level,
+                                  [eval_rng(config.seed, run, "beliefs", level) for run in runs], config.success_deg)
+            for (rows, per_trial, _), run, (row, trial, _) in zip(out, runs, plain):
+                rows.append({"run": run, **row, "level": f"{level} {PLAIN_LABEL}"})
+                per_trial.append((rows[-1]["level"], trial["mean_err_deg"]))
     if config.floor:                                                       # the same targets, started at the truth
-        floor, trial = evaluate_floor(perception, robot, targets, config.success_deg)
-        add_gaps(rows, floor)
-        rows.insert(0, {"run": run, **floor})
-        per_trial.insert(0, (FLOOR_LABEL, trial["mean_err_deg"]))
-    return rows, per_trial, curves
+        floors = evaluate_floor_runs(perception, robot, batch, config.success_deg)
+        for (rows, per_trial, _), run, (floor, trial, _) in zip(out, runs, floors):
+            add_gaps(rows, floor)
+            rows.insert(0, {"run": run, **floor})
+            per_trial.insert(0, (FLOOR_LABEL, trial["mean_err_deg"]))
+    return out
+
+
+def _targets(config: LevelsConfig, models: Sequence, encoder, run: int, robot, recorded):
+    """Run `run`'s targets: simulated (seeded by the run) or the store's frames of that run."""
+    noise_rng = eval_rng(config.seed, run, "noise")
+    if recorded is not None:
+        return recorded.run(run, config.trials, dict(config.noise), noise_rng)
+    has_image = any(is_image(m.modality) for m in models) or encoder is not None
+    return make_targets(robot, config.trials, eval_rng(config.seed, run, "targets"), has_image, dict(config.noise),
+                        noise_rng)
 
 
 def noise_sweep(config: PerceptionRunConfig, modality: str, sigmas: Sequence[float], level: int = 2,

@@ -23,7 +23,8 @@ from collections.abc import Mapping, Sequence
 import torch
 
 from bodyschema.evaluation.core.tables import markdown_table
-from bodyschema.evaluation.levels.scoring import observations, score
+from bodyschema.evaluation.levels.run_batch import RunBatch
+from bodyschema.evaluation.levels.scoring import observations, score_runs
 
 FLOOR_LABEL = "floor"                  # the row's label in the level column
 UNOBSERVABLE_DEG = 2.0                 # deg; a joint whose floor is above this is flagged (Pixel-AIF's ≤ 2° criterion)
@@ -31,12 +32,12 @@ GAP = "gap_to_floor_deg"               # a level row's mean joint error minus it
 JOINT = "joint_err_deg/"               # the per-joint columns' prefix
 
 
-def evaluate_floor(perception, robot, targets, success_deg: float = 1.0):
-    """Infer every target from its true pose; returns (metrics row labelled "floor", per-trial arrays)."""
+def evaluate_floor_runs(perception, robot, batch: RunBatch, success_deg: float = 1.0):
+    """The floor of every run of a batch, inferred in one batch: per run (row, per-trial arrays, result)."""
     start = time.perf_counter()
-    result = perception.infer(observations(perception, targets), torch.from_numpy(targets.q))   # (N, Dq) rad start
-    return score(perception.models, robot, targets, FLOOR_LABEL, result, result.evaluations,
-                 time.perf_counter() - start, success_deg)
+    result = perception.infer(observations(perception, batch.targets), torch.from_numpy(batch.targets.q))
+    return score_runs(perception.models, robot, batch, FLOOR_LABEL, result, result.evaluations,
+                      time.perf_counter() - start, success_deg)
 
 
 def add_gaps(rows: Sequence[dict], floor: Mapping) -> None:

@@ -1,9 +1,10 @@
-"""The runs of a levels benchmark in worker processes (`--workers N`).
+"""The runs of a levels benchmark in worker processes (`--workers N`), a batch of runs (run_batch.py) at a time.
 
 A run's trials form one batch whose updates are small convolutions or kinematics: torch's intra-op threads gain
 little on them and lose much on a loaded machine, so on several cores the runs go to processes of their own, the
 torch threads split among them. Runs are independent (targets and beliefs seeded by the run's index) and the work of
-a run is the same wherever it runs, so the rows do not depend on the number of workers. Workers are spawned (no fork
+a run is the same wherever it runs, so the rows do not depend on the number of workers beyond the rounding of the
+batches they cut (run_batch.py: none with one run per batch, ~1e-10 rad for float64 models). Workers are spawned (no fork
 of a process holding torch threads or a GL context) and build their robot once; models travel pickled, and a worker
 checks its copies' predictions against the originals' before its first run (a model whose state does not survive
 pickling would otherwise score wrong rows).
@@ -22,13 +23,14 @@ from bodyschema.errors import must_be
 _WORKER: dict = {}                   # per worker process: the run function and its fixed arguments
 
 
-def map_runs(measure: Callable, config, models: Sequence, encoder, workers: int) -> Iterator:
-    """measure(config, models, encoder, run) for run in range(config.runs) over `workers` processes, in run order."""
+def map_runs(measure: Callable, config, models: Sequence, encoder, batches: Sequence[tuple[int, ...]],
+             workers: int) -> Iterator:
+    """measure(config, models, encoder, runs) for each batch of runs over `workers` processes, in order."""
     threads = max(1, torch.get_num_threads() // workers)
     probe = _probe(models)
     with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"), initializer=_start,
                              initargs=(threads, measure, config, list(models), encoder, probe)) as pool:
-        yield from pool.map(_run, range(config.runs))
+        yield from pool.map(_run, batches)
 
 
 def _probe(models: Sequence) -> tuple[torch.Tensor, list[torch.Tensor]]:
@@ -43,7 +45,7 @@ def _start(threads: int, measure: Callable, config, models: list, encoder, probe
     _WORKER.update(measure=measure, args=(config, models, encoder), probe=probe)
 
 
-def _run(run: int):
+def _run(runs: tuple[int, ...]):
     probe = _WORKER.pop("probe", None)
     if probe is not None:                                                  # the first run of this worker
         models = _WORKER["args"][1]
@@ -52,4 +54,4 @@ def _run(run: int):
                 raise ValueError(must_be("models", "the same after pickling (a worker process gets a copy)",
                                          f"{getattr(m, 'kind', type(m).__name__)}:{m.modality} predicting "
                                          f"{float((got - want).abs().max()):.3g} off", "Run with --workers 1."))
-    return _WORKER["measure"](*_WORKER["args"], run)
+    return _WORKER["measure"](*_WORKER["args"], runs)

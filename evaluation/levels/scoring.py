@@ -8,6 +8,7 @@ import numpy as np
 import torch
 
 from bodyschema.base.modalities import is_image
+from bodyschema.evaluation.levels.run_batch import RunBatch, split_result
 
 
 def score(models, robot, targets, label: str, result, evaluations: int, wall: float, success_deg: float):
@@ -31,6 +32,19 @@ def score(models, robot, targets, label: str, result, evaluations: int, wall: fl
             pred = image.predict(result.mu.to(torch.float32)).double()
         row["image_mse"] = float((pred - torch.from_numpy(targets.observations[image.modality])).pow(2).mean())
     return row, {"mean_err_deg": mean_err, "ee_err_mm": ee_mm}
+
+
+def score_runs(models, robot, batch: RunBatch, label: str, result, evaluations: float, wall: float,
+               success_deg: float) -> list[tuple[dict, dict, object]]:
+    """Each run's (row, per-trial arrays, result) from a batched result: its trials, and its share by trials of the
+    batch's evaluations and wall time."""
+    out, total = [], len(batch.targets.q)
+    for i, rows in enumerate(batch.slices()):
+        share = (rows.stop - rows.start) / total
+        part = split_result(result, rows)
+        out.append((*score(models, robot, batch.part(i), label, part, evaluations * share, wall * share,
+                           success_deg), part))
+    return out
 
 
 def broken(perception) -> set[str]:
