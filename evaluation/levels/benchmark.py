@@ -208,8 +208,8 @@ def measure_levels(config: LevelsConfig, models: Sequence) -> tuple[LevelsSummar
     on_device(models + ([encoder] if encoder else []), config.device)
     workers = min(config.workers, config.runs)
     batches = chunks(config.runs, workers, runs_per_batch(config.run_batch, models, encoder, config.device))
-    _log.info("levels: %d runs in %d batch(es) of %s runs over %d process(es)", config.runs, len(batches),
-              "/".join(str(len(b)) for b in batches), workers)
+    _log.debug("levels: %d runs in %d batch(es) of %s runs over %d process(es)", config.runs, len(batches),
+               "/".join(str(len(b)) for b in batches), workers)
     done = (map_runs(measure_runs, config, models, encoder, batches, workers) if workers > 1 else
             (measure_runs(config, models, encoder, runs, robot, recorded) for runs in batches))
     rows, per_trial, curves = [], {}, {}
