@@ -4,9 +4,9 @@ Rows, per device: a decoder epoch at batch 64 and 512 (a small pixel decoder of 
 training loop's device rule makes batch 64 a 512, `models/_nn_device.py`, and the row says so), the levels'
 inference of --trials trials at once (adam+lm, ms per round: wall / the rounds the batch ran), one tracker frame of
 --trials streams, and the levels benchmark of 5 runs × --trials (levels 1–3 and the floor, targets rendered) with its
-runs apart and in one batch (evaluation/levels/run_batch.py). Then, on the CPU, the levels' descent (Adam, then LM) before/after its batched checks
-(aif/descent.py, check_every; d78a013: Adam's, 00ac2f9: LM's): the former descent.py read from git (--before), both
-on the same targets in this run, with the largest belief change.
+runs apart and in one batch (evaluation/levels/run_batch.py). Then, on the CPU, the levels' descent (Adam, then LM)
+before/after its batched checks (aif/descent.py, check_every; d78a013: Adam's, 00ac2f9: LM's): the former
+descent.py read from git (--before), both on the same targets in this run, with the largest belief change.
 
     MUJOCO_GL=egl OMP_NUM_THREADS=1 .venv/bin/python bench/gpu.py [--trials 500] [--before 00ac2f9] [--repeats 3]
 
@@ -36,7 +36,6 @@ from bodyschema.evaluation.levels.benchmark import LevelsConfig, measure_levels
 from bodyschema.models._nn_device import plan_for
 from bodyschema.models.pixel import PixelDecoder
 from bodyschema.models.scaling import BodySpec
-
 
 LEVEL_RUNS = 5                      # issue 36's target: 5 × 500 levels trials
 

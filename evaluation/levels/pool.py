@@ -4,10 +4,10 @@ A run's trials form one batch whose updates are small convolutions or kinematics
 little on them and lose much on a loaded machine, so on several cores the runs go to processes of their own, the
 torch threads split among them. Runs are independent (targets and beliefs seeded by the run's index) and the work of
 a run is the same wherever it runs, so the rows do not depend on the number of workers beyond the rounding of the
-batches they cut (run_batch.py: none with one run per batch, ~1e-10 rad for float64 models). Workers are spawned (no fork
-of a process holding torch threads or a GL context) and build their robot once; models travel pickled, and a worker
-checks its copies' predictions against the originals' before its first run (a model whose state does not survive
-pickling would otherwise score wrong rows).
+batches they cut (run_batch.py: none with one run per batch, ~1e-10 rad for float64 models). Workers are spawned
+(no fork of a process holding torch threads or a GL context) and build their robot once; models travel pickled, and
+a worker checks its copies' predictions against the originals' before its first run (a model whose state does not
+survive pickling would otherwise score wrong rows).
 """
 
 from __future__ import annotations
