@@ -22,7 +22,7 @@ from bodyschema.errors import must_be
 
 # Integer hyper-parameters that a fit refuses at 0 (the minibatch loop's TrainSettings, the MDN's mixture): refused
 # here already, when the command is parsed, not after the dataset has been loaded.
-COUNTS = ("epochs", "batch_size", "patience", "n_components")
+COUNTS = ("epochs", "batch_size", "patience", "n_components", "pool")
 
 
 @dataclass(frozen=True)
@@ -136,11 +136,12 @@ class MultimodalConfig(ModelConfig):
 @dataclass(frozen=True)
 class EncoderConfig(ModelConfig):
     kind: ClassVar[str] = "encoder"
+    pool: int | None = None  # average-pool the image by this factor first; None: to at most 80 px a side
     channels: tuple[int, ...] | None = None  # stride-2 convolutions; None: 16, 32, 64, + 64 while the map is > 10 px
     fc_hidden: int = 128  # width of the fully connected head
     epochs: int = 100  # at most this many passes over the training set
     batch_size: int = 64  # images per gradient step
-    lr: float | None = None  # Adam learning rate; None: 2e-3 up to 80 px a side, 5e-4 above
+    lr: float | None = None  # Adam learning rate; None: 2e-3 up to 80 px a side (pooled), 5e-4 above
     patience: int = 10  # stop after this many epochs without a better validation loss
     weight_decay: float = 0.0  # Adam's L2 penalty
     lr_schedule: Literal["constant", "cosine", "wsd"] = "constant"  # cosine: to 0 over epochs; wsd: in the last 20 %
