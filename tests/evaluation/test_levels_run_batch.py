@@ -71,6 +71,8 @@ def test_the_rule_keeps_image_models_on_the_cpu_one_run_per_batch(nao_xyz, tiny_
     assert runs_per_batch(2, [tiny_decoder], None, "cpu") == 2           # the user's setting wins
 
 
-def test_a_negative_run_batch_is_the_house_error():
-    with pytest.raises(ValueError, match=r"run_batch must be a finite number ≥ 0. Got -1"):
+def test_a_run_batch_out_of_its_bounds_is_the_house_error():
+    with pytest.raises(ValueError, match=r"run_batch must be at least 0. Got -1"):
         LevelsConfig(run_batch=-1)
+    with pytest.raises(ValueError, match=r"run_batch must be at most 100. Got 101. Runs inferred in one batch"):
+        LevelsConfig(run_batch=101)
