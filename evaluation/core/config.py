@@ -60,8 +60,8 @@ LIMITS = {
     "recovery_frames": Limit(1, 10_000, "Frames a lost track may take to count as recovered (default 3)."),
     "restart_starts": Limit(1, 64, f"Starts multiply the batch; {ONE_BATCH.lower()} (default 8)."),
     "workers": Limit(1, 64, "Each worker process holds the models and one run's batch (default 1; 2–3 on 2 cores)."),
-    "run_batch": Limit(0, 100, "Runs inferred in one batch, at most --runs (default 0: all of a worker's, one for image "
-                       "models on the CPU)."),
+    "run_batch": Limit(0, 100, "Runs inferred in one batch, at most --runs (default 0: all of a worker's, one for "
+                       "image models on the CPU)."),
 }
 # Integers that are no counts of work, each bounded by a check of its own: a value from a list (order, levels, level),
 # the robot's image size limits (image_size), max_steps (patience: steps without progress), ≥ 0 (seed).
