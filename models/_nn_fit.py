@@ -247,15 +247,23 @@ def train(module: nn.Module, loss_fn: Callable[..., torch.Tensor], data: tuple[t
                      "and kept epoch %d's weights (%s loss %.4g)", desc, diverged + 1, state["best_epoch"] + 1,
                      score_name, state["best"])
     else:
-        _log.info("%s: %s; kept epoch %d's weights (%s loss %.4g)", desc,
-                  f"stopped after {state['epoch'] + 1} of at most {settings.epochs} epochs, the {score_name} loss "
-                  f"not better for {settings.patience}" if stopped else
-                  f"ran all {settings.epochs} epochs (the cap), the last better {score_name} loss "
-                  f"{state['bad']} before the end", state["best_epoch"] + 1, score_name, state["best"])
+        _log.info("%s: %s; kept epoch %d's weights (%s loss %.4g)", desc, _ending(state, settings, stopped, score_name),
+                  state["best_epoch"] + 1, score_name, state["best"])
     module.load_state_dict(state["best_weights"])
     module.eval().to("cpu")
     return {"best_loss": state["best"], "best_epoch": state["best_epoch"], "epochs_run": state["epoch"] + 1,
             "stopped_early": stopped, "diverged_epoch": diverged}
+
+
+def _ending(state: dict, settings: TrainSettings, stopped: bool, score_name: str) -> str:
+    """How the fit ended, in words: stopped early, or ran to the cap still improving (then more epochs may help)."""
+    if stopped:
+        return (f"stopped after {state['epoch'] + 1} of at most {settings.epochs} epochs, the {score_name} loss not "
+                f"better for {settings.patience}")
+    if state["bad"] == 0:
+        return f"ran all {settings.epochs} epochs (the cap), the last one the best: more --epochs may lower the loss"
+    return (f"ran all {settings.epochs} epochs (the cap), the {score_name} loss last better {state['bad']} epochs "
+            f"before the end")
 
 
 @torch.no_grad()

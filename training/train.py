@@ -96,6 +96,8 @@ class TrainResult:
                 "  → now @champion" if r.champion else
                 "  (champion unchanged: not better, or the champion was scored on other validation data)"))
         scores = {k: v for k, v in self.metrics.items() if "val_" in k and not k.startswith("fit_")}
+        if "val_loss" in scores and "best_loss" in self.metrics:    # the kept weights' epoch, not the last one's
+            scores["val_loss"] = self.metrics["best_loss"]
         lines.append("held-out: " + ", ".join(f"{k}={v:.4g}{self._unit(k)}" for k, v in sorted(scores.items())))
         lines += [f"plot: {p}" for p in self.plots.values()]
         return "\n".join(lines)

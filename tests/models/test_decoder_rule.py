@@ -55,6 +55,11 @@ def test_the_cap_ends_a_fit_still_improving_and_a_seed_gives_one_model(caplog):
         _, info, seen, _ = _fit(seed=0, patience=5, epochs=3)
     assert not info["stopped_early"] and info["epochs_run"] == len(seen) == 3
     assert "ran all 3 epochs (the cap)" in caplog.text
+    if seen[-1] == min(seen):                              # still improving at the cap: the user is told to go on
+        assert "the last one the best: more --epochs may lower the loss" in caplog.text
+    else:
+        last_better = len(seen) - 1 - min(range(len(seen)), key=seen.__getitem__)
+        assert f"loss last better {last_better} epochs before the end" in caplog.text
     a, b = _fit(seed=1, patience=5)[0], _fit(seed=1, patience=5)[0]
     assert all(torch.equal(p, q) for p, q in zip(a.state_dict().values(), b.state_dict().values()))
 

@@ -43,6 +43,8 @@ def test_train_prints_each_score_with_its_unit():
     assert "ee_pixel/val_rmse=1.5 px, ee_xyz/val_rmse=0.001 m" in str(multi)
     encoder = TrainResult("r", (), {"val_loss": 0.2019, "val_rmse": 52.41}, units={"": "deg"})
     assert "held-out: val_loss=0.2019, val_rmse=52.41 deg" in str(encoder), "val_loss is the fit's unit-box MSE"
+    stopped = TrainResult("r", (), {"val_loss": 0.1187, "best_loss": 0.09667, "val_rmse": 45.36}, units={"": "deg"})
+    assert "held-out: val_loss=0.09667, val_rmse=45.36 deg" in str(stopped), "the kept epoch's, not the last epoch's"
     from bodyschema.training.model_card import with_unit
     assert [with_unit(k, "deg") for k in ("train_rmse", "train_loss", "fit_seconds", "image/val_rmse")] == \
         [" deg", "", "", " deg"]
