@@ -47,7 +47,7 @@ def _start(threads: int, measure: Callable, config, models: list, encoder, probe
 
 def _run(runs: tuple[int, ...]):
     probe = _WORKER.pop("probe", None)
-    if probe is not None:                                                  # the first run of this worker
+    if probe is not None:                                                  # the first batch of this worker
         models = _WORKER["args"][1]
         for m, want, got in zip(models, probe[1], _probe(models)[1]):
             if not torch.allclose(got, want, rtol=1e-5, atol=1e-6):
