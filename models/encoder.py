@@ -121,9 +121,9 @@ class ImageEncoder(NetHolder, Estimator):
         self.output_shape = (self.latent_dim,)               # per-sample output z, rad
         image_layout(self.image_shape)
         self.pool = pool_for(self.image_shape) if pool is None else pool
-        if not (isinstance(self.pool, int) and self.pool >= 1 and min(pooled(self.image_shape, self.pool)[:2]) >= 1):
+        seen = pooled(self.image_shape, self.pool) if isinstance(self.pool, int) and self.pool >= 1 else (0, 0)
+        if min(seen[:2]) < 1:
             raise ValueError(must_be("pool", f"an int ≥ 1 that leaves pixels of the {self.image_shape} image", pool))
-        seen = pooled(self.image_shape, self.pool)
         channels = channels_for(seen) if channels is None else channels
         if not channels or min(channels) < 1 or fc_hidden < 1:
             raise ValueError(must_be("channels and fc_hidden", "a non-empty tuple of positive ints and > 0",

@@ -44,7 +44,7 @@ from bodyschema.evaluation.levels.floor import FLOOR_LABEL, UNOBSERVABLE_DEG, ad
 from bodyschema.evaluation.levels.plain import PLAIN_LABEL, PLAIN_STEPS, PlainPixelAIF
 from bodyschema.evaluation.levels.pool import map_runs
 from bodyschema.evaluation.levels.recorded import RecordedTargets, plain_verdict
-from bodyschema.evaluation.levels.run_batch import RunBatch, chunks, runs_per_batch
+from bodyschema.evaluation.levels.run_batch import RunBatch, chunks, reads_images, runs_per_batch
 from bodyschema.evaluation.levels.scoring import observations, score_runs
 from bodyschema.evaluation.levels.targets import initial_beliefs, make_targets
 
@@ -115,7 +115,7 @@ def evaluate_level(perception: Perception, robot, targets, level: int, rng: np.r
                    encoder=None, shared: dict | None = None):
     """Infer every target of one run from its level-`level` belief; returns (metrics row, per-trial arrays, result).
     evaluate_runs with a batch of this one run."""
-    (row, trial, result), = evaluate_runs(perception, robot, RunBatch.of((0,), (targets,)), level, (rng,),
+    (row, trial, result), = evaluate_runs(perception, robot, RunBatch.of((targets,)), level, (rng,),
                                          success_deg, multistart, screen_steps, keep, encoder, shared)
     return row, trial, result
 
@@ -137,7 +137,7 @@ def evaluate_runs(perception: Perception, robot, batch: RunBatch, level: int, rn
     shared = {} if shared is None else shared
     targets = batch.targets
     obs = observations(perception, targets)
-    parts = [batch.part(i) for i in range(len(batch.runs))]
+    parts = [batch.part(i) for i in range(len(batch.sizes))]
     mu0s = [initial_beliefs(level, p.q, robot.sampling_ranges, rng) for p, rng in zip(parts, rngs)]
     mu0 = np.concatenate(mu0s)                                                    # (N, Dq) rad
     label = str(level) + ("+enc" if encoder is not None else "") + ("+ms" if multistart else "")
@@ -245,7 +245,7 @@ def measure_runs(config: LevelsConfig, models: Sequence, encoder, runs: Sequence
     if robot is None:
         robot, recorded = _setting(config, models)
     perception = Perception(models, replace(config.perception, record=config.perception.record and 0 in runs))
-    batch = RunBatch.of(runs, [_targets(config, models, encoder, run, robot, recorded) for run in runs])
+    batch = RunBatch.of([_targets(config, models, encoder, run, robot, recorded) for run in runs])
     out = [([], [], {}) for _ in runs]
     shared = {}
     jobs = [(level, ms, enc) for level in config.levels for enc in ((False, True) if encoder else (False,))
@@ -283,9 +283,8 @@ def _targets(config: LevelsConfig, models: Sequence, encoder, run: int, robot, r
     noise_rng = eval_rng(config.seed, run, "noise")
     if recorded is not None:
         return recorded.run(run, config.trials, dict(config.noise), noise_rng)
-    has_image = any(is_image(m.modality) for m in models) or encoder is not None
-    return make_targets(robot, config.trials, eval_rng(config.seed, run, "targets"), has_image, dict(config.noise),
-                        noise_rng)
+    return make_targets(robot, config.trials, eval_rng(config.seed, run, "targets"), reads_images(models, encoder),
+                        dict(config.noise), noise_rng)
 
 
 def noise_sweep(config: PerceptionRunConfig, modality: str, sigmas: Sequence[float], level: int = 2,

@@ -26,15 +26,14 @@ from bodyschema.evaluation.levels.targets import Targets
 
 @dataclass(frozen=True)
 class RunBatch:
-    runs: tuple[int, ...]                  # the runs' indices, in order
-    targets: Targets                       # their targets stacked: (Σ N_r, …)
+    targets: Targets                       # the runs' targets stacked, in run order: (Σ N_r, …)
     sizes: tuple[int, ...]                 # trials per run
 
     @classmethod
-    def of(cls, runs: Sequence[int], parts: Sequence[Targets]) -> RunBatch:
+    def of(cls, parts: Sequence[Targets]) -> RunBatch:
         stacked = Targets(np.concatenate([p.q for p in parts]),
                           {m: np.concatenate([p.observations[m] for p in parts]) for m in parts[0].observations})
-        return cls(tuple(runs), stacked, tuple(len(p.q) for p in parts))
+        return cls(stacked, tuple(len(p.q) for p in parts))
 
     def slices(self) -> list[slice]:
         ends = np.cumsum((0, *self.sizes))
@@ -57,13 +56,17 @@ def split_result(result: PerceptionResult, rows: slice) -> PerceptionResult:
                    evaluations=round(result.evaluations * n / len(result.mu)), trajectory=trajectory)
 
 
+def reads_images(models: Sequence, encoder) -> bool:
+    """Whether a levels run needs the targets' images: an image model, or an image encoder."""
+    return encoder is not None or any(is_image(m.modality) for m in models)
+
+
 def runs_per_batch(setting: int, models: Sequence, encoder, device: str) -> int:
     """How many runs share a batch: `setting` when given (≥ 1), else 0 meaning all of a worker's runs, except one
     for an image model on the CPU (measured slower in a larger batch: module docstring)."""
     if setting > 0:
         return setting
-    image = encoder is not None or any(is_image(m.modality) for m in models)
-    return 1 if image and not device.startswith("cuda") else 0
+    return 1 if reads_images(models, encoder) and not device.startswith("cuda") else 0
 
 
 def chunks(runs: int, workers: int, per_batch: int) -> list[tuple[int, ...]]:

@@ -45,7 +45,7 @@ def test_each_runs_rows_in_one_batch_are_its_rows_alone(tmp_path, nao_xyz):
 
 def test_a_batch_splits_into_its_runs_targets():
     parts = [Targets(np.full((n, 2), float(n)), {"ee_xyz": np.full((n, 3), -float(n))}) for n in (2, 5, 1)]
-    batch = RunBatch.of((4, 5, 6), parts)
+    batch = RunBatch.of(parts)
     assert batch.targets.q.shape == (8, 2) and batch.sizes == (2, 5, 1)
     for i, part in enumerate(parts):
         np.testing.assert_array_equal(batch.part(i).q, part.q)
