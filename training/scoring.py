@@ -8,6 +8,7 @@ before anything is registered. `train` and a sweep trial score with the same fun
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +21,7 @@ from bodyschema.training.data import Dataset, Split, as_float
 from bodyschema.training.registry import METRIC
 
 PREDICT_BATCH = 256       # validation prediction batch: bounded memory for image decoders
+METRIC_NAME_UNSAFE = re.compile(r"[^A-Za-z0-9_.\- ]")     # MLflow refuses other characters in a metric's name
 
 
 def score_and_plot(member, data: Dataset, modality: str, seed: int, out: Path, prefix: str,
@@ -54,7 +56,8 @@ def _score_encoder(encoder, data: Dataset, modality: str, seed: int, out: Path, 
     splits = {"val": data.val, "train": sub}
     pred = {k: np.degrees(encoder.encode(split.xs[modality]).numpy()) for k, split in splits.items()}   # (N, Dz)
     target = {k: np.degrees(split.q) for k, split in splits.items()}
-    scores = {**score(pred["val"], target["val"], "val"), **score(pred["train"], target["train"], "train")}
+    scores = {**score(pred["val"], target["val"], "val"), **score(pred["train"], target["train"], "train"),
+              **per_joint(pred["val"], target["val"], data.body.joint_names)}
     if not math.isfinite(scores[METRIC]):
         raise FloatingPointError(f"{METRIC} is {scores[METRIC]}: the fit diverged; nothing is registered.")
     path = out / "val_joints.png"
@@ -78,6 +81,13 @@ def score(pred: np.ndarray, target: np.ndarray, prefix: str) -> dict[str, float]
     err = (pred.astype(np.float64) - target).reshape(len(target), -1)            # (N, O)
     return {f"{prefix}_rmse": float(np.sqrt(np.mean(err ** 2))),
             f"{prefix}_mean_error": float(np.linalg.norm(err, axis=1).mean())}
+
+
+def per_joint(pred: np.ndarray, target: np.ndarray, names) -> dict[str, float]:
+    """Held-out mean |error| of each joint, in deg (`val_abs_error.<joint>`): which joints an encoder learned, where
+    the Euclidean `val_mean_error` over all joints hides a roll at a guess behind the others. (N, Dz) deg each."""
+    err = np.abs(pred.astype(np.float64) - target).mean(axis=0)
+    return {f"val_abs_error.{METRIC_NAME_UNSAFE.sub('_', name)}": float(e) for name, e in zip(names, err)}
 
 
 def _subset(split: Split, n: int, seed: int) -> Split:

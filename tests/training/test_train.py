@@ -138,6 +138,9 @@ def test_an_image_encoder_is_scored_in_joint_degrees_registered_and_loaded_back(
     assert isinstance(encoder, ImageEncoder) and encoder.image_shape == (16, 16)
     err = np.degrees(encoder.encode(data.val.x).numpy()) - np.degrees(data.val.q)   # (N, 2) deg
     assert np.sqrt(np.mean(err ** 2)) == pytest.approx(result.metrics["val_rmse"], rel=1e-5)
+    for name, e in zip(data.body.joint_names, np.abs(err).mean(axis=0)):   # each joint's mean |error|, printed in deg
+        assert result.metrics[f"val_abs_error.{name}"] == pytest.approx(e, rel=1e-5)
+        assert f"val_abs_error.{name}={result.metrics[f'val_abs_error.{name}']:.4g} deg" in str(result)
     version = _client(workdir).get_model_version(result.registered_name, result.model_version)
     assert float(version.tags["val_rmse"]) == result.metrics["val_rmse"], "the champion is chosen in degrees"
 
@@ -207,3 +210,11 @@ def test_svgp_trains_through_train_and_refuses_mixed_precision(workdir, kin_stor
         train(TrainConfig(model=small, data=kin_store, modality="ee_xyz", progress=False, mixed_precision=True))
     result = train(TrainConfig(model=small, data=kin_store, modality="ee_xyz", progress=False))
     assert result.metrics["val_rmse"] < 0.05                            # m: a 2-link arm, 16 inducing points
+
+
+def test_per_joint_scores_name_every_joint_with_characters_mlflow_accepts():
+    from bodyschema.training.scoring import per_joint
+
+    pred, target = np.array([[1.0, -2.0], [3.0, 2.0]]), np.zeros((2, 2))
+    scores = per_joint(pred, target, ["arm/elbow:1", "wrist roll"])
+    assert scores == {"val_abs_error.arm_elbow_1": 2.0, "val_abs_error.wrist roll": 2.0}
