@@ -103,6 +103,7 @@ class PixelConfig(ModelConfig):
     fc_hidden: int | None = None  # width of the fully connected layer; None: the preset's
     channels: tuple[int, ...] | None = None  # one ×2 upsampling per entry; None: the preset's
     refine: bool | None = None  # a 3×3 conv after each upsampling; None: the preset's
+    loss: Literal["mse", "cross_entropy"] | None = None  # what the fit minimises per pixel; None: the size's
     precision: float | None = None  # fixed Π_x per pixel; None: 1/σ² of the validation residuals
     epochs: int = 100  # at most this many passes over the training set
     batch_size: int = 64  # images per gradient step

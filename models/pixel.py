@@ -8,6 +8,12 @@ finite-difference checks and gradient descent), channels_last for oneDNN, and th
 centre crop of the last stage (any H, W; C = 1 or more). The precision is one fixed number per pixel: a
 hyper-parameter, or 1/σ² with σ² the mean squared residual on the validation set (train set without one).
 
+The fit minimises `loss` per pixel (LOSSES): "cross_entropy" (read on the logits) or "mse" (through the sigmoid).
+Both are minimised by the pixel's mean given the pose; they differ in the gradient a logit gets, σ − x against
+2(σ − x)·σ(1 − σ). Where most of an image is black (a small arm in a frame of its whole reach), the squared error
+pushes every logit far down in the first epochs, σ(1 − σ) vanishes there, and no pose is learned after: one dark
+image for every pose (SO-101 at 64×64, README "Your own robot"). The cross-entropy's gradient does not vanish.
+
 Two named capacities (`size`), each with its Adam step: "lean" (FC 64, channels 32/16/8, lr 2e-3) and
 "pixel_aif" (lr 5e-4: at 2e-3 it can collapse to a black image, see SIZES), the size of Pixel-AIF's
 NAO decoder (FC 4→512→1120 = 16×7×10 at 56×80, transposed convolutions 16→64→16→C, each but the last
@@ -47,6 +53,7 @@ SIZES = {   # name → capacity and its Adam step; an explicit fc_hidden / chann
     # 3 000 images 128×128, 40 epochs: floors 2.5–12° per joint where lean's were 10.8–159° (README)
     "splat": {"points": 128, "lr": 3e-3},
 }
+CONV_LOSS = "mse"      # what a conv size's fit minimises unless told (LOSSES); splat's blobs have no logits: mse
 
 
 def image_layout(output_shape: tuple[int, ...]) -> tuple[int, int, int]:
@@ -80,10 +87,14 @@ class PixelDecoderNet(nn.Module):
         self.up = nn.Sequential(*stages)
 
     def forward(self, u):
+        return self.logits(u).sigmoid()
+
+    def logits(self, u):
+        """The image before its sigmoid: what the cross-entropy loss reads. u (B, Dz) → (B, *output_shape)"""
         y = self.fc(u).reshape(-1, self.c0, self.h0, self.w0)            # (B, C0, h0, w0)
         y = self.up(y)                                                   # (B, C, h0·2^n, w0·2^n)
         top, left = (y.shape[2] - self.h) // 2, (y.shape[3] - self.w) // 2
-        y = y[:, :, top:top + self.h, left:left + self.w].sigmoid()      # (B, C, H, W), centre crop
+        y = y[:, :, top:top + self.h, left:left + self.w]                # (B, C, H, W), centre crop
         y = y.permute(0, 2, 3, 1)                                        # (B, H, W, C): free in channels_last
         return y.reshape(-1, *self.output_shape)
 
@@ -157,6 +168,7 @@ class PixelDecoder(NetModel, BaseSensoryModel):
                  fc_hidden: int | None = None,              # None: the preset's
                  channels: tuple[int, ...] | None = None,   # one ×2 upsampling per entry; None: the preset's
                  refine: bool | None = None,                # 3×3 conv after each upsampling; None: the preset's
+                 loss: str | None = None,                   # what the fit minimises (LOSSES); None: CONV_LOSS
                  precision: float | None = None,            # None: 1/σ² from the validation residuals
                  epochs: int = 100, batch_size: int = 64, lr: float | None = None, patience: int = 10,
                  weight_decay: float = 0.0, lr_schedule: str = "constant"):
@@ -177,6 +189,12 @@ class PixelDecoder(NetModel, BaseSensoryModel):
             raise ValueError(must_be("precision", "> 0 or None (fitted)", precision))
         self.size, self.fc_hidden, self.channels, self.fixed_precision = size, fc_hidden, tuple(channels), precision
         self.refine = bool(preset["refine"] if refine is None else refine)
+        self.loss = ("mse" if size == "splat" else CONV_LOSS) if loss is None else loss
+        if self.loss not in LOSSES or (size == "splat" and self.loss != "mse"):
+            raise ValueError(must_be("loss", "'mse' for size 'splat'" if self.loss in LOSSES else
+                                     f"one of {sorted(LOSSES)}", self.loss,
+                                     "A sum of blobs has no logits to read the cross-entropy on."
+                                     if self.loss in LOSSES else ""))
         lr = preset["lr"] if lr is None else lr                  # None: the preset's
         self.settings = TrainSettings(epochs, batch_size, lr, patience, weight_decay, lr_schedule)
         self.precision_: float | None = None
@@ -194,7 +212,7 @@ class PixelDecoder(NetModel, BaseSensoryModel):
         if self.size == "splat":
             net.start_from(x, gen)
         to_unit = self.body.to_unit
-        self.fit_info_ = train(net, _mse, (to_unit(q), x), self.settings, gen,
+        self.fit_info_ = train(net, LOSSES[self.loss], (to_unit(q), x), self.settings, gen,
                                val=(to_unit(val[0]), val[1]) if val is not None else None,
                                on_epoch=on_epoch, progress=progress, checkpoint=checkpoint, desc="fit pixel",
                                device=device, mixed_precision=mixed_precision)
@@ -236,7 +254,7 @@ class PixelDecoder(NetModel, BaseSensoryModel):
 
     def _config(self):
         return {"size": self.size, "fc_hidden": self.fc_hidden, "channels": list(self.channels),
-                "refine": self.refine, "precision": self.fixed_precision,
+                "refine": self.refine, "loss": self.loss, "precision": self.fixed_precision,
                 "epochs": self.settings.epochs, "batch_size": self.settings.batch_size, "lr": self.settings.lr,
                 "patience": self.settings.patience, "weight_decay": self.settings.weight_decay,
                 "lr_schedule": self.settings.lr_schedule}
@@ -246,7 +264,8 @@ class PixelDecoder(NetModel, BaseSensoryModel):
 
     @classmethod
     def _from_saved(cls, body, modality, output_shape, config, state):
-        model = cls(body, modality, output_shape, **{**config, "channels": tuple(config["channels"])})
+        # saved before `loss` existed: the fit was by squared error (only a fit reads it)
+        model = cls(body, modality, output_shape, **{"loss": "mse", **config, "channels": tuple(config["channels"])})
         model.precision_ = float(state["precision"])
         model._restore_net(lambda: fast_layout(model._factory()), state)
         return model
@@ -255,3 +274,11 @@ class PixelDecoder(NetModel, BaseSensoryModel):
 def _mse(net: nn.Module, u: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
     """Mean squared error per pixel. u (B, Dz), x (B, *out)."""
     return (net(u) - x).pow(2).mean()
+
+
+def _cross_entropy(net: PixelDecoderNet, u: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
+    """Binary cross-entropy per pixel, x in [0, 1] as soft labels, read on the logits. u (B, Dz), x (B, *out)."""
+    return F.binary_cross_entropy_with_logits(net.logits(u), x)
+
+
+LOSSES = {"mse": _mse, "cross_entropy": _cross_entropy}

@@ -203,3 +203,43 @@ def test_one_cameras_batch_runs_without_onednn_to_the_same_values_and_leaves_the
             assert not torch.backends.mkldnn.enabled, "a user's oneDNN off stays off"
     finally:
         torch.backends.mkldnn.enabled = user
+
+
+
+def test_the_loss_is_saved_a_save_without_it_loads_as_mse_and_splat_takes_only_mse(tmp_path):
+    import json
+
+    from bodyschema.models.contract import load_model
+    model = TestPixelDecoder().make_model(seed=0)
+    assert model.loss == "mse" and tiny_decoder(loss="cross_entropy").loss == "cross_entropy"
+    model.save(tmp_path / "m")
+    meta_path = tmp_path / "m" / "meta.json"
+    meta = json.loads(meta_path.read_text())
+    assert meta["config"].pop("loss") == "mse"
+    meta_path.write_text(json.dumps(meta))                      # as saved before `loss` existed
+    z = joint_angles(3, seed=5)
+    loaded = load_model(tmp_path / "m")
+    assert loaded.loss == "mse"
+    torch.testing.assert_close(loaded.predict(z), model.predict(z), rtol=0, atol=0)
+    with pytest.raises(ValueError, match=r"loss must be one of \['cross_entropy', 'mse'\]. Got 'l1'"):
+        tiny_decoder(loss="l1")
+    with pytest.raises(ValueError, match=r"loss must be 'mse' for size 'splat'. Got 'cross_entropy'. A sum of blobs"):
+        tiny_decoder(size="splat", loss="cross_entropy")
+
+
+@pytest.mark.usefixtures("tiny_threads")
+def test_a_small_bright_blob_on_black_is_learned_by_cross_entropy_where_squared_error_goes_dark():
+    """2 % of the pixels bright, the rest black (a small arm in a frame of its whole reach): the squared error through
+    the sigmoid drives every logit down, σ' vanishes and the output is one dark image for every pose (SO-101 at
+    64×64: README); the cross-entropy's gradient on a logit is σ − x, which does not vanish on the blob."""
+    q, q_val = joint_angles(256, seed=0), joint_angles(64, seed=1)
+    shape = (24, 36)
+    x, x_val = blob_images(q, shape, width_px=1.2), blob_images(q_val, shape, width_px=1.2)
+    assert float((x > 0.1).float().mean()) < 0.03
+    found, varies = {}, {}
+    for loss in ("mse", "cross_entropy"):
+        pred = tiny_decoder(shape, loss=loss, epochs=60).fit(q, x, progress=False).predict(q_val.double())
+        found[loss] = float((peak_px(pred) - peak_px(x_val)).norm(dim=1).median())
+        varies[loss] = float(pred.std(dim=0).mean())            # how much the image changes with the pose
+    assert found["cross_entropy"] <= 2.5 and varies["cross_entropy"] > 0.01, (found, varies)
+    assert varies["mse"] < 1e-3 and found["mse"] > 5 * found["cross_entropy"], (found, varies)
