@@ -1,12 +1,12 @@
 """Benchmark: does a decoder size train on a store's images, or stall at the mean image? (issue 33, item 4)
 
 Trains each `--sizes` preset (models/pixel.py SIZES; `size:{'lr': 5e-4}` overrides keywords) on the first `--n`
-training images of one store, validation on its split (seed 0), and prints per epoch the held-out MSE per pixel
-(intensity in [0, 1]), then for the kept weights: that MSE beside the mean training image's (the plateau a
-decoder that ignores the pose sits on), how much the prediction varies with the pose (mean over pixels of the
-std across held-out poses, vs the images' own), the share of the second fully connected layer's units below
--2 (ELU saturated: a gradient under e⁻² of the unit's), the brightest predicted pixel (near 0: the sigmoid
-saturated on a black image, σ' ≈ 0, from which no gradient brings it back), and the pose variation at init.
+training images of one store, validation on its split (seed 0), and prints per epoch the held-out loss per pixel
+(the size's `loss`), then for the kept weights: the held-out MSE (intensity in [0, 1]) beside the mean training
+image's (the plateau a decoder that ignores the pose sits on), how much the prediction varies with the pose
+(mean over pixels of the std across held-out poses, vs the images' own), the share of the second fully connected
+layer's units below -2 (ELU saturated: a gradient under e⁻² of the unit's), the brightest predicted pixel (near 0:
+the sigmoid saturated on a black image, σ' ≈ 0, from which no gradient brings it back), and the pose variation at init.
 Small by default (a shared 2-core machine): `--n 600 --epochs 8`, 64×64 nao_arm ≈ 1 min lean, ≈ 7 min pixel_aif.
 Run: `MUJOCO_GL=egl .venv/bin/bodyschema datagen --robot nao_arm --n 1200 --image-size 64 64 --out /tmp/nao64.zarr`
 then `.venv/bin/python bench/decoder_rule.py --data /tmp/nao64.zarr --sizes lean pixel_aif`.
@@ -59,14 +59,15 @@ def fit_one(spec: str, data, n: int, epochs: int, mean_mse: float) -> None:
 
     def on_epoch(epoch: int, metrics: dict) -> None:
         losses.append(metrics["val_loss"])
-        print(f"  {spec} epoch {epoch + 1}: held-out MSE {metrics['val_loss']:.4g}", flush=True)
+        print(f"  {spec} epoch {epoch + 1}: held-out {model.loss} {metrics['val_loss']:.4g}", flush=True)
 
     model.fit(data.train.q[:n], data.train.x[:n], val=(data.val.q, data.val.x), on_epoch=on_epoch)
     with torch.no_grad():
         saturated = float((model.net_.fc[:3](u_val) < -2).float().mean())
-        brightest = float(model.net_(u_val).max())
+        predicted = model.net_(u_val)
+        brightest, mse = float(predicted.max()), float((predicted - as_float(data.val.x)).pow(2).mean())
     params = sum(p.numel() for p in model.net_.parameters())
-    print(f"{spec}: {params} params, held-out MSE {min(losses):.4g} ({min(losses) / mean_mse:.2f}× the mean "
+    print(f"{spec}: {params} params, held-out MSE {mse:.4g} ({mse / mean_mse:.2f}× the mean "
           f"image's), pose variation {pose_variation(model.net_, u_val):.4f} (at init {at_init:.4f}), fc units "
           f"saturated {saturated:.0%}, brightest predicted pixel {brightest:.3g}, "
           f"{time.perf_counter() - start:.0f} s", flush=True)
