@@ -122,13 +122,16 @@ def tiny_threads():
 
 
 @pytest.mark.usefixtures("tiny_threads")
-def test_training_reduces_loss_and_puts_the_blob_in_place():
+@pytest.mark.parametrize("loss", ["cross_entropy", "mse"])
+def test_training_reduces_loss_and_puts_the_blob_in_place(loss):
     q, q_val = joint_angles(256, seed=0), joint_angles(64, seed=1)
     x_val = blob_images(q_val)
     losses = []
-    model = tiny_decoder(epochs=40).fit(q, blob_images(q), val=(q_val, x_val), progress=False,
-                                        on_epoch=lambda e, m: losses.append(m["val_loss"]))
-    assert losses[-1] < 0.3 * losses[0]
+    model = tiny_decoder(epochs=40, loss=loss).fit(q, blob_images(q), val=(q_val, x_val), progress=False,
+                                                   on_epoch=lambda e, m: losses.append(m["val_loss"]))
+    x = x_val.double().clamp(1e-12, 1 - 1e-12)
+    least = float(-(x * x.log() + (1 - x) * (1 - x).log()).mean()) if loss == "cross_entropy" else 0.0
+    assert losses[-1] - least < 0.3 * (losses[0] - least)      # the cross-entropy's least is the targets' entropy
     pred = model.predict(q_val.double())                                 # (64, 8, 12)
     assert (peak_px(pred) - peak_px(x_val)).norm(dim=1).median() <= 1.5, "blob peak should be within ~1 px"
     mse = (pred - x_val.double()).pow(2).mean()
@@ -206,16 +209,17 @@ def test_one_cameras_batch_runs_without_onednn_to_the_same_values_and_leaves_the
 
 
 
-def test_the_loss_is_saved_a_save_without_it_loads_as_mse_and_splat_takes_only_mse(tmp_path):
+def test_the_loss_defaults_to_cross_entropy_is_saved_a_save_without_it_loads_as_mse_splat_takes_mse(tmp_path):
     import json
 
     from bodyschema.models.contract import load_model
     model = TestPixelDecoder().make_model(seed=0)
-    assert model.loss == "mse" and tiny_decoder(loss="cross_entropy").loss == "cross_entropy"
+    assert model.loss == "cross_entropy" and tiny_decoder(loss="mse").loss == "mse"          # the conv sizes' default
+    assert tiny_decoder(size="splat").loss == "mse"
     model.save(tmp_path / "m")
     meta_path = tmp_path / "m" / "meta.json"
     meta = json.loads(meta_path.read_text())
-    assert meta["config"].pop("loss") == "mse"
+    assert meta["config"].pop("loss") == "cross_entropy"
     meta_path.write_text(json.dumps(meta))                      # as saved before `loss` existed
     z = joint_angles(3, seed=5)
     loaded = load_model(tmp_path / "m")
