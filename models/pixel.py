@@ -47,7 +47,8 @@ SIZES = {   # name → capacity and its Adam step; an explicit fc_hidden / chann
     # lr 5e-4: at lean's 2e-3 its first epoch's steps blow up the unnormalised conv stack (ELU outputs' mean 4, 8, 12
     # after the refines) and the last layer lands at -40 on every pixel: a black image, σ' ≈ e⁻⁴⁰, no gradient back
     # (nao_arm 64×64, 600 images: held-out MSE frozen at 0.0317 from epoch 2, pose variation 0; bench/decoder_rule.py;
-    # at 56×80 too): not the image size, the step size
+    # at 56×80 too): not the image size, the step size. Measured with the squared error, whose gradient carries that σ';
+    # the cross-entropy (CONV_LOSS) does not: not re-measured on this size
     "pixel_aif": {"fc_hidden": 512, "channels": (16, 64, 16), "refine": True, "lr": 5e-4},  # 56×80: 7×10×16 = 1120
     # not a conv stack: K blobs placed by the joints' trig features (models/splat.py); ≤ 7 joints. SO-101 URDF,
     # 3 000 images 128×128, 40 epochs: floors 2.5–12° per joint where lean's were 10.8–159° (README)
