@@ -2,6 +2,7 @@
 
     MUJOCO_GL=egl .venv/bin/python bench/foreign_arms.py [--arms ur5 so_arm ...] [--n 3000] [--epochs 40]
         [--trials 50] [--pixel-size lean|pixel_aif|splat] [--pixel-lr LR] [--pixel-schedule constant|cosine|wsd]
+        [--pixel-loss cross_entropy|mse]
         [--work bench_out/foreign] [--quick]
 
 Per arm, in a folder of its own (its own MLflow store): `robot init` (a file: the visuals it can load, nothing
@@ -106,7 +107,8 @@ def measure(name: str, work: Path, o: argparse.Namespace) -> dict[str, str]:
     minutes["levels gpr"] = s / 60
     gpr_l1 = levels_rows(folder / "levels_gpr")["1"]["joint_err_deg"]
     out, s = bodyschema(["train", "pixel", *train, "--epochs", str(o.epochs), "--size", o.pixel_size,
-                         *(["--lr", str(o.pixel_lr)] if o.pixel_lr else []), "--lr-schedule", o.pixel_schedule], log)
+                         *(["--lr", str(o.pixel_lr)] if o.pixel_lr else []), "--lr-schedule", o.pixel_schedule,
+                         *(["--loss", o.pixel_loss] if o.pixel_loss else [])], log)
     pixel, minutes["train pixel"] = registered(out), s / 60
     out, s = bodyschema(["train", "encoder", *train, "--epochs", str(o.epochs)], log)
     encoder, minutes["train encoder"] = registered(out), s / 60
@@ -138,6 +140,8 @@ def main() -> None:
     parser.add_argument("--pixel-size", default="lean", help="train pixel's --size (models/pixel.py SIZES)")
     parser.add_argument("--pixel-lr", type=float, default=None, help="train pixel's --lr (default: the size's)")
     parser.add_argument("--pixel-schedule", default="constant", help="train pixel's --lr-schedule")
+    parser.add_argument("--pixel-loss", default=None, help="train pixel's --loss (default: the size's; the README's "
+                        "nine-arm table: mse)")
     parser.add_argument("--trials", type=int, default=50)
     parser.add_argument("--reach-trials", type=int, default=20)
     parser.add_argument("--work", type=Path, default=Path("bench_out/foreign"))
