@@ -68,6 +68,11 @@ def plan(config: SweepConfig) -> Plan:
                                  "train` (it is scored otherwise than by one decoder's val_rmse)."))
     cls = kind.config_class
     space = parse_space(cls, kind.name, config.grid, config.space, config.random)
+    losses = [d.grid for d in space.dimensions if d.name == "loss"]
+    if losses and len(set(losses[0])) > 1:
+        raise ValueError(must_be("--grid loss", "one value", ", ".join(map(str, losses[0])),
+                                 "ASHA compares trials by their val_loss, which differs in kind between losses: "
+                                 "sweep one loss at a time."))
     fixed = {}
     if config.epochs_budget is not None:
         if "epochs" not in {f.name for f in dataclasses.fields(cls)} or "epochs" in space.describe():

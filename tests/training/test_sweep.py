@@ -74,6 +74,15 @@ def test_bad_input_is_refused_before_any_run(kin_store, workdir, monkeypatch):
     assert not (workdir / "runs").exists()
 
 
+def test_a_grid_of_losses_is_refused_one_loss_is_swept(kin_store):
+    """ASHA ranks trials by val_loss: a cross-entropy and a squared error are not on one scale."""
+    from bodyschema.training.sweep import plan
+
+    with pytest.raises(ValueError, match=r"--grid loss must be one value. Got 'mse, cross_entropy'. ASHA compares"):
+        plan(SweepConfig("pixel", kin_store, grid=("loss=mse,cross_entropy",)))
+    assert plan(SweepConfig("pixel", kin_store, grid=("loss=mse", "lr=1e-3,2e-3"))).space.trials == 2
+
+
 def test_networks_get_asha_per_epoch_and_a_gp_no_early_stop(kin_store):
     pytest.importorskip("ray", reason=RAY_EXTRA)
     from ray.tune.schedulers import ASHAScheduler, FIFOScheduler
