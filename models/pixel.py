@@ -194,11 +194,11 @@ class PixelDecoder(NetModel, BaseSensoryModel):
         self.size, self.fc_hidden, self.channels, self.fixed_precision = size, fc_hidden, tuple(channels), precision
         self.refine = bool(preset["refine"] if refine is None else refine)
         self.loss = ("mse" if size == "splat" else CONV_LOSS) if loss is None else loss
-        if self.loss not in LOSSES or (size == "splat" and self.loss != "mse"):
-            raise ValueError(must_be("loss", "'mse' for size 'splat'" if self.loss in LOSSES else
-                                     f"one of {sorted(LOSSES)}", self.loss,
-                                     "A sum of blobs has no logits to read the cross-entropy on."
-                                     if self.loss in LOSSES else ""))
+        if self.loss not in LOSSES:
+            raise ValueError(must_be("loss", f"one of {sorted(LOSSES)}", self.loss))
+        if size == "splat" and self.loss != "mse":
+            raise ValueError(must_be("loss", "'mse' for size 'splat'", self.loss,
+                                     "A sum of blobs has no logits to read the cross-entropy on."))
         lr = preset["lr"] if lr is None else lr                  # None: the preset's
         self.settings = TrainSettings(epochs, batch_size, lr, patience, weight_decay, lr_schedule)
         self.precision_: float | None = None
