@@ -9,6 +9,8 @@ digest and the held-out score. The registered model's description names its newe
 
 from __future__ import annotations
 
+import re
+
 from bodyschema.base import modalities
 from bodyschema.training.digest import DIGEST_TAG
 
@@ -61,6 +63,11 @@ def describe_registration(client, name: str, version: str, tags: dict[str, str],
 def score_unit(model) -> str:
     """The unit of a model's held-out scores: joint degrees for an encoder, its modality's unit otherwise."""
     return "deg" if model.encodes else modalities.unit(model.modality, "output units")
+
+
+def metric_name(text: str) -> str:
+    """`text` with every character MLflow refuses in a metric name replaced by '_'."""
+    return re.sub(r"[^A-Za-z0-9_./ -]", "_", str(text))
 
 
 def with_unit(key: str, unit: str) -> str:

@@ -8,7 +8,6 @@ before anything is registered. `train` and a sweep trial score with the same fun
 from __future__ import annotations
 
 import math
-import re
 from pathlib import Path
 
 import numpy as np
@@ -18,10 +17,10 @@ from tqdm.auto import tqdm
 from bodyschema.base import modalities
 from bodyschema.training import plots
 from bodyschema.training.data import Dataset, Split, as_float
+from bodyschema.training.model_card import metric_name
 from bodyschema.training.registry import METRIC
 
 PREDICT_BATCH = 256       # validation prediction batch: bounded memory for image decoders
-METRIC_NAME_UNSAFE = re.compile(r"[^A-Za-z0-9_.\- ]")     # MLflow refuses other characters in a metric's name
 
 
 def score_and_plot(member, data: Dataset, modality: str, seed: int, out: Path, prefix: str,
@@ -87,7 +86,8 @@ def per_joint(pred: np.ndarray, target: np.ndarray, names) -> dict[str, float]:
     """Held-out mean |error| of each joint, in deg (`val_abs_error.<joint>`): which joints an encoder learned, where
     the Euclidean `val_mean_error` over all joints hides a roll at a guess behind the others. (N, Dz) deg each."""
     err = np.abs(pred.astype(np.float64) - target).mean(axis=0)
-    return {f"val_abs_error.{METRIC_NAME_UNSAFE.sub('_', name)}": float(e) for name, e in zip(names, err)}
+    # no '/' in the name: a key's part before its last '/' names its modality (TrainResult._unit)
+    return {f"val_abs_error.{metric_name(name).replace('/', '_')}": float(e) for name, e in zip(names, err)}
 
 
 def _subset(split: Split, n: int, seed: int) -> Split:

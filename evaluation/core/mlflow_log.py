@@ -26,16 +26,12 @@ from dataclasses import asdict
 from pathlib import Path
 
 from bodyschema.evaluation.core.specs import provenance_rows, spec_label
+from bodyschema.training.model_card import metric_name
 
 MODEL_TAG = "bodyschema.model"
 REFERENCE_TAG = "bodyschema.reference.model_id"   # a reference logged model: the id of the model it stands for
 TARGETS_TAG = "bodyschema.targets"                  # `.path`, `.sha256`: the frames a benchmark scored (levels)
 _SHA256 = re.compile(r"^[0-9a-f]{64}$")
-
-
-def metric_name(text: str) -> str:
-    """`text` with every character MLflow refuses in a metric name replaced by '_'."""
-    return re.sub(r"[^A-Za-z0-9_./ -]", "_", str(text))
 
 
 def run_title(benchmark: str, models: Sequence) -> str:
