@@ -125,6 +125,7 @@ class MultimodalConfig(ModelConfig):
     hidden: tuple[int, ...] = (64, 64)  # hidden layer widths of the MLP decoders
     fc_hidden: int = 64  # fully connected width of the pixel decoders
     channels: tuple[int, ...] = (32, 16, 8)  # channels of the pixel decoders' upsamplings
+    pixel_loss: Literal["cross_entropy", "mse"] = "cross_entropy"  # the pixel decoders' data term (see `train pixel`)
     epochs: int = 200  # at most this many passes over the training set
     batch_size: int = 64  # samples per gradient step
     lr: float = 2e-3  # Adam learning rate of the networks

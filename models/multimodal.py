@@ -5,6 +5,10 @@ ee_pixel, touch) or the pixel decoder's network for images, plus a log-precision
 minimises the Gaussian negative log-likelihood per output, 0.5·e^λ·r² − 0.5·λ (+ const), so λ converges to
 −log of the residual variance: each modality learns how much to be trusted (Friston 2010: precision-weighted
 prediction errors). A precision set by the caller replaces λ (then the loss is the plain squared error).
+A pixel member fits its decoder by `pixel_loss` (pixel.py's LOSSES): by default the cross-entropy on the logits,
+whose gradient does not vanish where the squared error's through the sigmoid does (an arm covering 2 % of a black
+image: SO-101 at 64×64 went black for every pose); its λ still converges to −log of the residual variance, fitted
+on the residuals without weighing the decoder's gradient.
 `MultimodalModel` holds `members: dict[modality, member]` (what the AIF consumes: SensoryModels over the
 same z), fits them jointly (one loop, one early stopping on the summed loss) or one by one, and saves one
 sub-directory per member plus `multimodal.json`.
@@ -18,6 +22,7 @@ from pathlib import Path
 
 import torch
 from torch import nn
+from torch.nn import functional as F
 
 from bodyschema.base.modalities import is_image
 from bodyschema.errors import must_be
@@ -34,7 +39,7 @@ from bodyschema.models._nn_model import NetModel
 from bodyschema.models.capabilities import Capabilities
 from bodyschema.models.contract import BaseSensoryModel, load_model, register_kind
 from bodyschema.models.estimator import Estimator
-from bodyschema.models.pixel import PixelDecoderNet, fast_layout
+from bodyschema.models.pixel import CONV_LOSS, LOSSES, PixelDecoderNet, fast_layout
 from bodyschema.models.scaling import BodySpec
 
 DECODERS = ("auto", "mlp", "pixel")
@@ -61,6 +66,7 @@ class MultimodalMember(NetModel, BaseSensoryModel):
                  decoder: str = "auto",                  # auto: "pixel" for (H, W[, C]) images, else "mlp"
                  hidden: tuple[int, ...] = (64, 64),     # mlp
                  fc_hidden: int = 64, channels: tuple[int, ...] = (32, 16, 8),   # pixel (see pixel.py)
+                 pixel_loss: str = CONV_LOSS,            # pixel: the decoder's data term (pixel.py's LOSSES)
                  precision: float | None = None,         # None: learned λ; else fixed, in output units⁻²
                  epochs: int = 200, batch_size: int = 64, lr: float = 2e-3, patience: int = 15,
                  weight_decay: float = 0.0, lr_schedule: str = "constant",
@@ -72,6 +78,9 @@ class MultimodalMember(NetModel, BaseSensoryModel):
             decoder = "pixel" if is_image(modality) or len(self.output_shape) >= 2 else "mlp"
         if precision is not None and not precision > 0:
             raise ValueError(must_be("precision", "> 0 or None (learned)", precision))
+        if pixel_loss not in LOSSES:
+            raise ValueError(must_be("pixel_loss", f"one of {sorted(LOSSES)}", pixel_loss))
+        self.pixel_loss = pixel_loss
         self.decoder, self.hidden, self.fc_hidden, self.channels = decoder, tuple(hidden), fc_hidden, tuple(channels)
         self.fixed_precision, self.precision_lr = precision, precision_lr
         self.settings = TrainSettings(epochs, batch_size, lr, patience, weight_decay, lr_schedule)
@@ -79,7 +88,7 @@ class MultimodalMember(NetModel, BaseSensoryModel):
         self.fit_info_: dict = {}
 
     def fit(self, q, x, *, seed: int = 0, val=None, on_epoch=None, progress: bool = False, checkpoint=None):
-        """Train on q (N, Dz) rad, x (N, *output_shape) by the Gaussian NLL with its λ (`_nn_fit.train`); self."""
+        """Train on q (N, Dz) rad, x (N, *output_shape) by `_nll` (`_nn_fit.train`); self."""
         val = None if val is None else (val[0], {self.modality: val[1]}) if isinstance(val, (tuple, list)) else val
         fit_jointly({self.modality: self}, q, {self.modality: x}, seed=seed, val=val, on_epoch=on_epoch,
                     progress=progress, checkpoint=checkpoint, settings=self.settings)
@@ -111,12 +120,20 @@ class MultimodalMember(NetModel, BaseSensoryModel):
         return MemberNet(nn.Sequential(*layers, nn.Linear(width, math.prod(self.output_shape))))
 
     def _nll(self, net: MemberNet, u: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-        """Gaussian NLL per output, mean over batch and outputs. u (B, Dz), target (B, O) standardized."""
-        r2 = (net.decoder(u).reshape(u.shape[0], -1) - target).pow(2)               # (B, O)
+        """Gaussian NLL per output, mean over batch and outputs; a pixel member fitted by the cross-entropy: that,
+        plus λ's NLL on the detached residuals (λ learns their variance, the decoder learns from the
+        cross-entropy alone). u (B, Dz), target (B, O) standardized."""
+        if self.decoder == "pixel" and self.pixel_loss == "cross_entropy":
+            logits = net.decoder.logits(u).reshape(u.shape[0], -1)                  # (B, O)
+            data = F.binary_cross_entropy_with_logits(logits, target)
+            r2 = (logits.sigmoid() - target).pow(2).detach()
+        else:
+            r2 = (net.decoder(u).reshape(u.shape[0], -1) - target).pow(2)           # (B, O)
+            data = 0.5 * r2.mean() if self.fixed_precision is not None else 0.0
         if self.fixed_precision is not None:
-            return 0.5 * r2.mean()
+            return data
         lam = net.noise.log_precision
-        return (0.5 * lam.exp() * r2 - 0.5 * lam).mean()
+        return data + (0.5 * lam.exp() * r2 - 0.5 * lam).mean()
 
     # ---- hooks ----------------------------------------------------------------------------------------
     def _outputs(self, net, u):
@@ -135,7 +152,7 @@ class MultimodalMember(NetModel, BaseSensoryModel):
 
     def _config(self):
         return {"decoder": self.decoder, "hidden": list(self.hidden), "fc_hidden": self.fc_hidden,
-                "channels": list(self.channels), "precision": self.fixed_precision,
+                "channels": list(self.channels), "pixel_loss": self.pixel_loss, "precision": self.fixed_precision,
                 "epochs": self.settings.epochs, "batch_size": self.settings.batch_size, "lr": self.settings.lr,
                 "patience": self.settings.patience, "weight_decay": self.settings.weight_decay,
                 "lr_schedule": self.settings.lr_schedule,
@@ -146,8 +163,9 @@ class MultimodalMember(NetModel, BaseSensoryModel):
 
     @classmethod
     def _from_saved(cls, body, modality, output_shape, config, state):
-        model = cls(body, modality, output_shape,
-                    **{**config, "hidden": tuple(config["hidden"]), "channels": tuple(config["channels"])})
+        model = cls(body, modality, output_shape,   # saved before pixel_loss existed: fitted by the squared error
+                    **{"pixel_loss": "mse", **config, "hidden": tuple(config["hidden"]),
+                       "channels": tuple(config["channels"])})
         model.x_mean_, model.x_scale_ = state["x_mean"], state["x_scale"]
         model._restore_net(model._factory, state)
         return model

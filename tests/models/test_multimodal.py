@@ -7,7 +7,13 @@ import torch
 from bodyschema.models import load_model
 from bodyschema.models.multimodal import MultimodalMember, MultimodalModel
 from tests.models.contract import SensoryModelContract
-from tests.models.test_pixel import blob_images, joint_angles, one_thread
+from tests.models.test_pixel import (
+    assert_blob_learned_by_cross_entropy_only,
+    blob_images,
+    blob_on_black_scores,
+    joint_angles,
+    one_thread,
+)
 from tests.toy_models import ToyPlanarArm
 
 BODY = ToyPlanarArm().body
@@ -95,6 +101,34 @@ def test_save_then_load_round_trip(fitted, tmp_path):
         assert isinstance(load_model(tmp_path / "mm" / m), MultimodalMember)
 
 
+@pytest.mark.usefixtures("tiny_threads")
+def test_an_image_member_learns_a_small_blob_on_black_by_cross_entropy_where_squared_error_goes_dark():
+    """The member's Gaussian NLL through the sigmoid has the pixel decoder's vanishing gradient (SO-101 at 64×64 went
+    black for every pose, README); its default data term, the cross-entropy, does not."""
+    def fit_predict(q, x, q_val, loss):
+        member = MultimodalMember(BODY, "image", tuple(x.shape[1:]), **{**TINY, "epochs": 60,
+                                                                         "pixel_loss": loss})
+        return member.fit(q, x, progress=False).predict(q_val.double())
+    assert_blob_learned_by_cross_entropy_only(*blob_on_black_scores(fit_predict))
+
+
+def test_pixel_loss_defaults_to_cross_entropy_is_saved_and_a_save_without_it_loads_as_mse(tmp_path):
+    import json
+    model = TestMultimodalImageMember().make_model(seed=0)
+    assert model.pixel_loss == "cross_entropy"
+    model.save(tmp_path / "m")
+    meta_path = tmp_path / "m" / "meta.json"
+    meta = json.loads(meta_path.read_text())
+    assert meta["config"].pop("pixel_loss") == "cross_entropy"
+    meta_path.write_text(json.dumps(meta))                      # as saved before `pixel_loss` existed
+    loaded = load_model(tmp_path / "m")
+    assert loaded.pixel_loss == "mse"
+    z = joint_angles(3, seed=5).double()
+    torch.testing.assert_close(loaded.predict(z), model.predict(z), rtol=0, atol=0)
+    with pytest.raises(ValueError, match=r"pixel_loss must be one of \['cross_entropy', 'mse'\]. Got 'l1'"):
+        MultimodalMember(BODY, "image", (8, 12), pixel_loss="l1")
+
+
 def test_separate_fit_trains_every_member():
     q = joint_angles(64, seed=0)
     seen = []
@@ -148,14 +182,15 @@ def test_fit_rejects_bad_modalities_lengths_and_nan():
 
 def test_one_model_with_an_output_per_camera_is_perceived_over_one_z():
     """Two cameras of one arm (`image` and a further camera's `image_side`, another size) as members of one
-    multimodal model: fitted together, perceived together (each camera's error a term of F), the pose is recovered
-    from a start 0.3 rad off to within 0.3 of the start's error."""
+    multimodal model: fitted together, perceived together (each camera's error a term of F), the end effector is
+    recovered from a start 0.3 rad off to within 0.3 of the start's error. Judged on the ee, not the joints: a blob
+    at the ee sees the elbow-up and elbow-down poses alike, and perception may settle on either."""
     from bodyschema.aif.perception import Perception, PerceptionConfig
     from tests.aif.toys import perturb
     shapes = {"image": (8, 12), "image_side": (10, 10)}
     q = joint_angles(256, seed=0)
     views = {"image": blob_images(q), "image_side": blob_images(q, shapes["image_side"], width_px=2.0)}
-    model = MultimodalModel(BODY, shapes, **{**TINY, "epochs": 40})
+    model = MultimodalModel(BODY, shapes, **{**TINY, "epochs": 80})
     with one_thread():
         model.fit(q, views, progress=False)
     truth = joint_angles(8, seed=3).double()
@@ -164,4 +199,7 @@ def test_one_model_with_an_output_per_camera_is_perceived_over_one_z():
     start = perturb(truth, seed=4, max_rad=0.3)
     result = both.infer(obs, start)
     assert set(both.energies(obs, truth)[1]) == {"image", "image_side"}
-    assert (result.mu - truth).abs().mean() < 0.3 * (start - truth).abs().mean()
+
+    def ee_error(z):
+        return (ToyPlanarArm().predict(z) - ToyPlanarArm().predict(truth)).norm(dim=1).mean()
+    assert ee_error(result.mu) < 0.3 * ee_error(start)
