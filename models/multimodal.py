@@ -7,8 +7,8 @@ minimises the Gaussian negative log-likelihood per output, 0.5·e^λ·r² − 0.
 prediction errors). A precision set by the caller replaces λ (then the loss is the plain squared error).
 A pixel member fits its decoder by `pixel_loss` (pixel.py's LOSSES): by default the cross-entropy on the logits,
 whose gradient does not vanish where the squared error's through the sigmoid does (an arm covering 2 % of a black
-image: SO-101 at 64×64 went black for every pose); its λ still converges to −log of the residual variance, fitted
-on the residuals without weighing the decoder's gradient.
+image: SO-101 at 64×64 went black for every pose), weighted by e^λ as the squared error is; λ still converges to
+−log of the residual variance (`_cross_entropy_nll`).
 `MultimodalModel` holds `members: dict[modality, member]` (what the AIF consumes: SensoryModels over the
 same z), fits them jointly (one loop, one early stopping on the summed loss) or one by one, and saves one
 sub-directory per member plus `multimodal.json`.
@@ -120,20 +120,29 @@ class MultimodalMember(NetModel, BaseSensoryModel):
         return MemberNet(nn.Sequential(*layers, nn.Linear(width, math.prod(self.output_shape))))
 
     def _nll(self, net: MemberNet, u: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-        """Gaussian NLL per output, mean over batch and outputs; a pixel member fitted by the cross-entropy: that,
-        plus λ's NLL on the detached residuals (λ learns their variance, the decoder learns from the
-        cross-entropy alone). u (B, Dz), target (B, O) standardized."""
+        """Gaussian NLL per output, mean over batch and outputs. u (B, Dz), target (B, O) standardized."""
         if self.decoder == "pixel" and self.pixel_loss == "cross_entropy":
-            logits = net.decoder.logits(u).reshape(u.shape[0], -1)                  # (B, O)
-            data = F.binary_cross_entropy_with_logits(logits, target)
-            r2 = (logits.sigmoid() - target).pow(2).detach()
-        else:
-            r2 = (net.decoder(u).reshape(u.shape[0], -1) - target).pow(2)           # (B, O)
-            data = 0.5 * r2.mean() if self.fixed_precision is not None else 0.0
+            return self._cross_entropy_nll(net, u, target)
+        r2 = (net.decoder(u).reshape(u.shape[0], -1) - target).pow(2)               # (B, O)
         if self.fixed_precision is not None:
-            return data
+            return 0.5 * r2.mean()
         lam = net.noise.log_precision
-        return data + (0.5 * lam.exp() * r2 - 0.5 * lam).mean()
+        return (0.5 * lam.exp() * r2 - 0.5 * lam).mean()
+
+    def _cross_entropy_nll(self, net: MemberNet, u: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+        """The cross-entropy on the logits less its least value (a KL, 0 at a perfect fit), plus λ's Gaussian NLL on
+        the detached residuals (λ learns their variance as above). The KL's gradient is weighted by e^λ, as the
+        Gaussian NLL's is: λ grows during the fit and Adam's steps with it (nao_arm, two cameras: floor 4.4°
+        unweighted, 3.1° weighted). Its value is not: weighted, it would grow with λ while the fit improves, and
+        early stopping reads it. u (B, Dz), target (B, O) in [0, 1]."""
+        logits = net.decoder.logits(u).reshape(u.shape[0], -1)                      # (B, O)
+        kl = F.binary_cross_entropy_with_logits(logits, target) - _bernoulli_entropy(target)
+        if self.fixed_precision is not None:
+            return kl
+        lam = net.noise.log_precision
+        r2 = (logits.sigmoid() - target).pow(2).detach()
+        weighted = kl.detach() + lam.detach().exp() * (kl - kl.detach())           # value kl, gradient e^λ·∇kl
+        return weighted + (0.5 * lam.exp() * r2 - 0.5 * lam).mean()
 
     # ---- hooks ----------------------------------------------------------------------------------------
     def _outputs(self, net, u):
@@ -210,6 +219,11 @@ def fit_jointly(members: dict[str, MultimodalMember], q, xs: dict, *, seed: int,
         members[m]._set_net(nets[m])
         members[m].fit_info_ = info
     return info
+
+
+def _bernoulli_entropy(x: torch.Tensor) -> torch.Tensor:
+    """The least cross-entropy of targets x in [0, 1], mean per output: subtracted, the data term is a KL ≥ 0."""
+    return -(torch.xlogy(x, x) + torch.xlogy(1 - x, 1 - x)).mean()
 
 
 def _prefixed(on_epoch, modality: str):

@@ -1,5 +1,7 @@
 """Multimodal members under the shared contract; joint fit, learned precisions, save→load, bad data."""
 
+import math
+
 import numpy as np
 import pytest
 import torch
@@ -110,6 +112,39 @@ def test_an_image_member_learns_a_small_blob_on_black_by_cross_entropy_where_squ
                                                                          "pixel_loss": loss})
         return member.fit(q, x, progress=False).predict(q_val.double())
     assert_blob_learned_by_cross_entropy_only(*blob_on_black_scores(fit_predict))
+
+
+def test_the_cross_entropy_term_reads_as_a_kl_and_its_gradient_is_weighted_by_the_learned_precision():
+    """The value is the cross-entropy less the targets' entropy (0 where the logits give the targets), the decoder's
+    gradient e^λ times that KL's (the Gaussian NLL's weighting), λ's gradient its Gaussian NLL's on the residuals."""
+    from torch.nn import functional as F
+
+    from bodyschema.models._nn_fit import build
+    from bodyschema.models.multimodal import _bernoulli_entropy
+    p = torch.rand(64, dtype=torch.float64, generator=torch.Generator().manual_seed(0)) * 0.98 + 0.01
+    assert float(F.binary_cross_entropy_with_logits(torch.logit(p), p) - _bernoulli_entropy(p)) == pytest.approx(
+        0, abs=1e-12)
+    q = joint_angles(16, seed=0)
+    member = MultimodalMember(BODY, "image", (8, 12), **TINY)
+    member._prepare(blob_images(q))
+    net = build(member._factory, torch.Generator().manual_seed(0))
+    net.noise.log_precision.data.fill_(2.0)
+    u, target = BODY.to_unit(q), member._target(blob_images(q))
+    decoder = list(net.decoder.parameters())
+
+    loss = member._nll(net, u, target)
+    loss.backward()
+    got = [w.grad.clone() for w in decoder]
+    lam_grad = float(net.noise.log_precision.grad)
+    net.zero_grad()
+    logits = net.decoder.logits(u).reshape(16, -1)
+    kl = F.binary_cross_entropy_with_logits(logits, target) - _bernoulli_entropy(target)
+    r2 = (logits.sigmoid() - target).pow(2).detach()
+    kl.backward()
+    assert float(loss.detach()) == pytest.approx(float(kl.detach() + (0.5 * math.exp(2.0) * r2 - 1.0).mean()), rel=1e-6)
+    for g, w in zip(got, decoder):
+        torch.testing.assert_close(g, math.exp(2.0) * w.grad, rtol=1e-5, atol=1e-9)
+    assert lam_grad == pytest.approx(float((0.5 * math.exp(2.0) * r2 - 0.5).mean()), rel=1e-5)
 
 
 def test_pixel_loss_defaults_to_cross_entropy_is_saved_and_a_save_without_it_loads_as_mse(tmp_path):
