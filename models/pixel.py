@@ -15,7 +15,7 @@ pushes every logit far down in the first epochs, σ(1 − σ) vanishes there, an
 image for every pose (SO-101 at 64×64, README "Your own robot"). The cross-entropy's gradient does not vanish.
 
 Two named capacities (`size`), each with its Adam step: "lean" (FC 64, channels 32/16/8, lr 2e-3) and
-"pixel_aif" (lr 5e-4: at 2e-3 it can collapse to a black image, see SIZES), the size of Pixel-AIF's
+"pixel_aif" (lr 2e-3; 5e-4 with the squared error, at 2e-3 a black image: see SIZES), the size of Pixel-AIF's
 NAO decoder (FC 4→512→1120 = 16×7×10 at 56×80, transposed convolutions 16→64→16→C, each but the last
 followed by a 3×3 convolution of the same width, which Pixel-AIF adds against checkerboard artifacts).
 Unlike Pixel-AIF it keeps ELU for ReLU and has no dropout: the AIF update differentiates g, and a seed must
@@ -44,12 +44,12 @@ ONEDNN_MIN_BATCH = 4   # latents per inference call from which oneDNN's convolut
 # Jacobian 0.83×, forward + VJP 0.85× the time with it; from B = 4 the VJP, from B = 32 every call, is slower without)
 SIZES = {   # name → capacity and its Adam step; an explicit fc_hidden / channels / refine / lr overrides the preset's
     "lean": {"fc_hidden": 64, "channels": (32, 16, 8), "refine": False, "lr": 2e-3},       # 56×80: 7×10×32 → …
-    # lr 5e-4: at lean's 2e-3 its first epoch's steps blow up the unnormalised conv stack (ELU outputs' mean 4, 8, 12
-    # after the refines) and the last layer lands at -40 on every pixel: a black image, σ' ≈ e⁻⁴⁰, no gradient back
-    # (nao_arm 64×64, 600 images: held-out MSE frozen at 0.0317 from epoch 2, pose variation 0; bench/decoder_rule.py;
-    # at 56×80 too): not the image size, the step size. Measured with the squared error, whose gradient carries that σ';
-    # the cross-entropy (CONV_LOSS) does not: not re-measured on this size
-    "pixel_aif": {"fc_hidden": 512, "channels": (16, 64, 16), "refine": True, "lr": 5e-4},  # 56×80: 7×10×16 = 1120
+    # mse_lr, its step under the squared error: at 2e-3 the first epoch's steps blow up the unnormalised conv stack
+    # (ELU outputs' mean 4, 8, 12 after the refines) and the last layer lands at -40 on every pixel: a black image,
+    # σ' ≈ e⁻⁴⁰, and the squared error's gradient carries that σ' (nao_arm 64×64, 600 images: held-out MSE frozen at
+    # 0.0317 from epoch 2, pose variation 0; at 56×80 too). The cross-entropy's does not: at 2e-3 it trains, 30 epochs
+    # on the same images held-out MSE 0.0090 against 0.0155 at 5e-4 (bench/decoder_rule.py)
+    "pixel_aif": {"fc_hidden": 512, "channels": (16, 64, 16), "refine": True, "lr": 2e-3, "mse_lr": 5e-4},
     # not a conv stack: K blobs placed by the joints' trig features (models/splat.py); ≤ 7 joints. SO-101 URDF,
     # 3 000 images 128×128, 40 epochs: floors 2.5–12° per joint where lean's were 10.8–159° (README)
     "splat": {"points": 128, "lr": 3e-3},
@@ -199,7 +199,8 @@ class PixelDecoder(NetModel, BaseSensoryModel):
         if size == "splat" and self.loss != "mse":
             raise ValueError(must_be("loss", "'mse' for size 'splat'", self.loss,
                                      "A sum of blobs has no logits to read the cross-entropy on."))
-        lr = preset["lr"] if lr is None else lr                  # None: the preset's
+        if lr is None:                                           # the preset's, for its loss
+            lr = preset.get("mse_lr", preset["lr"]) if self.loss == "mse" else preset["lr"]
         self.settings = TrainSettings(epochs, batch_size, lr, patience, weight_decay, lr_schedule)
         self.precision_: float | None = None
         self.fit_info_: dict = {}
@@ -207,7 +208,7 @@ class PixelDecoder(NetModel, BaseSensoryModel):
     # ---- fit ------------------------------------------------------------------------------------------
     def fit(self, q, x, *, seed: int = 0, val=None, on_epoch=None, progress: bool = False, checkpoint=None,
             device: str = "cpu", mixed_precision: bool = False):
-        """Train on q (N, Dz) rad, x (N, *output_shape) by the per-pixel squared error (`_nn_fit.train`) on
+        """Train on q (N, Dz) rad, x (N, *output_shape) by the per-pixel `loss` (`_nn_fit.train`) on
         `device`; self (its network on the CPU: `to(device)` for inference elsewhere)."""
         q, x = check_fit_data(q, x, self.latent_dim, self.output_shape)     # (N, Dz), (N, *out) in [0, 1]
         val = check_val(val, self.latent_dim, self.output_shape)

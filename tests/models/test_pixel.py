@@ -252,6 +252,13 @@ def assert_blob_learned_by_cross_entropy_only(found: dict, varies: dict) -> None
     assert varies["mse"] < 1e-3 and found["mse"] > 5 * found["cross_entropy"], (found, varies)
 
 
+def test_pixel_aif_steps_at_2e3_by_cross_entropy_and_at_5e4_by_mse_unless_told():
+    def step(size="pixel_aif", **kw):
+        return PixelDecoder(ToyPlanarArm().body, "image", HW, size=size, **kw).settings.lr
+    assert (step(), step(loss="mse"), step(loss="mse", lr=1e-3)) == (2e-3, 5e-4, 1e-3)
+    assert step("lean") == step("lean", loss="mse") == 2e-3                       # lean: one step for both
+
+
 @pytest.mark.usefixtures("tiny_threads")
 def test_a_small_bright_blob_on_black_is_learned_by_cross_entropy_where_squared_error_goes_dark():
     """The squared error through the sigmoid drives every logit down, σ' vanishes and the output is one dark image
