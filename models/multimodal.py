@@ -120,7 +120,8 @@ class MultimodalMember(NetModel, BaseSensoryModel):
         return MemberNet(nn.Sequential(*layers, nn.Linear(width, math.prod(self.output_shape))))
 
     def _nll(self, net: MemberNet, u: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
-        """Gaussian NLL per output, mean over batch and outputs. u (B, Dz), target (B, O) standardized."""
+        """Gaussian NLL per output, mean over batch and outputs (a pixel member by the cross-entropy: its own).
+        u (B, Dz), target (B, O) standardized."""
         if self.decoder == "pixel" and self.pixel_loss == "cross_entropy":
             return self._cross_entropy_nll(net, u, target)
         r2 = (net.decoder(u).reshape(u.shape[0], -1) - target).pow(2)               # (B, O)

@@ -88,8 +88,8 @@ LEVELS = Recipe(
            _benchmark("levels", "evaluate levels --model {decoder} --encoder {encoder} --multistart 0 --runs 5 "
                                 "--trials 500 --seed 0 --device {device} --workers {workers}")),
     table=Table(marker="levels", step="levels", csv="summary.csv", key="level",
-                rows=(Row("floor", "floor"), Row("1 (", "1"), Row("1 +", "1+enc"), Row("2 (", "2"), Row("2 +", "2+enc"), Row("3 (", "3"),
-                      Row("3 from", "3+enc")),
+                rows=(Row("floor", "floor"), Row("1 (", "1"), Row("1 +", "1+enc"), Row("2 (", "2"),
+                      Row("2 +", "2+enc"), Row("3 (", "3"), Row("3 from", "3+enc")),
                 columns=(column("mean", "joint_err_deg"), column("median", "joint_err_median_deg"),
                          column("every joint ≤ 2°", "all_joints_2deg", 100.0),
                          column("LElbowYaw", "joint_err_deg/LElbowYaw"),
