@@ -74,6 +74,7 @@ NAO_DATA = Step("nao_data", "datagen --robot nao_arm --n 18000 --workers {worker
                             "--out {run}/data/nao_arm.zarr")
 DECODER = Step("decoder", "train pixel --data {nao_data} --epochs 60 --seed 0 " + TRACKED)
 ENCODER = Step("encoder", "train encoder --data {nao_data} --epochs 40 --seed 0 " + TRACKED)
+GPR_EE_PIXEL = Step("gpr_ee_pixel", "train gpr --data {nao_data} --modality ee_pixel --seed 0 " + TRACKED)
 
 
 def _benchmark(name: str, command: str) -> Step:
@@ -168,14 +169,19 @@ IMITATOR_DELAYS = (("imitator d = 0", "0.00"), ("0.05 s", "0.05"), ("0.1 s", "0.
 SELF_RECOGNITION = Recipe(
     name="self-recognition",
     about="is this me? nao_arm, 100 episodes per condition, 20 frames of 0.05 s, seed 0: the exact ee_pixel model "
-          "and the levels' pixel decoder, with its former per-frame start (README: Self-recognition)",
-    steps=(NAO_DATA, DECODER,
+          "a GPR of ee_pixel and the levels' pixel decoder on the levels' store, that decoder fused with the GPR, and "
+          "the decoder with its former per-frame start (README: Self-recognition)",
+    steps=(NAO_DATA, DECODER, GPR_EE_PIXEL,
            _benchmark("self_exact", "evaluate self-recognition --model analytic:nao_arm:ee_pixel --no-plots"),
+           _benchmark("self_gpr", "evaluate self-recognition --model {gpr_ee_pixel} --no-plots"),
            _benchmark("self_decoder", "evaluate self-recognition --model {decoder} --no-plots"),
+           _benchmark("self_fused", "evaluate self-recognition --model {decoder} --model {gpr_ee_pixel} --no-plots"),
            _benchmark("self_decoder_before", "evaluate self-recognition --model {decoder} --start previous "
                                              "--perception.method flow --no-plots")),
     table=Table(marker="self-recognition", step="self_exact", csv="summary.csv", key="comparison",
-                rows=(Row("exact (", step="self_exact"), Row("pixel decoder (`dec_hand`", step="self_decoder"),
+                rows=(Row("exact (", step="self_exact"), Row("GPR (ee_pixel", step="self_gpr"),
+                      Row("pixel decoder (`dec_hand`", step="self_decoder"),
+                      Row("pixel decoder + GPR ee_pixel, fused", step="self_fused"),
                       Row("pixel decoder, before", step="self_decoder_before")),
                 columns=(column("AUC pooled", "auc", row="pooled"),
                          *(column(header, "auc", row=f"imitator_{d}s") for header, d in IMITATOR_DELAYS),
