@@ -1,6 +1,7 @@
 """The cost estimate printed before a reproduction starts: every pending step run small in a scratch folder, timed,
 and scaled to its full size. Datagen: PROBE_SAMPLES samples on one worker, scaled by the samples. Training: one
-epoch on PROBE_ROWS rows, its fit alone scaled by rows × epochs (an upper bound: patience stops fits early).
+epoch on PROBE_ROWS rows, its fit alone scaled by rows × epochs (an upper bound: patience stops fits early); an exact
+GP by the cube of the samples its marginal likelihood is fitted on.
 A benchmark: PROBE_TRIALS trials of one run, its trials' time scaled by trials × runs, plus its fixed cost
 (loading models, rendering, tables) once. CPU time is the process's and its children's; wall time is this machine's
 now (a loaded machine gives a longer estimate).
@@ -77,8 +78,12 @@ def _shrunk(config, full, full_configs: dict):
         model = dataclasses.replace(config.model, epochs=1) if hasattr(config.model, "epochs") else config.model
         rows = _training_rows(full, full_configs)
         small = dataclasses.replace(config, model=model, max_train=PROBE_ROWS)
-        power = 1 if hasattr(config.model, "epochs") else 3          # a GP's exact solve is O(N³)
-        return small, (rows / PROBE_ROWS) ** power * epochs
+        if hasattr(config.model, "epochs"):
+            return small, rows / PROBE_ROWS * epochs
+        # an exact GP: most of its fit is the marginal likelihood on min(rows, hyper_points) samples, O(m³) per step;
+        # its one solve on max_points (or the kinematic kernel's 3^D features) takes seconds
+        m = min(rows, getattr(config.model, "hyper_points", rows))
+        return small, max(m / PROBE_ROWS, 1.0) ** 3
     trials, runs = getattr(full, "trials", PROBE_TRIALS), getattr(full, "runs", 1)
     changes = {k: v for k, v in (("trials", PROBE_TRIALS), ("runs", 1), ("plots", False)) if hasattr(config, k)}
     return dataclasses.replace(config, **changes), trials * runs / PROBE_TRIALS

@@ -170,6 +170,19 @@ def test_the_cost_probe_scales_a_step_to_its_full_size(tmp_path):
     assert not (tmp_path / "run").exists()
 
 
+def test_an_exact_gp_is_scaled_by_the_samples_of_its_likelihood_not_the_store(tmp_path):
+    """A GP on 18 000 poses fits its hyper-parameters on `hyper_points` of them and solves once on at most
+    `max_points`: its estimate is the cube of hyper_points / PROBE_ROWS, not of the store's size (which printed 96 h
+    for a 2-minute step)."""
+    data, gp = TINY.steps[:2]
+    values = {"run": str(tmp_path / "run"), "workers": "1", "device": "cpu", "tracking": "unused"}
+    full = reproduce_run._full_configs([data, gp], values, {})
+    full["data"] = dataclasses.replace(full["data"], n=18000)
+    small, scale = probe._shrunk(full["gp"], full["gp"], full)
+    assert small.max_train == probe.PROBE_ROWS
+    assert scale == pytest.approx((full["gp"].model.hyper_points / probe.PROBE_ROWS) ** 3)
+
+
 def test_a_dry_run_runs_nothing(tiny, capsys):
     folder = reproduce_run.reproduce(dataclasses.replace(tiny, dry_run=True))
     assert "to do  levels     bodyschema evaluate levels --model <gp>" in capsys.readouterr().out
