@@ -52,7 +52,7 @@ class JointView:
                     "the tool's own axis, seen only through bodies beyond it that are not round about that axis")
         return (f"it moves the ee {self.mm_per_deg:.2f} mm/°, but the bodies it moves cover too few pixels or are "
                 "hidden behind the arm at this framing: move the camera closer (a narrower workspace, `robot "
-                "camera`) or raise image_size")
+                "camera`), raise image_size, or add a second view for it (`robot camera --add`)")
 
 
 @dataclass(frozen=True)
