@@ -3,12 +3,13 @@
 Per frame (`Tracker.step`):
   1. predict   the belief moves by the motor command (joint velocities, rad/s; an efference copy) or, without one, by
                its own velocity: μ ← μ + Δt μ' (+ ½ Δt² μ'' at order 2), the generalized coordinates of the belief;
-               with an image encoder its guess competes (`proposals`): the one of lower F is the frame's start;
+               a direct guess of the pose competes (`proposals`): a joints sensor's reading, else the image
+               encoder's (`guess`); the one of lower F is the frame's start;
   2. perceive  a `Perception` runs from there within a budget of model evaluations per stream (and, on top, of
                milliseconds: fewer updates when the last frames' cost per evaluation says the budget would overrun);
   3. lost?     a stream whose F exceeds the lost-track threshold (calibrated from F at the true poses of training
                frames, `calibrate`, or given), or whose belief a low-dimensional sensor contradicts beyond its own
-               calibrated noise (`consistency`), restarts from the image encoder's guess or from several starts
+               calibrated noise (`consistency`), restarts from the frame's guess or from several starts
                (aif/multistart.py); of the restart and the tracked belief, the one the sensors accept, then the
                lower F, wins;
   4. motion    the belief's velocity (and acceleration) follow the frame-to-frame change of μ through a fixed-gain
@@ -37,7 +38,13 @@ from bodyschema.errors import must_be
 from bodyschema.models.contract import as_input
 
 MS_SMOOTHING = 0.8          # weight of the past in the running cost per evaluation (the millisecond budget)
-PROPOSAL_EVALUATIONS = 2    # F at the predicted belief and at the encoder's guess
+PROPOSAL_EVALUATIONS = 2    # F at the predicted belief and at the frame's guess
+
+
+def reading_of(models, latent_dim: int) -> str | None:
+    """The modality of a joints sensor among `models`, whose observation is the belief itself (rad), else None."""
+    return next((m.modality for m in models if m.modality == "joints" and tuple(m.output_shape) == (latent_dim,)),
+                None)
 
 
 @dataclass
@@ -55,8 +62,9 @@ class FrameInfo:
 class Tracker:
     """Tracks B streams of observations of one body (any set of SensoryModels, as `Perception` takes them).
 
-    encoder: an image encoder (`encode(images) → (N, Dz) rad`, images of its `modality`) for restarts and the first
-    frame; precisions, limits: as `Perception`'s; seed: the multi-start draws (`reset` draws them anew from it)."""
+    encoder: an image encoder (`encode(images) → (N, Dz) rad`, images of its `modality`), the frame's guess where no
+    joints sensor reads the pose (config.guess); precisions, limits: as `Perception`'s; seed: the multi-start draws
+    (`reset` draws them anew from it)."""
 
     def __init__(self, models: Sequence, config: TrackerConfig = DEFAULTS, encoder=None,
                  precisions: Mapping[str, float | torch.Tensor] | None = None,
@@ -64,23 +72,36 @@ class Tracker:
         self.config, self.encoder, self.seed = config, encoder, seed
         self.perception = Perception(models, config.perception, precisions, limits)
         resolved = self.perception.config
-        self.proposes = config.proposals and encoder is not None and encoder.modality in self._modalities
+        self.reading = reading_of(self.perception.models, self.latent_dim)
+        self.guesses = self._guess_source(config.guess, encoder)
+        self.proposes = config.proposals and self.guesses is not None
         spent = PROPOSAL_EVALUATIONS if self.proposes else 0
         self.steps = steps_within(resolved, config.budget - spent)
         if self.steps < least_steps(resolved):
             need = spent + next(n for n in range(1, 100) if steps_within(resolved, n) >= least_steps(resolved))
             raise ValueError(must_be("budget", f"at least {need} model evaluations for one update of "
-                                     f"{resolved.method}{' after the encoder proposal' if spent else ''}",
+                                     f"{resolved.method}{' after the proposal' if spent else ''}",
                                      config.budget))
-        self.restart = config.restart if config.restart != "auto" else ("encoder" if encoder else "multistart")
-        if self.restart == "encoder" and (encoder is None or encoder.modality not in self._modalities):
-            raise ValueError(must_be("restart", "'multistart' without an encoder and an image model", "encoder"))
+        self.restart = config.restart if config.restart != "auto" else ("guess" if self.guesses else "multistart")
+        if self.restart == "guess" and self.guesses is None:
+            raise ValueError(must_be("restart", "'multistart' without a joints sensor or an image encoder", "guess"))
         self.threshold = config.lost_threshold
         self.settled: float | None = None       # F of a start good enough to skip a frame's updates (`calibrate`)
         self.sensors = SensorChecks.of(self.perception, precisions, limits) if config.consistency else None
         self._runs: dict[int, Perception] = {}
         self._restarts = self.perception.with_config(replace(config.restart_perception, record=False))
         self.reset()
+
+    def _guess_source(self, choice: str, encoder) -> str | None:
+        """"reading", "encoder" or None (no guess): config.guess, checked against what this tracker perceives."""
+        has_encoder = encoder is not None and encoder.modality in self._modalities
+        if choice == "reading" and self.reading is None:
+            raise ValueError(must_be("guess", "'encoder' or 'auto' without a joints model", "reading"))
+        if choice == "encoder" and not has_encoder:
+            raise ValueError(must_be("guess", "'reading' or 'auto' without an encoder of a perceived image", "encoder"))
+        if choice == "auto":
+            return "reading" if self.reading else ("encoder" if has_encoder else None)
+        return choice
 
     @property
     def _modalities(self) -> set[str]:
@@ -174,11 +195,17 @@ class Tracker:
             mu = mu + 0.5 * dt ** 2 * u[:, 2]
         return self._clamp(mu)
 
+    def _guess(self, obs) -> torch.Tensor:
+        """The frame's direct guess of every stream's pose (B, Dz) rad: the joints reading or the encoder's."""
+        if self.guesses == "reading":
+            return self._clamp(obs[self.reading].to(torch.float64))
+        return self._clamp(self.encoder.encode(obs[self.encoder.modality]).to(torch.float64))
+
     def _proposed(self, obs, predicted) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Per stream the lower-F start of the predicted belief and the encoder's guess, the guess (a restart of
-        this frame reuses it) and F at the start. → (B, Dz), (B, Dz) rad, (B,)"""
+        """Per stream the lower-F start of the predicted belief and the frame's guess, the guess (a restart of this
+        frame reuses it) and F at the start. → (B, Dz), (B, Dz) rad, (B,)"""
         b = len(predicted)
-        guess = self._clamp(self.encoder.encode(obs[self.encoder.modality]).to(torch.float64))          # (B, Dz) rad
+        guess = self._guess(obs)                                                          # (B, Dz) rad
         twice = {m: torch.cat([x, x]) for m, x in obs.items()}
         both = self.perception.free_energy(twice, torch.cat([predicted, guess]))          # (2B,)
         worse = ~(both[b:] < both[:b])                                                    # NaN-safe: predicted wins
@@ -217,17 +244,16 @@ class Tracker:
         return self._runs[steps]
 
     def _restarted(self, obs, mu, free, contradicted, predicted, rows_mask, guess=None):
-        """Restart the streams in rows_mask from the encoder's guess or several starts; per stream, of the restart and
-        its tracked belief, the one no sensor contradicts, then the lower F. guess: this frame's encoder guess (B, Dz)
-        rad, else None (asked here). From the guess, not from the lower F of it and the frame's belief: from the
+        """Restart the streams in rows_mask from the frame's guess or several starts; per stream, of the restart and
+        its tracked belief, the one no sensor contradicts, then the lower F. guess: this frame's guess (B, Dz) rad,
+        else None (asked here). From the guess, not from the lower F of it and the frame's belief: from the
         belief, the lower in most restarts, the restart stays in its local basin (measured, nao_arm 30 Hz: 1.96°
         against 1.84° mean error). → (μ, F, contradicted (B,) bool, evaluations)."""
         rows = torch.nonzero(rows_mask).squeeze(-1)
         sub = {name: x[rows] for name, x in obs.items()}
         run = self._restarts
-        if self.restart == "encoder":
-            start = guess[rows] if guess is not None else \
-                self._clamp(self.encoder.encode(sub[self.encoder.modality]).to(torch.float64))          # (b, Dz) rad
+        if self.restart == "guess":
+            start = guess[rows] if guess is not None else self._guess(sub)                 # (b, Dz) rad
             result = run.infer(sub, start)
             new_mu, new_free, evaluations = result.mu, torch.where(result.diverged, torch.inf, result.F), \
                 result.evaluations

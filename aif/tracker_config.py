@@ -8,7 +8,8 @@ from dataclasses import dataclass
 from bodyschema.aif.perception_config import FlowSettings, LMSettings, PerceptionConfig, resolve
 from bodyschema.errors import must_be
 
-RESTARTS = ("auto", "encoder", "multistart")
+RESTARTS = ("auto", "guess", "multistart")
+GUESSES = ("auto", "reading", "encoder")
 # (evaluations before the first update, worst case per update) of the descents (descent.py: LM evaluates F, then the
 # derivatives where a step is accepted; adam+lm runs both with the same max_steps)
 DESCENT_COST = {"lm": (1, 2), "adam": (1, 1), "adam+lm": (2, 3)}
@@ -30,7 +31,12 @@ class TrackerConfig:
     lost_threshold: float | None = None   # F above this: lost track; None: set by `calibrate`, else never lost
     lost_quantile: float = 0.99     # calibrate: the quantile of F at the true poses …
     lost_slack: float = 1.0         # … plus this many times its distance to the median (F's spread)
-    restart: str = "auto"           # "encoder" (its guess), "multistart", "auto": the encoder when one is given
+    guess: str = "auto"             # the frame's direct guess of the pose, a start for the proposal and the restarts:
+    # "reading" (a joints sensor's own reading, where one is perceived), "encoder" (the image encoder's), "auto":
+    # the reading where there is one, else the encoder's. The reading is as far from the truth as its noise (1°: a
+    # mean of 0.8°), the encoder's guess ~2.3° on nao_arm, with heavier tails
+    restart: str = "auto"           # "guess" (from the frame's guess), "multistart", "auto": the guess where there is
+    # one, else multistart
     restart_perception: PerceptionConfig = RESTART   # a restart's update ("auto": Adam then LM with an image model)
     # One stream's LM steps are mostly accepted, so each trial brings its derivatives. Adam then LM as in the levels,
     # monotone in F, where undamped Gauss–Newton steps bounce (1.7° against 2.1° on nao_arm at 30 Hz). 2 steps each:
@@ -51,9 +57,9 @@ class TrackerConfig:
     # median. Measured (nao_arm fused with joints, bench/tracking.py, 60 s at 30 Hz): 3.0 restarts 11 % of frames,
     # 0.77° mean error, lost track ≤ 2 frames; 1.0: 16 %, 0.74°, ≤ 2 frames (the restarted frames set the p95: 1 ms
     # more); without the test: 7 %, 0.88°, 13 frames lost (that ambiguity's ½ εᵀΠε ≈ 117 is far above either)
-    proposals: bool = True          # with an encoder and an image model its guess competes with the predicted belief
-    # every frame, the lower F starting the updates (2 F evaluations of the budget): a babbling arm moves up to ~20°
-    # between frames at 30 Hz, farther than an image F's basin around the predicted pose
+    proposals: bool = True          # where there is a guess, it competes with the predicted belief every frame, the
+    # lower F starting the updates (2 F evaluations of the budget): a babbling arm moves up to ~20° between frames at
+    # 30 Hz, farther than an image F's basin around the predicted pose
 
     def __post_init__(self):
         if self.perception.order != 0:
@@ -76,6 +82,8 @@ class TrackerConfig:
                                      (self.lost_quantile, self.lost_slack)))
         if self.restart not in RESTARTS:
             raise ValueError(must_be("restart", f"one of {RESTARTS}", self.restart))
+        if self.guess not in GUESSES:
+            raise ValueError(must_be("guess", f"one of {GUESSES}", self.guess))
         if self.restart_perception.order != 0 or self.restart_starts < 2:
             raise ValueError(must_be("restart_perception.order, restart_starts", "0 and ≥ 2",
                                      (self.restart_perception.order, self.restart_starts)))

@@ -1,12 +1,12 @@
 """Tracking, "where is my arm now?": babbling arms filmed at 10–60 Hz, followed frame by frame.
 
 For every frame rate the robot babbles `trials` streams (streams.py); each sensing condition (the given models alone,
-and fused with the joint encoders) is followed side by side by every method (methods.py): the encoder alone, a
-Pixel-AIF-style per-frame gradient flow with the tracker's budget, and `aif.Tracker` moved by its own velocity or by
-the motor command. Per frame: the belief's joint error (deg) and end-effector error (mm, simulator FK), lost track
-(the hand more than `lost_mm` off the truth) and the frames until it is back, the tracker's own lost-track restarts
-(F above its calibrated threshold), model evaluations, and wall time per frame with the networks' share. Tables,
-error-vs-time curves and plot (report.py), one MLflow run.
+and fused with the joint encoders) is followed side by side by every method (methods.py): the encoder alone, the
+joint encoders' reading alone (fused conditions), a Pixel-AIF-style per-frame gradient flow with the tracker's budget,
+and `aif.Tracker` moved by its own velocity or by the motor command. Per frame: the belief's joint error (deg) and
+end-effector error (mm, simulator FK), lost track (the hand more than `lost_mm` off the truth) and the frames until
+it is back, the tracker's own lost-track restarts (F above its calibrated threshold), model evaluations, and wall time
+per frame with the networks' share. Tables, error-vs-time curves and plot (report.py), one MLflow run.
 """
 
 from __future__ import annotations
@@ -51,7 +51,7 @@ class TrackingConfig(TrialsConfig):
     duration: float = 10.0             # s per stream
     rates: tuple[float, ...] = (10.0, 30.0, 60.0)   # Hz, frame rates (realised as whole physics steps)
     fuse_joints: tuple[bool, ...] = (False, True)   # the models alone, and fused with the joint encoders
-    methods: tuple[str, ...] = METHODS  # encoder, flow, tracker, tracker+command
+    methods: tuple[str, ...] = METHODS  # encoder, reading, flow, tracker, tracker+command
     noise: tuple[tuple[str, float], ...] = (         # σ per modality: m, px, intensity in [0, 1], rad (1°)
         ("ee_xyz", 0.001), ("ee_pixel", 1.0), ("image", 0.02), ("joints", math.radians(1.0)))
     hold_s: tuple[float, float] = (0.2, 1.0)         # s each babbling target is held: datagen's (the demo's) pace

@@ -2,9 +2,11 @@
 that times the networks inside them.
 
   encoder          the image encoder's guess, frame by frame (no perception; needs an encoder and an image model)
+  reading          the joint encoders' reading, frame by frame (no perception; the conditions fused with them): what
+                   fusing the other senses must beat
   flow             a Pixel-AIF-style per-frame gradient flow: Euler steps on F from the last frame's belief, no motion
-                   model, no lost-track handling, with the tracker's budget of model evaluations. Its Δt is the
-                   largest stable one for these models: 1/λ_max of F's Gauss–Newton curvature at the median
+                   model, no proposal, no lost-track handling, with the tracker's budget of model evaluations. Its
+                   Δt is the largest stable one for these models: 1/λ_max of F's Gauss–Newton curvature at the median
                    calibration frame (Pixel-AIF reaches stability instead by a small visual precision 1/Σ_v, which
                    at Δt 0.1 is a far smaller step: a handicap this baseline is spared)
   tracker          `aif.Tracker`: warm start moved by the belief's own velocity, the budget, lost-track restarts
@@ -24,12 +26,12 @@ import torch
 from bodyschema.aif.free_energy import sensory_terms
 from bodyschema.aif.perception import Perception
 from bodyschema.aif.perception_config import FlowSettings, PerceptionConfig
-from bodyschema.aif.tracker import Tracker
+from bodyschema.aif.tracker import Tracker, reading_of
 from bodyschema.aif.tracker_config import TrackerConfig
 from bodyschema.base.modalities import is_image
 from bodyschema.models.contract import FUSED_CALLS
 
-METHODS = ("encoder", "flow", "tracker", "tracker+command")
+METHODS = ("encoder", "reading", "flow", "tracker", "tracker+command")
 CURVATURE_FRAMES = 32             # calibration frames whose curvature sets the flow's Δt (Jacobians of images cost)
 
 
@@ -124,6 +126,18 @@ class EncoderFollower(Follower):
         return Step(mu, np.zeros(len(mu), bool), 0.0)
 
 
+class ReadingFollower(Follower):
+    def __init__(self, modality: str, low: np.ndarray, high: np.ndarray):
+        self.modality, self.low, self.high = modality, low, high
+
+    def start(self, q0):
+        pass
+
+    def frame(self, obs, command, dt):
+        mu = np.clip(obs[self.modality].double().numpy(), self.low, self.high)
+        return Step(mu, np.zeros(len(mu), bool), 0.0)
+
+
 class TrackerFollower(Follower):
     def __init__(self, tracker: Tracker, uses_command: bool):
         self.tracker, self.uses_command = tracker, uses_command
@@ -160,21 +174,26 @@ def flow_config(dt: float) -> PerceptionConfig:
 def make_followers(methods, models, tracker_config: TrackerConfig, encoder, precisions, calibration, seed: int
                    ) -> dict[str, Follower]:
     """The followers of `methods` over the (timed) models; calibration: (q, observations) of the calibration frames.
-    The encoder row needs an encoder and an image model, and is left out without them."""
+    The encoder row needs an encoder and an image model, the reading row a joints model; each is left out without."""
     q, observations = calibration
     out = {}
     has_image = any(is_image(m.modality) for m in models)
+    low, high = np.asarray(models[0].body.q_low), np.asarray(models[0].body.q_high)
+    reading = reading_of(models, len(low))
     for name in methods:
         if name == "encoder":
             if encoder is not None and has_image:
-                low, high = np.asarray(models[0].body.q_low), np.asarray(models[0].body.q_high)
                 out[name] = EncoderFollower(encoder, low, high)
+            continue
+        if name == "reading":
+            if reading is not None:
+                out[name] = ReadingFollower(reading, low, high)
             continue
         if name == "flow":
             probe = Perception(models, precisions=precisions)
             config = TrackerConfig(perception=flow_config(euler_dt(probe, q, observations)),
                                    budget=tracker_config.budget, budget_ms=tracker_config.budget_ms, order=0,
-                                   lost_threshold=None, restart="multistart")
+                                   lost_threshold=None, restart="multistart", proposals=False)
             out[name] = TrackerFollower(Tracker(models, config, precisions=precisions, seed=seed), False)
             continue
         tracker = Tracker(models, tracker_config, encoder if has_image else None, precisions=precisions, seed=seed)

@@ -100,7 +100,7 @@ def test_the_belief_velocity_and_a_command_each_improve_the_warm_start():
     assert errors["velocity"] < errors["still"] and errors["command"] < errors["still"], errors
 
 
-@pytest.mark.parametrize("restart", ["encoder", "multistart"])
+@pytest.mark.parametrize("restart", ["guess", "multistart"])
 def test_a_jump_is_detected_as_lost_track_and_recovered_within_three_frames(restart):
     image = ToyBlobImage()
     q = trajectory(30, 4, seed=2)
@@ -186,6 +186,28 @@ def test_a_restart_reuses_its_frames_encoder_guess():
     tracker.reset(q[0])
     _, restarted = run(tracker, q, image)
     assert restarted.all() and encoder.calls == len(q), "one encoder call per frame: proposal and restart share it"
+
+
+def test_a_joints_reading_is_the_frames_guess_and_catches_a_jump_without_the_encoder():
+    """With joint encoders perceived, their reading (1° off) is the frame's guess, not the encoder's (a grid several
+    degrees coarse): the encoder is never asked, and the proposal catches a jump on its frame without a restart."""
+    image, joints = ToyBlobImage(precision=NOISE ** -2), ToyJoints(precision=DEG ** -2)
+    q = trajectory(12, 4, seed=2)
+    q[6:] = q[6:] + torch.tensor([-1.0, 0.6], dtype=torch.float64)
+    encoder = CountingEncoder(image)
+    tracker = Tracker([image, joints], TrackerConfig(budget=4, settle_quantile=None), encoder, limits=ELBOW_BENT)
+    calibration = trajectory(50, 4, seed=3).reshape(-1, 2)
+    tracker.calibrate({"image": seen(image, calibration, NOISE, seed=9),
+                       "joints": seen(joints, calibration, DEG, seed=10)}, calibration)
+    images, readings = seen(image, q, NOISE, seed=11), seen(joints, q, DEG, seed=12)
+    tracker.reset(q[0])
+    beliefs, restarted = [], []
+    for k in range(len(q)):
+        beliefs.append(tracker.step({"image": images[k], "joints": readings[k]}, dt=DT)[0])
+        restarted.append(tracker.last.restarted)
+    err = (torch.stack(beliefs) - q).abs().amax(-1) / DEG                  # (T, B) worst joint, deg
+    assert tracker.guesses == "reading" and tracker.restart == "guess" and encoder.calls == 0
+    assert not torch.stack(restarted)[1:].any() and (err[6:] < 3).all(), err.T
 
 
 def test_the_first_frame_is_acquired_by_a_restart():
@@ -274,7 +296,13 @@ def test_bad_configs_raise():
     with pytest.raises(ValueError, match="budget must be at least 5"):
         Tracker([arm], TrackerConfig(perception=PerceptionConfig(method="adam+lm"), budget=4))
     with pytest.raises(ValueError, match="restart must be 'multistart'"):
-        Tracker([arm], TrackerConfig(restart="encoder"))
+        Tracker([arm], TrackerConfig(restart="guess"))
+    with pytest.raises(ValueError, match="restart must be one of"):
+        TrackerConfig(restart="encoder")
+    with pytest.raises(ValueError, match="guess must be 'encoder' or 'auto' without a joints model"):
+        Tracker([arm], TrackerConfig(guess="reading"))
+    with pytest.raises(ValueError, match="guess must be 'reading' or 'auto' without an encoder"):
+        Tracker([arm], TrackerConfig(guess="encoder"))
     with pytest.raises(ValueError, match="settle_quantile must be"):
         TrackerConfig(settle_quantile=1.0)
     with pytest.raises(ValueError, match="mu0 must be"):

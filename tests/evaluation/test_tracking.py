@@ -36,11 +36,14 @@ def test_a_run_writes_its_tables_and_plot_and_the_tracker_beats_the_same_budget_
     with open(paths["summary_csv"], newline="") as f:
         rows = list(csv.DictReader(f))
     cases = {(r["rate_hz"], r["condition"], r["method"]) for r in rows}
-    assert len(cases) == len(rows) == 2 * 2 * 3, "rates × (ee_xyz, ee_xyz+joints) × (flow, tracker, +command)"
+    assert len(cases) == len(rows) == 2 * (3 + 4), "rates × (ee_xyz: flow, tracker, +command; +joints: + reading)"
     assert "encoder" not in {r["method"] for r in rows}, "no encoder row without an encoder and an image model"
+    assert {r["condition"] for r in rows if r["method"] == "reading"} == {"ee_xyz+joints"}
     fused = {(r["rate_hz"], r["method"]): float(r["joint_err_deg"]) for r in rows if r["condition"] == "ee_xyz+joints"}
     for rate in {r["rate_hz"] for r in rows}:
         assert fused[(rate, "tracker")] < fused[(rate, "flow")], fused
+        assert fused[(rate, "tracker")] < fused[(rate, "reading")], "fusing 1 mm ee readings beats the 1° joints alone"
+        assert abs(fused[(rate, "reading")] - 0.80) < 0.2, "the reading is as far off as its noise: E|N(0, 1°)| = 0.8°"
     assert all(float(r["evaluations_per_frame"]) <= 8 + 1e-9 for r in rows if r["method"] == "flow")
     assert "| case |" in paths["summary_md"].read_text()
 
