@@ -18,6 +18,7 @@ Every follower starts at the true first pose: the benchmark measures following, 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -114,27 +115,17 @@ class Follower:
         raise NotImplementedError
 
 
-class EncoderFollower(Follower):
-    def __init__(self, encoder, low: np.ndarray, high: np.ndarray):
-        self.encoder, self.low, self.high = encoder, low, high
+class GuessFollower(Follower):
+    """A direct guess of the pose each frame, no perception: guess(observations) → (B, Dz) rad, kept in the box."""
+
+    def __init__(self, guess: Callable[[dict], torch.Tensor], low: np.ndarray, high: np.ndarray):
+        self.guess, self.low, self.high = guess, low, high
 
     def start(self, q0):
         pass
 
     def frame(self, obs, command, dt):
-        mu = np.clip(self.encoder.encode(obs[self.encoder.modality]).double().numpy(), self.low, self.high)
-        return Step(mu, np.zeros(len(mu), bool), 0.0)
-
-
-class ReadingFollower(Follower):
-    def __init__(self, modality: str, low: np.ndarray, high: np.ndarray):
-        self.modality, self.low, self.high = modality, low, high
-
-    def start(self, q0):
-        pass
-
-    def frame(self, obs, command, dt):
-        mu = np.clip(obs[self.modality].double().numpy(), self.low, self.high)
+        mu = np.clip(self.guess(obs).double().numpy(), self.low, self.high)
         return Step(mu, np.zeros(len(mu), bool), 0.0)
 
 
@@ -183,11 +174,11 @@ def make_followers(methods, models, tracker_config: TrackerConfig, encoder, prec
     for name in methods:
         if name == "encoder":
             if encoder is not None and has_image:
-                out[name] = EncoderFollower(encoder, low, high)
+                out[name] = GuessFollower(lambda obs: encoder.encode(obs[encoder.modality]), low, high)
             continue
         if name == "reading":
             if reading is not None:
-                out[name] = ReadingFollower(reading, low, high)
+                out[name] = GuessFollower(lambda obs: obs[reading], low, high)
             continue
         if name == "flow":
             probe = Perception(models, precisions=precisions)
