@@ -168,7 +168,7 @@ IMITATOR_DELAYS = (("imitator d = 0", "0.00"), ("0.05 s", "0.05"), ("0.1 s", "0.
                    ("0.5 s", "0.50"))
 SELF_RECOGNITION = Recipe(
     name="self-recognition",
-    about="is this me? nao_arm, 100 episodes per condition, 20 frames of 0.05 s, seed 0: the exact ee_pixel model "
+    about="is this me? nao_arm, 100 episodes per condition, 20 frames of 0.05 s, seed 0: the exact ee_pixel model, "
           "a GPR of ee_pixel and the levels' pixel decoder on the levels' store, that decoder fused with the GPR, and "
           "the decoder with its former per-frame start (README: Self-recognition)",
     steps=(NAO_DATA, DECODER, GPR_EE_PIXEL,
