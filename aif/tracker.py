@@ -93,7 +93,8 @@ class Tracker:
         self.reset()
 
     def _guess_source(self, choice: str, encoder) -> str | None:
-        """"reading", "encoder" or None (no guess): config.guess, checked against what this tracker perceives."""
+        """The source of the frame's guess, "reading", "encoder" or None (none): config.guess, checked against the
+        models this tracker perceives."""
         has_encoder = encoder is not None and encoder.modality in self._modalities
         if choice == "reading" and self.reading is None:
             raise ValueError(must_be("guess", "'encoder' or 'auto' without a joints model", "reading"))
