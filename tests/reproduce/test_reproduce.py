@@ -173,7 +173,7 @@ def test_the_cost_probe_scales_a_step_to_its_full_size(tmp_path):
 def test_an_exact_gp_is_scaled_by_the_samples_of_its_likelihood_not_the_store(tmp_path):
     """A GP on 18 000 poses fits its hyper-parameters on `hyper_points` of them and solves once on at most
     `max_points`: its estimate is the cube of hyper_points / PROBE_ROWS, not of the store's size (which printed 96 h
-    for a 2-minute step)."""
+    for a 20-second fit)."""
     data, gp = TINY.steps[:2]
     values = {"run": str(tmp_path / "run"), "workers": "1", "device": "cpu", "tracking": "unused"}
     full = reproduce_run._full_configs([data, gp], values, {})
