@@ -45,7 +45,7 @@ from bodyschema.errors import must_be
 ENV = "BODYSCHEMA_THREADS"
 USER_ENV = ("OMP_NUM_THREADS", "MKL_NUM_THREADS")   # what torch itself reads at start
 FASTER_BY = 1.25          # N threads must make a step this much faster than 1 to be chosen (asymmetric risk, above)
-ROUNDS = 3                # measured steps per thread count, after one warm-up step each (oneDNN primitive creation)
+ROUNDS = 3                # measured steps per thread count, after one warm-up step each (pool start, oneDNN primitives)
 # The commands that run networks or GPs in their own process (`reproduce` runs its steps in-process).
 NETWORK_COMMANDS = ("train", "sweep", "evaluate", "demo", "reproduce")
 _log = logging.getLogger(__name__)
@@ -183,7 +183,9 @@ def pinned(threads: int) -> Iterator[None]:
 
 def measure_probe(threads: int, rounds: int = ROUNDS) -> dict:
     """Seconds of one training step of a small decoder at 1 and at `threads` intra-op threads, in rounds of one step
-    each (load from other processes hits both alike), after a warm-up step at 1 thread (oneDNN's primitives).
+    each (load from other processes hits both alike), after a warm-up step at each count: oneDNN's primitives, and
+    at `threads` the OpenMP pool's start, which alone made the first N-thread step 2–7× the 1-thread step on an idle
+    2-core machine where N threads are 1.5× faster after it (the policy then chose 1 there).
     It stops once a majority of `rounds` is decided either way (a round is won by `threads` when its step is
     FASTER_BY faster than the round's 1-thread step), or at once when `threads` are more than 2× slower (the loaded
     machine: its N-thread step is the expensive one, ~1 s on 2 cores at load 7). torch's count is restored.
@@ -192,7 +194,9 @@ def measure_probe(threads: int, rounds: int = ROUNDS) -> dict:
     times: dict[int, list[float]] = {1: [], threads: []}
     won = lost = 0
     with pinned(1):
-        step()
+        for n in times:
+            _set(n)
+            step()
         while max(won, lost) <= rounds // 2:
             for n in times:
                 _set(n)

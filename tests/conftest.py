@@ -1,7 +1,15 @@
 """Suite-wide guards."""
 
+import os
+
 import pytest
 import torch
+
+# The CLI's thread policy (bodyschema/threads.py) measures 1 against N torch threads once per process; on an idle
+# machine the two are within its 1.25× margin, so two runs of one command could choose differently and differ in the
+# last float digits. The suite's commands and their child processes run at one thread; the policy's own tests unset
+# this (tests/test_threads_policy.py, fixture `policy`).
+os.environ.setdefault("BODYSCHEMA_THREADS", "1")
 
 
 @pytest.fixture(autouse=True)

@@ -114,6 +114,25 @@ def test_measure_probe_restores_the_count(policy):
     assert torch.get_num_threads() == 4
 
 
+def test_the_first_step_at_each_count_is_a_warm_up_not_a_round(policy, monkeypatch):
+    """A step whose first run at a thread count is slow (OpenMP's pool starting, oneDNN's primitives) and whose later
+    runs are 3× faster at 2 threads: the probe must choose 2. Timed on the fake step's own sleeps (30 ms start-up
+    against 1–3 ms steps: far above a loaded scheduler's jitter on this order)."""
+    import time
+
+    started = set()
+
+    def step():
+        n = torch.get_num_threads()
+        time.sleep(0.030 if n not in started else (0.001 if n == 2 else 0.003))
+        started.add(n)
+
+    monkeypatch.setattr(threads, "_probe", lambda: step)
+    seconds = threads.measure_probe(2)
+    assert seconds["won"] * 2 > seconds["rounds"], seconds
+    assert seconds[2] < seconds[1] < 0.030
+
+
 def test_verbose_line_states_the_count_and_why(policy, tmp_path, capsys, monkeypatch):
     """A network command with --verbose says the count and its reason on stderr before it runs (here it then fails
     at its data: nothing is trained)."""
