@@ -13,10 +13,12 @@ The rule (`choose`; the first that applies wins):
      since this module was imported (`torch.set_num_threads` in the host script) → left as it is.
   3. torch has one thread anyway: 1.
   4. Measured: training steps of a small decoder (the demo's lean pixel decoder at batch 16) at 1 and at N threads
-     (torch's count), in rounds of one step each; N only when it is `FASTER_BY` faster in most rounds: one thread
-     loses at most N× on an idle machine and only on these small ops, N threads lost 10× and more beside other work.
-The measurement is made once per process and kept (0.7–2.7 s measured at load 5–8.5 on 2 cores, the N-thread steps being
-the slow ones; a few 10–30 ms steps where the cores are free). Load that starts after it is not seen.
+     (torch's count), in rounds of STEPS_PER_ROUND steps at each count; N only when it is `FASTER_BY` faster in most
+     rounds: one thread loses at most N× on an idle machine and only on these small ops, N threads lost 10× and more
+     beside other work.
+The measurement is made once per process and kept (on 2 cores, torch's import included: ~1 s idle, 2.1–2.7 s beside a
+spinning process per core, where the N-thread block gives up after twice the 1-thread block's time). Load that starts
+after it is not seen.
 
 Who applies it: the CLI, around the commands that run networks (`applied_for`); a library call keeps the host's
 torch threads unless it calls `apply()` (as a library call prints nothing unless asked, bodyschema/log.py). Code
@@ -45,7 +47,10 @@ from bodyschema.errors import must_be
 ENV = "BODYSCHEMA_THREADS"
 USER_ENV = ("OMP_NUM_THREADS", "MKL_NUM_THREADS")   # what torch itself reads at start
 FASTER_BY = 1.25          # N threads must make a step this much faster than 1 to be chosen (asymmetric risk, above)
-ROUNDS = 3                # measured steps per thread count, after one warm-up step each (pool start, oneDNN primitives)
+ROUNDS = 3                # measured rounds per thread count, after a warm-up step each (pool start, oneDNN primitives)
+STEPS_PER_ROUND = 16      # steps a round times at each count: ~80 ms, several of the scheduler's slices. Rounds of one
+# step let a hog's contention slip between slices: beside a spinning process per core, 2 threads won in 3 of 6 fresh
+# processes, and `make demo` took 544 s instead of ~100 (its levels and tracking 16–47× slower); 16 steps: 0 of 6
 # The commands that run networks or GPs in their own process (`reproduce` runs its steps in-process).
 NETWORK_COMMANDS = ("train", "sweep", "evaluate", "demo", "reproduce")
 _log = logging.getLogger(__name__)
@@ -182,14 +187,14 @@ def pinned(threads: int) -> Iterator[None]:
 
 
 def measure_probe(threads: int, rounds: int = ROUNDS) -> dict:
-    """Seconds of one training step of a small decoder at 1 and at `threads` intra-op threads, in rounds of one step
-    each (load from other processes hits both alike), after a warm-up step at each count: oneDNN's primitives, and
-    at `threads` the OpenMP pool's start, which alone made the first N-thread step 2–7× the 1-thread step on an idle
-    2-core machine where N threads are 1.5× faster after it (the policy then chose 1 there).
-    It stops once a majority of `rounds` is decided either way (a round is won by `threads` when its step is
-    FASTER_BY faster than the round's 1-thread step), or at once when `threads` are more than 2× slower (the loaded
-    machine: its N-thread step is the expensive one, ~1 s on 2 cores at load 7). torch's count is restored.
-    → {1: median s, threads: median s, "won": rounds won by `threads`, "rounds": rounds run}"""
+    """Seconds per training step of a small decoder at 1 and at `threads` intra-op threads, in rounds of
+    STEPS_PER_ROUND steps at each count (load from other processes hits both alike), after a warm-up step at each
+    count: oneDNN's primitives, and at `threads` the OpenMP pool's start (alone 2–7× a 1-thread step).
+    It stops once a majority of `rounds` is decided either way (a round is won by `threads` when its steps are
+    FASTER_BY faster than the round's 1-thread steps), or at once when `threads` are more than 2× slower (the loaded
+    machine: its N-thread steps are the expensive ones, ~0.5 s each on 2 cores beside a hog; the block gives up
+    there). torch's count is restored.
+    → {1: s per step, threads: s per step (medians over rounds), "won": rounds won by `threads`, "rounds": run}"""
     step = _probe()
     times: dict[int, list[float]] = {1: [], threads: []}
     won = lost = 0
@@ -198,17 +203,25 @@ def measure_probe(threads: int, rounds: int = ROUNDS) -> dict:
             _set(n)
             step()
         while max(won, lost) <= rounds // 2:
-            for n in times:
-                _set(n)
-                start = time.perf_counter()
-                step()
-                times[n].append(time.perf_counter() - start)
+            _set(1)
+            times[1].append(_block(step, STEPS_PER_ROUND))
+            _set(threads)
+            times[threads].append(_block(step, STEPS_PER_ROUND, give_up=2 * STEPS_PER_ROUND * times[1][-1]))
             if times[threads][-1] * FASTER_BY <= times[1][-1]:
                 won += 1
             else:
                 lost += 1 if times[threads][-1] <= 2 * times[1][-1] else rounds    # far slower: decided
     return {1: statistics.median(times[1]), threads: statistics.median(times[threads]), "won": won,
             "rounds": len(times[1])}
+
+
+def _block(step: Callable[[], None], steps: int, give_up: float = float("inf")) -> float:
+    """Seconds per step over `steps` steps, or over the steps run once `give_up` seconds have passed."""
+    start, done = time.perf_counter(), 0
+    while done < steps and (done == 0 or time.perf_counter() - start <= give_up):
+        step()
+        done += 1
+    return (time.perf_counter() - start) / done
 
 
 def _probe() -> Callable[[], None]:

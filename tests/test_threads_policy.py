@@ -133,6 +133,24 @@ def test_the_first_step_at_each_count_is_a_warm_up_not_a_round(policy, monkeypat
     assert seconds[2] < seconds[1] < 0.030
 
 
+def test_a_count_far_slower_is_given_up_within_its_first_round(policy, monkeypatch):
+    """Beside a hog an N-thread step took ~0.5 s against 5 ms: the probe stops the N-thread block once it has spent
+    twice the 1-thread block's time, and the choice is 1 thread after that one round (counted calls, no timing)."""
+    import time
+
+    calls = {1: 0, 2: 0}
+
+    def step():
+        n = torch.get_num_threads()
+        calls[n] += 1
+        time.sleep(0.001 if n == 1 else 0.1)
+
+    monkeypatch.setattr(threads, "_probe", lambda: step)
+    seconds = threads.measure_probe(2)
+    assert (seconds["won"], seconds["rounds"]) == (0, 1)
+    assert calls == {1: 1 + threads.STEPS_PER_ROUND, 2: 1 + 1}       # a warm-up each, then one slow step given up
+
+
 def test_verbose_line_states_the_count_and_why(policy, tmp_path, capsys, monkeypatch):
     """A network command with --verbose says the count and its reason on stderr before it runs (here it then fails
     at its data: nothing is trained)."""
