@@ -107,10 +107,11 @@ class PixelConfig(ModelConfig):
     precision: float | None = None  # fixed Π_x per pixel; None: 1/σ² of the validation residuals
     epochs: int = 100  # at most this many passes over the training set
     batch_size: int = 64  # images per gradient step
-    lr: float | None = None  # Adam learning rate; None: the preset's (2e-3; splat 3e-3; pixel_aif by mse 5e-4)
+    lr: float | None = None  # Adam learning rate; None: the preset's (lean 4e-3, pixel_aif 2e-3 / mse 5e-4, splat 3e-3)
     patience: int = 10  # stop after this many epochs without a better validation loss
     weight_decay: float = 0.0  # Adam's L2 penalty
-    lr_schedule: Literal["constant", "cosine", "wsd"] = "constant"  # cosine: to 0 over epochs; wsd: in the last 20 %
+    lr_schedule: Literal["constant", "cosine", "wsd"] | None = None  # cosine: to 0 over epochs; wsd: in the last 20 %;
+    # None: the preset's (lean wsd, the others constant)
 
 
 @dataclass(frozen=True)

@@ -256,7 +256,16 @@ def test_pixel_aif_steps_at_2e3_by_cross_entropy_and_at_5e4_by_mse_unless_told()
     def step(size="pixel_aif", **kw):
         return PixelDecoder(ToyPlanarArm().body, "image", HW, size=size, **kw).settings.lr
     assert (step(), step(loss="mse"), step(loss="mse", lr=1e-3)) == (2e-3, 5e-4, 1e-3)
-    assert step("lean") == step("lean", loss="mse") == 2e-3                       # lean: one step for both
+    assert step("lean") == step("lean", loss="mse") == 4e-3                       # lean: one step for both
+
+
+def test_each_size_has_its_schedule_unless_told():
+    """lean decays its larger step over the last 20 % of the epochs (SIZES); the others keep a constant step; an
+    explicit schedule wins (tests/models/test_lr_schedule.py: it survives a save and load)."""
+    def schedule(size, **kw):
+        return PixelDecoder(ToyPlanarArm().body, "image", HW, size=size, **kw).settings.lr_schedule
+    assert (schedule("lean"), schedule("pixel_aif"), schedule("splat")) == ("wsd", "constant", "constant")
+    assert schedule("lean", lr_schedule="constant") == "constant"
 
 
 @pytest.mark.usefixtures("tiny_threads")
