@@ -14,7 +14,7 @@ Both are minimised by the pixel's mean given the pose; they differ in the gradie
 pushes every logit far down in the first epochs, σ(1 − σ) vanishes there, and no pose is learned after: one dark
 image for every pose (SO-101 at 64×64, README "Your own robot"). The cross-entropy's gradient does not vanish.
 
-Two named capacities (`size`), each with its Adam step: "lean" (FC 64, channels 32/16/8, lr 2e-3) and
+Two named capacities (`size`), each with its Adam step: "lean" (FC 64, channels 32/16/8, lr 4e-3 and wsd) and
 "pixel_aif" (lr 2e-3; 5e-4 with the squared error, at 2e-3 a black image: see SIZES), the size of Pixel-AIF's
 NAO decoder (FC 4→512→1120 = 16×7×10 at 56×80, transposed convolutions 16→64→16→C, each but the last
 followed by a 3×3 convolution of the same width, which Pixel-AIF adds against checkerboard artifacts).
@@ -47,8 +47,8 @@ SIZES = {   # name → capacity and its Adam step; an explicit fc_hidden / chann
     # lean's step: 4e-3, held until the last 20 % of --epochs and then decayed (`_nn_fit.schedule_factor`). At 2e-3
     # (the default until 2026-11-30) the decoder was far from its fit at the recipes' end: on the same stores and
     # epochs the mean floor over the seen joints fell on all five stores measured (nao_arm 3 000 poses 2.3×, 18 000
-    # poses 1.2× and L1 1.87° → 1.16°, SO-101, Z1 and the UR5 1.4–1.8×; README "Lean's step"). The step is the
-    # cause: a constant 4e-3 did as well on nao_arm's short store, 2e-3 with wsd no better than 2e-3
+    # poses 1.3× and L1 1.87° → 1.16°, Z1 1.4×, the UR5 1.7×, SO-101's first four joints 1.5×; README "Lean's
+    # step"). The step is the cause: a constant 4e-3 did as well on nao_arm's short store, 2e-3 with wsd no better
     # mse_lr, its step under the squared error: at 2e-3 the first epoch's steps blow up the unnormalised conv stack
     # (ELU outputs' mean 4, 8, 12 after the refines) and the last layer lands at -40 on every pixel: a black image,
     # σ' ≈ e⁻⁴⁰, and the squared error's gradient carries that σ' (nao_arm 64×64, 600 images: held-out MSE frozen at
