@@ -132,7 +132,8 @@ def measure(name: str, work: Path, o: argparse.Namespace) -> dict[str, str]:
     minutes["levels gpr"] = s / 60
     gpr_l1 = levels_rows(folder / "levels_gpr")["1"]["joint_err_deg"]
     out, s = bodyschema(["train", "pixel", *train, "--epochs", str(o.epochs), "--size", o.pixel_size,
-                         *(["--lr", str(o.pixel_lr)] if o.pixel_lr else []), "--lr-schedule", o.pixel_schedule,
+                         *(["--lr", str(o.pixel_lr)] if o.pixel_lr else []),
+                         *(["--lr-schedule", o.pixel_schedule] if o.pixel_schedule else []),
                          *(["--loss", o.pixel_loss] if o.pixel_loss else [])], log)
     pixel, minutes["train pixel"] = registered(out), s / 60
     out, s = bodyschema(["train", "encoder", *train, "--epochs", str(o.epochs)], log)
@@ -167,7 +168,7 @@ def main() -> None:
     parser.add_argument("--epochs", type=int, default=40)
     parser.add_argument("--pixel-size", default="lean", help="train pixel's --size (models/pixel.py SIZES)")
     parser.add_argument("--pixel-lr", type=float, default=None, help="train pixel's --lr (default: the size's)")
-    parser.add_argument("--pixel-schedule", default="constant", help="train pixel's --lr-schedule")
+    parser.add_argument("--pixel-schedule", default=None, help="train pixel's --lr-schedule (default: the size's)")
     parser.add_argument("--pixel-loss", default=None, help="train pixel's --loss (default: the size's; the README's "
                         "nine-arm table: mse)")
     parser.add_argument("--trials", type=int, default=50)
