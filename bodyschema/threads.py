@@ -216,7 +216,7 @@ def measure_probe(threads: int, rounds: int = ROUNDS) -> dict:
 
 
 def _block(step: Callable[[], None], steps: int, give_up: float = float("inf")) -> float:
-    """Seconds per step over `steps` steps, or over the steps run once `give_up` seconds have passed."""
+    """Seconds per step over `steps` steps, stopping early (after at least one) once `give_up` seconds have passed."""
     start, done = time.perf_counter(), 0
     while done < steps and (done == 0 or time.perf_counter() - start <= give_up):
         step()

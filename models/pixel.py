@@ -49,7 +49,7 @@ SIZES = {   # name → capacity and its Adam step; an explicit fc_hidden / chann
     # epochs the mean floor over the seen joints fell on all five stores measured (nao_arm 3 000 poses 2.3×, 18 000
     # poses 1.3× and L1 1.87° → 1.16°, Z1 1.4×, the UR5 1.7×, SO-101's first four joints 1.5×; README "Lean's
     # step"). The step is the cause: a constant 4e-3 did as well on nao_arm's short store, 2e-3 with wsd no better
-    # mse_lr, its step under the squared error: at 2e-3 the first epoch's steps blow up the unnormalised conv stack
+    # pixel_aif's mse_lr, its step under the squared error: at 2e-3 the first epoch's steps blow up its conv stack
     # (ELU outputs' mean 4, 8, 12 after the refines) and the last layer lands at -40 on every pixel: a black image,
     # σ' ≈ e⁻⁴⁰, and the squared error's gradient carries that σ' (nao_arm 64×64, 600 images: held-out MSE frozen at
     # 0.0317 from epoch 2, pose variation 0; at 56×80 too). The cross-entropy's does not: at 2e-3 it trains, 30 epochs
