@@ -48,7 +48,7 @@ SIZES = {   # name → capacity and its Adam step; an explicit fc_hidden / chann
     # (the default until 2026-11-30) the decoder was far from its fit at the recipes' end: on the same stores and
     # epochs the mean floor over the seen joints fell on all five stores measured (nao_arm 3 000 poses 2.3×, 18 000
     # poses 1.3× and L1 1.87° → 1.16°, Z1 1.4×, the UR5 1.7×, SO-101's first four joints 1.5×; README "Lean's
-    # step"). The step is the cause: a constant 4e-3 did as well on nao_arm's short store, 2e-3 with wsd no better
+    # step"). The step is the cause: a constant 4e-3 did as well on nao_arm's short store, 2e-3 with wsd no better.
     # pixel_aif's mse_lr, its step under the squared error: at 2e-3 the first epoch's steps blow up its conv stack
     # (ELU outputs' mean 4, 8, 12 after the refines) and the last layer lands at -40 on every pixel: a black image,
     # σ' ≈ e⁻⁴⁰, and the squared error's gradient carries that σ' (nao_arm 64×64, 600 images: held-out MSE frozen at
