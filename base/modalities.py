@@ -69,17 +69,21 @@ class Modality:
         return IMAGE_UNIT if self.is_image else self.unit
 
 
-# Default precisions: 1 / σ² with σ = 1 mm, 1 px, 1° (the analytic model's fixed Π).
+# Default precisions: 1 / σ² with σ = 1 mm, 1 px, 1° (the analytic model's fixed Π). The ee's orientation is its
+# rotation matrix row by row (a hinge moves each entry by a degree-one polynomial of its cos q, sin q, as it moves
+# ee_xyz: the GP's kinematic kernel holds both exactly); a turn by θ moves entries by up to θ, so σ = 1° is 0.0175.
 MODALITIES: dict[str, Modality] = {m.name: m for m in (
     Modality("joints", "rad", ("Dq",), ("joint",), 1.0 / math.radians(1.0) ** 2, array="q", error_unit="deg"),
     Modality("ee_xyz", "m", (3,), ("x", "y", "z"), 1.0 / 1e-3 ** 2, error_unit="mm"),
+    Modality("ee_rot", "1", (9,), tuple(f"r{i}{k}" for i in range(3) for k in range(3)),
+             1.0 / math.radians(1.0) ** 2),
     Modality(EE_PIXEL, "px", (2,), ("u", "v"), 1.0),
     Modality(IMAGE, "intensity", ("image",), ("row", "col", "channel"), dtype="uint8", kind="image", camera="",
              error_unit="MSE"),
     Modality("touch", "N", (1,), ("contact",), sensor=True),
     Modality("jacobian", "m/rad", (3, "Dq"), ("xyz", "joint")),
 )}
-KINEMATIC = ("ee_xyz", EE_PIXEL, "joints")              # what forward kinematics gives (models/analytic.py)
+KINEMATIC = ("ee_xyz", "ee_rot", EE_PIXEL, "joints")              # what forward kinematics gives (models/analytic.py)
 SHIPPED = tuple(MODALITIES)
 
 

@@ -3,13 +3,15 @@
     MUJOCO_GL=egl .venv/bin/python bench/foreign_arms.py [--arms ur5 so_arm ...] [--n 3000] [--epochs 40]
         [--trials 50] [--pixel-size lean|pixel_aif|splat] [--pixel-lr LR] [--pixel-schedule constant|cosine|wsd]
         [--pixel-loss cross_entropy|mse]
-        [--work bench_out/foreign] [--quick]
+        [--work bench_out/foreign] [--kinematics-only] [--quick]
 
 Per arm, in a folder of its own (its own MLflow store): `robot init` (a file: the visuals it can load, nothing
-edited by hand) and `robot camera`, then `datagen` (uniform poses, the record's image size), `train gpr` (ee_xyz)
-and the GPR levels (level 1), `train pixel` and `train encoder` and the pixel levels 1–3 with and without the
-encoder (its floor row: perception started at the truth, per joint), `evaluate reaching` with the GPR and the joints
-(AIF against the PD baseline). The floor of a joint datagen's observability check does not see is in parentheses;
+edited by hand) and `robot camera`, then `datagen` (uniform poses, the record's image size), `train gpr` (ee_xyz, and
+ee_rot: the ee's orientation) and the GPR levels (level 1, ee_xyz alone and with ee_rot), `train pixel` and
+`train encoder` and the pixel levels 1–3 with and without the encoder (its floor row: perception started at the
+truth, per joint), `evaluate reaching` with the GPR and the joints (AIF against the PD baseline);
+`--kinematics-only`: no images, the GPR columns and reaching.
+The floor of a joint datagen's observability check does not see is in parentheses;
 the worst floor over the others is the issue's bar (≤ 2°). Prints one markdown row per arm and the wall minutes of
 each step (2 CPU cores: the recipe's CPU time) and writes them to <work>/table.md. Arms: the three shipped ones and
 arms of packages in the test extra the project did not write (example-robot-data, dm_control), `--visual` chosen as
@@ -121,16 +123,29 @@ def measure(name: str, work: Path, o: argparse.Namespace) -> dict[str, str]:
     minutes: dict[str, float] = {}
     robot = robot_of(name, folder, log, minutes)
     data = folder / "data.zarr"
-    out, s = bodyschema(["datagen", "--robot", robot, "--n", str(o.n), "--out", str(data), "--no-progress"], log)
+    out, s = bodyschema(["datagen", "--robot", robot, "--n", str(o.n), "--out", str(data), "--no-progress",
+                         *(["--no-images", "--workspace", "camera"] if o.kinematics_only else [])], log)
     minutes["datagen"], ms_per_image, unseen = s / 60, 1000 * s / o.n, unseen_joints(out)
     train = [*common, "--run-root", str(folder / "runs"), "--no-progress", "--data", str(data)]
-    out, s = bodyschema(["train", "gpr", *train, "--modality", "ee_xyz"], log)
-    gpr, minutes["train gpr"] = registered(out), s / 60
     bench = [*common, "--no-progress", "--no-plots", "--trials", str(o.trials), "--runs", "1"]
-    _, s = bodyschema(["evaluate", "levels", *bench, "--model", gpr, "--levels", "1", "--multistart", "0",
-                       "--no-floor", "--out", str(folder / "levels_gpr")], log)
-    minutes["levels gpr"] = s / 60
-    gpr_l1 = levels_rows(folder / "levels_gpr")["1"]["joint_err_deg"]
+    gpr = {}
+    for modality in ("ee_xyz", "ee_rot"):
+        out, s = bodyschema(["train", "gpr", *train, "--modality", modality], log)
+        gpr[modality], minutes[f"train gpr {modality}"] = registered(out), s / 60
+    gpr_l1 = {}
+    for sensed in (("ee_xyz",), ("ee_xyz", "ee_rot")):
+        models = [arg for m in sensed for arg in ("--model", gpr[m])]
+        out_dir = folder / f"levels_gpr_{'_'.join(sensed)}"
+        _, s = bodyschema(["evaluate", "levels", *bench, *models, "--levels", "1", "--multistart", "0",
+                           "--no-floor", "--out", str(out_dir)], log)
+        minutes[f"levels gpr {'+'.join(sensed)}"] = s / 60
+        gpr_l1[sensed] = f"{float(levels_rows(out_dir)['1']['joint_err_deg']):.2f}"
+    kinematics = {"arm": name, "GPR L1 (°)": gpr_l1[("ee_xyz",)],
+                  "GPR L1, ee_xyz + ee_rot (°)": gpr_l1[("ee_xyz", "ee_rot")]}
+    if o.kinematics_only:
+        return {**kinematics, **reaching(robot, gpr["ee_xyz"], folder, common, o, log, minutes),
+                "recipe minutes": f"{sum(minutes.values()):.1f}",
+                "steps": ", ".join(f"{k} {v:.1f}" for k, v in minutes.items())}
     out, s = bodyschema(["train", "pixel", *train, "--epochs", str(o.epochs), "--size", o.pixel_size,
                          *(["--lr", str(o.pixel_lr)] if o.pixel_lr else []),
                          *(["--lr-schedule", o.pixel_schedule] if o.pixel_schedule else []),
@@ -142,6 +157,21 @@ def measure(name: str, work: Path, o: argparse.Namespace) -> dict[str, str]:
                        "--out", str(folder / "levels_pixel")], log)
     minutes["levels pixel"] = s / 60
     px = levels_rows(folder / "levels_pixel")
+    reached = reaching(robot, gpr["ee_xyz"], folder, common, o, log, minutes)
+    level = {k: f"{float(px[k]['joint_err_deg']):.2f}" for k in px if k != "floor"}
+    per_joint = floors(px)
+    return {**kinematics,
+            "pixel floor per joint (°), (not seen)": floor_text(per_joint, unseen),
+            "worst seen joint's floor (°)": worst_seen(per_joint, unseen),
+            "pixel L1 / L2 / L3 (°)": " / ".join(level.get(k, "–") for k in ("1", "2", "3")),
+            "+ encoder": " / ".join(level.get(k, "–") for k in ("1+enc", "2+enc", "3+enc")),
+            **reached, "datagen ms/image": f"{ms_per_image:.1f}", "recipe minutes": f"{sum(minutes.values()):.1f}",
+            "steps": ", ".join(f"{k} {v:.1f}" for k, v in minutes.items())}
+
+
+def reaching(robot: str, gpr: str, folder: Path, common: list[str], o: argparse.Namespace, log: Path,
+             minutes: dict[str, float]) -> dict[str, str]:
+    """`evaluate reaching` with the GPR of ee_xyz and the joints: the AIF's and the PD baseline's success (%)."""
     reach = [*common, "--no-progress", "--trials", str(o.reach_trials)]
     joints = f"analytic:{robot}:joints"
     _, s = bodyschema(["evaluate", "reaching", *reach, "--robot", robot, "--model", gpr, "--model", joints,
@@ -149,16 +179,7 @@ def measure(name: str, work: Path, o: argparse.Namespace) -> dict[str, str]:
     minutes["reaching"] = s / 60
     with (folder / "reaching" / "latest" / "summary.csv").open() as f:
         success = {row["controller"]: 100 * float(row["success"]) for row in csv.DictReader(f)}
-    level = {k: f"{float(px[k]['joint_err_deg']):.2f}" for k in px if k != "floor"}
-    per_joint = floors(px)
-    return {"arm": name, "GPR L1 (°)": f"{float(gpr_l1):.2f}",
-            "pixel floor per joint (°), (not seen)": floor_text(per_joint, unseen),
-            "worst seen joint's floor (°)": worst_seen(per_joint, unseen),
-            "pixel L1 / L2 / L3 (°)": " / ".join(level.get(k, "–") for k in ("1", "2", "3")),
-            "+ encoder": " / ".join(level.get(k, "–") for k in ("1+enc", "2+enc", "3+enc")),
-            "reaching AIF / PD (%)": f"{success.get('aif', float('nan')):.0f} / {success.get('pd', float('nan')):.0f}",
-            "datagen ms/image": f"{ms_per_image:.1f}", "recipe minutes": f"{sum(minutes.values()):.1f}",
-            "steps": ", ".join(f"{k} {v:.1f}" for k, v in minutes.items())}
+    return {"reaching AIF / PD (%)": f"{success.get('aif', float('nan')):.0f} / {success.get('pd', float('nan')):.0f}"}
 
 
 def main() -> None:
@@ -174,6 +195,7 @@ def main() -> None:
     parser.add_argument("--trials", type=int, default=50)
     parser.add_argument("--reach-trials", type=int, default=20)
     parser.add_argument("--work", type=Path, default=Path("bench_out/foreign"))
+    parser.add_argument("--kinematics-only", action="store_true", help="no images: the GPR columns and reaching")
     parser.add_argument("--quick", action="store_true", help="tiny sizes: checks the script, not the arms")
     o = parser.parse_args()
     if o.quick:

@@ -1,10 +1,10 @@
 """`AnalyticModel`: the robot's exact MuJoCo forward kinematics as a SensoryModel — the oracle.
 
-x = g(z) for z = joint angles (rad): the `ee` site position (ee_xyz, m), its camera projection (ee_pixel, px;
-ee_pixel_<camera> into a further camera of the record)
-or the joints themselves (joints, rad, identity). The Jacobian is closed-form: mj_jacSite (its hinge
-recursion vectorized over the batch for large B, equal to 1e-12), chained with
-the pinhole projection Jacobian for ee_pixel. Precision is fixed. Nothing is learned, so saving stores the
+x = g(z) for z = joint angles (rad): the `ee` site position (ee_xyz, m), its orientation (ee_rot, its rotation
+matrix row by row), its camera projection (ee_pixel, px; ee_pixel_<camera> into a further camera of the record)
+or the joints themselves (joints, rad, identity). The Jacobian is closed-form: mj_jacSite (its hinge recursion
+vectorized over the batch for large B, equal to 1e-12), chained with the pinhole projection Jacobian for ee_pixel;
+for ee_rot each hinge's turn of the rotation, [a_j]× R. Precision is fixed. Nothing is learned, so saving stores the
 config and the body only, and loading rebuilds the robot as every stage does (`body_robot`): a shipped robot from
 its shipped MJCF (a changed MJCF is reported on load), a robot from a file from the record and model text its body
 carries.
@@ -33,7 +33,7 @@ DEFAULT_PRECISION = {m: modalities.MODALITIES[m].precision for m in MODALITIES}
 
 @register_kind
 class AnalyticModel(BaseSensoryModel):
-    """Exact FK of a robot: ee_xyz (3,) m, ee_pixel (2,) px or joints (Dq,) rad, fixed precision.
+    """Exact FK of a robot: ee_xyz (3,) m, ee_rot (9,), ee_pixel (2,) px or joints (Dq,) rad, fixed precision.
 
     robot: a shipped name, a path to an MJCF/URDF/record, or another model's BodySpec (its robot: `body_robot`;
     the latent scaling is the robot's camera workspace either way)."""
@@ -70,6 +70,8 @@ class AnalyticModel(BaseSensoryModel):
     def _predict(self, z: torch.Tensor) -> torch.Tensor:
         if self.modality == "joints":
             return z.clone()
+        if self.modality == "ee_rot":
+            return torch.from_numpy(self.robot.ee_rot_and_jacobian(_numpy(z), check=False)[0]).to(z)
         q = _numpy(z)                                                     # (B, Dz) rad, float64
         xyz = self.robot.fk(q, check=False)                               # (B, 3) m
         x = self.robot.project(xyz, self.modality) if self.image_size else xyz   # (B, 2) px | (B, 3) m
@@ -79,6 +81,8 @@ class AnalyticModel(BaseSensoryModel):
         if self.modality == "joints":
             eye = torch.eye(self.latent_dim, dtype=z.dtype, device=z.device)
             return eye.expand(z.shape[0], -1, -1).clone()                 # (B, Dz, Dz)
+        if self.modality == "ee_rot":
+            return torch.from_numpy(self.robot.ee_rot_and_jacobian(_numpy(z), check=False)[1]).to(z)   # (B, 9, Dz)
         xyz, jac = self.robot.fk_and_jacobian(_numpy(z), check=False)     # (B, 3) m, (B, 3, Dz) m/rad
         if self.image_size:                                               # a projection: px/m @ m/rad
             jac = self.robot.project_jacobian(xyz, self.modality) @ jac   # (B, 2, 3) @ (B, 3, Dz) → (B, 2, Dz)

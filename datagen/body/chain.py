@@ -1,4 +1,5 @@
-"""Forward kinematics and site Jacobian of a MuJoCo hinge chain in numpy, vectorized over a batch of poses.
+"""Forward kinematics and site Jacobian of a MuJoCo hinge chain in numpy, vectorized over a batch of poses: the
+site's position and its orientation, each with its derivative in the joints.
 
 For large batches this is several times faster than calling mj_kinematics + mj_jacSite per pose; `Robot`
 switches to it from `VECTORIZE_FROM` poses up (kinematics.py).
@@ -32,12 +33,27 @@ class HingeChain:
         self.jnt_pos, self.jnt_axis = np.array(model.jnt_pos), np.array(model.jnt_axis)
         self.qpos0, self.qadr = np.array(model.qpos0), np.array(model.jnt_qposadr)
         self.site_pos = np.array(model.site_pos[site])
+        self.site_rot = quat_to_mat(model.site_quat[site])                        # the site in its body
         self.dq = model.njnt
         # Rodrigues about the local axis a: R(θ) = I + sin θ·[a]× + (1 − cos θ)·[a]×²   (constant [a]×, [a]×²)
         self.skew = np.array([-np.cross(np.eye(3), axis).T for axis in self.jnt_axis])  # (Dq, 3, 3): [a]×v = a × v
         self.skew2 = self.skew @ self.skew
 
     def __call__(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(N, Dq) rad → the site's position (N, 3) m and its Jacobian (N, 3, Dq) m/rad."""
+        xyz, _, anchors, axes = self._walk(q)
+        jac = np.cross(axes, xyz[None] - anchors)                               # (Dq, N, 3) m/rad
+        return xyz, jac.transpose(1, 2, 0)                                      # (N, 3), (N, 3, Dq)
+
+    def rotation(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(N, Dq) rad → the site's orientation R (N, 3, 3) (its axes as columns, in the world, as MuJoCo's
+        site_xmat) and dR/dq (N, 3, 3, Dq): a hinge turns R about its world axis a_j, dR/dq_j = [a_j]× R."""
+        _, rot, _, axes = self._walk(q)
+        turned = np.cross(axes[:, :, :, None], rot[None], axis=2)               # (Dq, N, 3, 3): a_j × each column
+        return rot, turned.transpose(1, 2, 3, 0)
+
+    def _walk(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The site's position (N, 3) and orientation (N, 3, 3), each hinge's anchor and world axis (Dq, N, 3)."""
         n = q.shape[0]
         pos, rot = np.zeros((n, 3)), np.broadcast_to(np.eye(3), (n, 3, 3))     # (N, 3) m, (N, 3, 3)
         anchors, axes = np.zeros((self.dq, n, 3)), np.zeros((self.dq, n, 3))
@@ -54,8 +70,7 @@ class HingeChain:
                 if self.jnt_pos[j].any():                                               # off-centre hinge
                     pos = anchors[j] - np.einsum("nij,j->ni", rot, self.jnt_pos[j])
         xyz = pos + np.einsum("nij,j->ni", rot, self.site_pos)                  # (N, 3) m
-        jac = np.cross(axes, xyz[None] - anchors)                               # (Dq, N, 3) m/rad
-        return xyz, jac.transpose(1, 2, 0)                                      # (N, 3), (N, 3, Dq)
+        return xyz, rot @ self.site_rot, anchors, axes
 
 
 def quat_to_mat(quat: np.ndarray) -> np.ndarray:

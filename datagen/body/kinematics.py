@@ -1,9 +1,9 @@
-"""`ArmKinematics`: the ee site's position and Jacobian over a batch of poses, on a private MjData.
+"""`ArmKinematics`: the ee site's position, orientation and Jacobians over a batch of poses, on a private MjData.
 
 `fk` calls MuJoCo per pose (mj_kinematics: the reference); `fk_and_jacobian` uses the same hinge recursion
 vectorized over the batch (`chain.HingeChain`, equal to 1e-12) from VECTORIZE_FROM poses up, MuJoCo per pose
-(mj_kinematics + mj_comPos + mj_jacSite) below. `Robot` queries through it, and so does `robot init`'s camera
-placement (infer.py) before any Robot exists.
+(mj_kinematics + mj_comPos + mj_jacSite) below; `rotation_and_jacobian` (the site's orientation) the chain always.
+`Robot` queries through it, and so does `robot init`'s camera placement (infer.py) before any Robot exists.
 """
 
 from __future__ import annotations
@@ -51,6 +51,11 @@ class ArmKinematics:
     def fk_and_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Unchecked (any finite q, limits not enforced): (N, 3) m and (N, 3, Dq) m/rad, the fastest way."""
         return self._chain(q) if q.shape[0] >= VECTORIZE_FROM else self.mj_fk_and_jacobian(q)
+
+    def rotation_and_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Unchecked: the site's orientation (N, 3, 3) (MuJoCo's site_xmat) and its derivative (N, 3, 3, Dq) per
+        rad, by the vectorized chain at every batch size (no caller needs it per pose at camera rate)."""
+        return self._chain.rotation(q)
 
     def mj_fk_and_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The reference: mj_kinematics + mj_comPos + mj_jacSite per pose."""

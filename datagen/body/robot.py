@@ -181,6 +181,13 @@ class Robot:
         chain for large batches (≥ VECTORIZE_FROM poses), MuJoCo per pose otherwise; check as in `fk`."""
         return self._fk_and_jacobian(self.check_q(q) if check else np.asarray(q, dtype=np.float64))
 
+    def ee_rot_and_jacobian(self, q, check: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """(N, Dq) rad → the `ee` site's orientation as its rotation matrix read row by row (N, 9) (the ee_rot
+        modality: entry 3i + k is world axis i's component of the site's axis k) and its derivative (N, 9, Dq)
+        per rad; check as in `fk`."""
+        rot, jac = self._kinematics.rotation_and_jacobian(self.check_q(q) if check else np.asarray(q, dtype=np.float64))
+        return rot.reshape(len(rot), 9), jac.reshape(len(jac), 9, self.dq)
+
     @property
     def actuation(self) -> str:
         """What the actuators take: "position" (servos: ctrl is a joint target, rad) or "torque" (motors: ctrl is
@@ -224,13 +231,14 @@ class Robot:
         return touch_at_rest(self.model, self._kin, self._touch_adr, self._position_actuated, q)
 
     def observe(self, q, image: bool = True) -> dict[str, np.ndarray]:
-        """All observations of a batch: ee_xyz (N,3) m, ee_pixel (N,2) px and each further camera's
+        """All observations of a batch: ee_xyz (N,3) m, ee_rot (N,9), ee_pixel (N,2) px and each further camera's
         ee_pixel_<name>, jacobian (N,3,Dq) m/rad as float32, image (N,H,W[,3]) uint8 and each further camera's
         image_<name> when `image`, touch (N,1) float32 when the robot has a touch sensor."""
         q = self.check_q(q)
         xyz, jac = self._fk_and_jacobian(q)
-        out = {"ee_xyz": xyz.astype(np.float32), **{m: view.project(xyz).astype(np.float32)
-                                                     for m, view in self._views.items()},
+        rot = self.ee_rot_and_jacobian(q, check=False)[0]
+        out = {"ee_xyz": xyz.astype(np.float32), "ee_rot": rot.astype(np.float32),
+               **{m: view.project(xyz).astype(np.float32) for m, view in self._views.items()},
                "jacobian": jac.astype(np.float32)}
         if image:
             out.update({modality: self._render(q, modality) for modality in self.cameras})

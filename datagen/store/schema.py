@@ -1,7 +1,8 @@
 """The Zarr v3 dataset store: schema (`features`), creation, chunk-aligned shard writes and the markers.
 
 Layout of one store (a directory `*.zarr`), all data arrays sharing the first (sample) axis N:
-    q (N, Dq) f32 rad · ee_xyz (N, 3) f32 m · ee_pixel (N, 2) f32 px · jacobian (N, 3, Dq) f32 m/rad
+    q (N, Dq) f32 rad · ee_xyz (N, 3) f32 m · ee_rot (N, 9) f32, the ee's rotation matrix row by row (stores made
+    before it was recorded lack it) · ee_pixel (N, 2) f32 px · jacobian (N, 3, Dq) f32 m/rad
     image (N, H, W[, 3]) u8 (when rendered) · touch (N, 1) f32 N (robots with a touch sensor)
     babbling only: qvel (N, Dq) f32 rad/s (|qvel| <= MAX_JOINT_SPEED) · episode (N,) i32 · t (N,) f32 s since the
     episode start · target (N, Dq) f32 rad, the servo targets in force from each sample on, joint order as q (stores

@@ -2,6 +2,7 @@
 
     joints    q, rad
     ee_xyz    the end-effector (or the visual marker, when its simulated position is given) in the world, m
+    ee_rot    the end-effector's orientation, its rotation matrix row by row (the marker moves, it does not turn)
     ee_pixel  its projection in the robot camera, px (NaN for a point that left the scene); ee_pixel_<c> in a
               further camera c
     image     the camera image as intensity in [0, 1] scaled as the training data, the marker geom moved by
@@ -30,6 +31,8 @@ def sense(robot, modality: str, q: np.ndarray, xyz: np.ndarray | None = None,
         return np.asarray(q, dtype=np.float64)
     if is_image(modality):
         return _image(robot, modality, q, marker_offsets, image_dtype)
+    if modality == "ee_rot":
+        return robot.ee_rot_and_jacobian(q, check=False)[0]
     xyz = robot.fk(q, check=False) if xyz is None else xyz                # (N, 3) m; q may pass the limits
     if is_projection(modality):
         return _project(robot, modality, xyz)

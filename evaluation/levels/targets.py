@@ -45,8 +45,8 @@ def make_targets(robot, n: int, rng: np.random.Generator, image: bool = False,
     (standard deviation per modality, in its units: m, px, rad, intensity) added to the observations."""
     q = uniform(rng, robot.sampling_ranges, n)                            # (N, Dq) rad
     sensed = robot.observe(q, image=image)
-    obs = {m: sensed[m].astype(np.float64) for m in sensed if m == "ee_xyz" or is_projection(m)}
-    obs["joints"] = q.copy()                                              # ee_xyz, ee_pixel[_<camera>], joints
+    obs = {m: sensed[m].astype(np.float64) for m in sensed if m in ("ee_xyz", "ee_rot") or is_projection(m)}
+    obs["joints"] = q.copy()                                              # ee_xyz, ee_rot, ee_pixel[_<camera>], joints
     for camera in images_in(sensed):                                      # uint8 → [0, 1]
         obs[camera] = sensed[camera].astype(np.float64) / IMAGE_SCALE
     return Targets(q, add_noise(obs, noise, noise_rng if noise_rng is not None else rng))

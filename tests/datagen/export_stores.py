@@ -36,16 +36,19 @@ def uniform_store(folder: Path) -> Path:
     return generate(DatagenConfig(robot="planar2", n=40, images=False, out=folder / "uniform.zarr"))
 
 
-def without_targets(store: Path, out: Path) -> Path:
-    """A copy of the babbling `store` as datagen wrote it before it recorded the servo targets: no `target` array, no
-    feature or sampler_params entry of it, and shard checksums over the arrays left. The other arrays are what that
-    datagen wrote (recording the targets draws no random number: same seed, same bytes, checked when it was added)."""
+def older_store(store: Path, out: Path) -> Path:
+    """A copy of the babbling `store` as datagen wrote it before it recorded the servo targets and the ee's
+    orientation: no `target` or `ee_rot` array, no feature or sampler_params entry of them, and shard checksums over
+    the arrays left. The other arrays are what that datagen wrote (recording either draws no random number: same
+    seed, same bytes, checked when each was added)."""
     shutil.copytree(store, out)
     root = zarr.open_group(str(out), mode="r+")
-    del root["target"]
+    newer = ("target", "ee_rot")
+    for name in newer:
+        del root[name]
     attrs = dict(root.attrs)
-    root.attrs["features"] = {k: v for k, v in attrs["features"].items() if k != "target"}
-    root.attrs["sampler_params"] = {k: v for k, v in attrs["sampler_params"].items() if k != "target"}
+    root.attrs["features"] = {k: v for k, v in attrs["features"].items() if k not in newer}
+    root.attrs["sampler_params"] = {k: v for k, v in attrs["sampler_params"].items() if k not in newer}
     step, n = attrs["chunk_len"], attrs["n"]
     for shard, start in enumerate(range(0, n, step)):
         mark_shard_done(root, shard, shard_digest(root, start, min(n, start + step)))

@@ -19,7 +19,7 @@ from bodyschema.datagen.config import DatagenConfig
 from bodyschema.datagen.exchange import export_lerobot
 from bodyschema.datagen.exchange.export import export_dataset
 from bodyschema.datagen.generate import generate
-from tests.datagen.export_stores import babble_store, uniform_store, without_targets
+from tests.datagen.export_stores import babble_store, older_store, uniform_store
 
 pq = pytest.importorskip("pyarrow.parquet")
 
@@ -169,8 +169,8 @@ def test_frames_equal_the_store(stores, tmp_path, monkeypatch):
     assert ours["units"]["observation.state"] == "rad" and ours["body"]["robot"] == root.attrs["robot"]
 
 
-def test_a_store_without_targets_exports_the_next_state_as_action(stores, tmp_path):
-    old = without_targets(stores["babble"], tmp_path / "old.zarr")           # as datagen wrote it before targets
+def test_a_store_older_store_exports_the_next_state_as_action(stores, tmp_path):
+    old = older_store(stores["babble"], tmp_path / "old.zarr")           # as datagen wrote it before targets
     out = export_dataset(old, tmp_path / "lr", "lerobot")
     info, _, _, frames = _read(out)
     root = zarr.open_group(str(old), mode="r")

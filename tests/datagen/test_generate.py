@@ -19,7 +19,7 @@ from bodyschema.datagen.generate import generate
 from bodyschema.datagen.shards import plan_shards
 from bodyschema.datagen.store.schema import DONE, is_complete
 from bodyschema.datagen.store.validate import validate_store
-from tests.datagen.export_stores import without_targets
+from tests.datagen.export_stores import older_store
 
 SMALL = dict(robot="planar2", n=96, shard_size=16, seed=7)  # 6 shards of 16 rendered 64 x 64 frames
 KILLED = dict(robot="planar2", n=480, shard_size=24, seed=11)  # 20 shards, ~3 s: time to kill it midway
@@ -169,9 +169,10 @@ def test_a_store_with_another_config_is_refused_unless_overwrite(tmp_path):
 def test_a_babbling_store_made_before_targets_were_recorded_is_refused_unless_overwrite(tmp_path):
     config = DatagenConfig(robot="planar2", n=40, sampler="babble", episode_s=1.0, images=False,
                            out=tmp_path / "new.zarr")
-    old = without_targets(generate(config, progress=False), tmp_path / "old.zarr")
+    old = older_store(generate(config, progress=False), tmp_path / "old.zarr")
     again = DatagenConfig(**{**config.to_dict(), "out": old})
-    with pytest.raises(FileExistsError, match=r"\['target'\] missing \(made before datagen wrote.*--overwrite"):
+    missing = r"\['ee_rot', 'target'\] missing \(made before datagen wrote.*--overwrite"
+    with pytest.raises(FileExistsError, match=missing):
         generate(again, progress=False)                      # no shard could be written into the missing array
     generate(DatagenConfig(**{**again.to_dict(), "overwrite": True}), progress=False)
     assert validate_store(old) == [] and hashes(old) == hashes(config.out)        # the same q, now with targets

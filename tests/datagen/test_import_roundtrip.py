@@ -18,7 +18,7 @@ from bodyschema.datagen.exchange.importers.run import import_recording
 from bodyschema.datagen.generate import generate
 from bodyschema.datagen.store.schema import DONE
 from bodyschema.datagen.store.validate import validate_store
-from tests.datagen.export_stores import babble_store, uniform_store, without_targets
+from tests.datagen.export_stores import babble_store, older_store, uniform_store
 
 pytest.importorskip("h5py")
 pytest.importorskip("pyarrow")
@@ -31,7 +31,7 @@ def stores(tmp_path_factory):
                           rgb=True, out=folder / "panda.zarr")                      # touch (N, 1), 3 episodes
     babble = babble_store(folder)
     return {"babble": babble, "uniform": uniform_store(folder), "panda": generate(panda),
-            "old": without_targets(babble, folder / "old.zarr")}
+            "old": older_store(babble, folder / "old.zarr")}
 
 
 @pytest.mark.parametrize("to", ["hdf5", "lerobot"])
@@ -65,3 +65,17 @@ def test_the_source_digest_changes_with_one_byte(stores, tmp_path):
     data[-1] ^= 1
     exported.write_bytes(bytes(data))
     assert source_sha256([exported], tmp_path) != first
+
+
+def test_an_ee_rot_that_is_not_a_rotation_is_refused_and_nothing_is_written(stores, tmp_path):
+    import h5py
+
+    exported = export_dataset(stores["uniform"], tmp_path / "d.h5", "hdf5")
+    with h5py.File(exported, "r+") as f:
+        rot = f["ee_rot"][:]
+        rot[3] *= 1.01                                          # a matrix scaled by 1 %: |RᵀR − I| ≈ 0.02
+        f["ee_rot"][:] = rot
+    with pytest.raises(ValueError, match=r"ee_rot in .* must be rotation matrices read row by row .* at row 4 "
+                                         r"\(1 rows\)"):
+        import_recording(ImportConfig(source=exported, out=tmp_path / "back.zarr"))
+    assert not (tmp_path / "back.zarr").exists()

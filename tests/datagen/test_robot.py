@@ -150,6 +150,26 @@ def modified_dh_chain(q: np.ndarray) -> np.ndarray:
     return np.array(out)
 
 
+@pytest.mark.parametrize("name", SHIPPED)
+def test_ee_rot_is_mujocos_site_frame_and_its_jacobian_finite_differences(name):
+    import mujoco
+
+    r = robot(name)
+    q = random_q(r, 5, seed=4)
+    rot, jac = r.ee_rot_and_jacobian(q)
+    data = mujoco.MjData(r.model)
+    for q_i, rot_i in zip(q, rot):
+        data.qpos[:] = q_i
+        mujoco.mj_kinematics(r.model, data)
+        np.testing.assert_allclose(rot_i, data.site_xmat[r.model.site(r.ee_site).id], atol=1e-12)
+    np.testing.assert_allclose(rot.reshape(-1, 3, 3) @ rot.reshape(-1, 3, 3).transpose(0, 2, 1),
+                               np.broadcast_to(np.eye(3), (len(q), 3, 3)), atol=1e-12)   # a rotation
+    fd = np.stack([(r.ee_rot_and_jacobian(q + e, check=False)[0] - r.ee_rot_and_jacobian(q - e, check=False)[0])
+                   / (2 * FD_STEP) for e in np.eye(r.dq) * FD_STEP], axis=-1)
+    np.testing.assert_allclose(jac, fd, atol=1e-8)          # central differences at 1e-6 rad: error ~1e-10
+    np.testing.assert_allclose(r.observe(q, image=False)["ee_rot"], rot.astype(np.float32))
+
+
 def test_panda_fk_equals_the_modified_dh_chain():
     r = robot("panda")
     q = random_q(r, 20, seed=6)

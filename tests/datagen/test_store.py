@@ -19,12 +19,13 @@ from bodyschema.datagen.store.schema import (
 def test_features_follow_the_schema():
     f = features(4, (56, 80), sensors=("touch",), babble=True)
     assert f["q"]["shape"] == [4] and f["jacobian"]["shape"] == [3, 4] and f["image"]["shape"] == [56, 80]
-    assert {f[k]["dtype"] for k in ("q", "ee_xyz", "ee_pixel", "jacobian", "touch", "qvel", "t")} == {"float32"}
+    floats = ("q", "ee_xyz", "ee_rot", "ee_pixel", "jacobian", "touch", "qvel", "t")
+    assert {f[k]["dtype"] for k in floats} == {"float32"}
     assert f["image"]["dtype"] == "uint8" and f["episode"]["dtype"] == "int32"
     assert f["q"]["unit"] == "rad" and f["ee_xyz"]["unit"] == "m" and f["ee_pixel"]["unit"] == "px"
     assert f["target"] == {"dtype": "float32", "shape": [4], "unit": "rad", "names": ["joint"]}   # babbling commands
     kinematic = features(2, None, sensors=(), babble=False)
-    assert set(kinematic) == {"q", "ee_xyz", "ee_pixel", "jacobian"}
+    assert set(kinematic) == {"q", "ee_xyz", "ee_rot", "ee_pixel", "jacobian"}
     assert features(2, (8, 8, 3), (), False)["image"]["names"] == ["row", "col", "channel"]
 
 
@@ -37,13 +38,14 @@ def test_features_pin_the_store_format_key_order_included():
 
     assert list(f.items()) == list({
         "q": vec([4], "rad", ["joint"]), "ee_xyz": vec([3], "m", ["x", "y", "z"]),
+        "ee_rot": vec([9], "1", ["r00", "r01", "r02", "r10", "r11", "r12", "r20", "r21", "r22"]),
         "ee_pixel": vec([2], "px", ["u", "v"]),
         "jacobian": vec([3, 4], "m/rad", ["xyz", "joint"]),
         "image": {"dtype": "uint8", "shape": [56, 80], "unit": "intensity", "names": ["row", "col"]},
         "touch": vec([1], "N", ["contact"]), "qvel": vec([4], "rad/s", ["joint"]),
         "episode": {"dtype": "int32", "shape": [], "unit": "index", "names": []}, "t": vec([], "s", []),
         "target": vec([4], "rad", ["joint"])}.items())
-    assert list(features(2, None, (), False)) == ["q", "ee_xyz", "ee_pixel", "jacobian"]
+    assert list(features(2, None, (), False)) == ["q", "ee_xyz", "ee_rot", "ee_pixel", "jacobian"]
 
 
 @pytest.fixture

@@ -20,7 +20,7 @@ from bodyschema.datagen.store.contact_sheet import write_contact_sheet
 from bodyschema.datagen.store.integrity import shard_digest
 from bodyschema.datagen.store.schema import mark_shard_done
 from bodyschema.datagen.store.validate import summarize_store, validate_store
-from tests.datagen.export_stores import without_targets
+from tests.datagen.export_stores import older_store
 
 
 @pytest.fixture(scope="module")
@@ -149,7 +149,7 @@ def test_babbling_targets_of_the_wrong_width(babble, tmp_path):
 
 def test_a_babbling_store_made_before_targets_were_recorded_is_valid(babble, tmp_path):
     assert validate_store(babble) == [] and "target" in zarr.open_group(str(babble), mode="r").array_keys()
-    old = without_targets(babble, tmp_path / "old.zarr")
+    old = older_store(babble, tmp_path / "old.zarr")
     assert validate_store(old) == []
     gone = shutil.copytree(babble, tmp_path / "gone.zarr")          # a store that lists target but lost it: a defect
     shutil.rmtree(gone / "target")

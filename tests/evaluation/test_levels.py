@@ -98,6 +98,22 @@ def test_oracle_nao_arm_fusion_beats_every_sensor_alone():
     assert all(fused < e for e in alone.values()), (fused, alone)
 
 
+def test_oracle_ee_orientation_closes_what_ee_xyz_leaves_unseen():
+    # Level 1 on the 4-joint nao_arm: three coordinates leave a 1-D null space of J, and the start's component in
+    # it stays (~0.6°); the ee's pose (position and orientation) leaves none, so the belief must end at the truth.
+    models = {m: analytic.AnalyticModel("nao_arm", m) for m in ("ee_xyz", "ee_rot")}
+    robot = load_robot(list(models.values()))
+    targets = make_targets(robot, 40, eval_rng(0, 0, "targets"))
+
+    def level_1(names):
+        perception = Perception([models[n] for n in names])
+        return evaluate_level(perception, robot, targets, 1, eval_rng(0, 0, "beliefs", 1))[1]["mean_err_deg"]
+
+    xyz, pose = level_1(["ee_xyz"]), level_1(["ee_xyz", "ee_rot"])
+    assert xyz.mean() > 0.3, "ee_xyz alone leaves the null-space part of the start"
+    assert np.median(pose) < 0.01 and pose.mean() < 0.1 * xyz.mean()
+
+
 def test_model_of_another_robot_raises(planar2):
     with pytest.raises(ValueError, match="model body must be robot 'planar2'"):
         from bodyschema.evaluation.core.specs import check_models_match

@@ -37,6 +37,10 @@ class TestAnalyticEeXyz(_AnalyticNao):
     modality = "ee_xyz"
 
 
+class TestAnalyticEeRot(_AnalyticNao):
+    modality = "ee_rot"
+
+
 class TestAnalyticEePixel(_AnalyticNao):
     modality = "ee_pixel"
 
@@ -62,6 +66,9 @@ def test_predictions_equal_the_robot_kinematics_and_camera(nao, batch):
     pixel_jac = np.einsum("nij,njk->nik", nao.project_jacobian(nao.fk(q)), nao.jacobian(q))
     np.testing.assert_allclose(AnalyticModel(ROBOT, "ee_pixel").jacobian(z).numpy(), pixel_jac, atol=1e-9)
     torch.testing.assert_close(AnalyticModel(ROBOT, "joints").predict(z), z)
+    rot, rot_jac = nao.ee_rot_and_jacobian(q)
+    np.testing.assert_allclose(AnalyticModel(ROBOT, "ee_rot").predict(z).numpy(), rot, atol=1e-12)
+    np.testing.assert_allclose(AnalyticModel(ROBOT, "ee_rot").jacobian(z).numpy(), rot_jac, atol=1e-12)
 
 
 def test_bigger_image_scales_pixels_about_the_principal_point(nao):
@@ -72,13 +79,14 @@ def test_bigger_image_scales_pixels_about_the_principal_point(nao):
     torch.testing.assert_close(big.predict(q) - centre_big, 2 * (small.predict(q) - centre_small))
 
 
-def test_default_precisions_are_one_mm_one_px_one_degree():
+def test_default_precisions_are_one_mm_one_px_one_degree():   # ee_rot: 1° as a rotation-matrix entry
     z = torch.zeros(2, 4, dtype=torch.float64)
     assert AnalyticModel(ROBOT, "ee_xyz").precision(z)[0, 0].item() == pytest.approx(1e6)
     assert AnalyticModel(ROBOT, "ee_pixel").precision(z)[0, 0].item() == pytest.approx(1.0)
     assert AnalyticModel(ROBOT, "joints").precision(z)[0, 0].item() == pytest.approx((180 / np.pi) ** 2)
     assert AnalyticModel(ROBOT, "ee_xyz", precision=4.0).precision(z).unique().item() == 4.0
-    assert set(DEFAULT_PRECISION) == {"ee_xyz", "ee_pixel", "joints"}
+    assert AnalyticModel(ROBOT, "ee_rot").precision(z)[0, 0].item() == pytest.approx((180 / np.pi) ** 2)
+    assert set(DEFAULT_PRECISION) == {"ee_xyz", "ee_rot", "ee_pixel", "joints"}
 
 
 def test_body_uses_the_robot_joints_and_sampling_ranges(nao):
@@ -112,7 +120,7 @@ def test_fk_is_defined_outside_the_joint_limits():
 
 
 def test_bad_config_raises():
-    with pytest.raises(ValueError, match=r"modality must be one of \('ee_xyz', 'ee_pixel', 'joints'\)"):
+    with pytest.raises(ValueError, match=r"modality must be one of \('ee_xyz', 'ee_rot', 'ee_pixel', 'joints'\)"):
         AnalyticModel(ROBOT, "image")
     with pytest.raises(ValueError, match=r"robot must be one of"):
         AnalyticModel("atlas", "ee_xyz")

@@ -136,3 +136,17 @@ def test_the_model_card_says_which_kernel_auto_chose():
     chosen = GPRModel(TOY.body, "ee_xyz", (3,), hyper_points=60).fit(q, x)
     assert model_summary(chosen).endswith("Kernel kinematic: the likelier of rbf and kinematic.")
     assert "Kernel" not in model_summary(GPRModel(TOY.body, "ee_xyz", (3,), kernel="rbf", hyper_points=60).fit(q, x))
+
+
+def test_the_ee_orientation_is_held_exactly_and_its_jacobian_is_the_oracles():
+    # Each entry of the ee's rotation matrix is, like ee_xyz, of degree one in each joint's (cos q, sin q).
+    oracle = AnalyticModel("nao_arm", "ee_rot")
+    ranges = torch.tensor(Robot.load("nao_arm").sampling_ranges, dtype=torch.float64)   # (4, 2) rad
+    gen = torch.Generator().manual_seed(1)
+    q = ranges[:, 0] + torch.rand(700, 4, generator=gen, dtype=torch.float64) * (ranges[:, 1] - ranges[:, 0])
+    body = BodySpec("nao_arm", oracle.body.joint_names, *ranges.T.tolist())
+    model = GPRModel(body, "ee_rot", (9,)).fit(q[:600], oracle.predict(q[:600]), progress=False)
+    assert model.kernel_ == "kinematic"
+    held_out = q[600:]
+    assert (model.predict(held_out) - oracle.predict(held_out)).abs().max() < 1e-4   # a degree is 0.0175
+    torch.testing.assert_close(model.jacobian(held_out), oracle.jacobian(held_out), atol=1e-3, rtol=0)

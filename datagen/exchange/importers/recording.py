@@ -16,8 +16,8 @@ import numpy as np
 from bodyschema.errors import must_be
 
 # Arrays a recording may carry besides q and images, with the dtype the store keeps (store.features).
-EXTRA_ARRAYS = {"ee_xyz": "float32", "ee_pixel": "float32", "jacobian": "float32", "qvel": "float32",
-                "touch": "float32", "episode": "int32", "t": "float32", "target": "float32"}
+EXTRA_ARRAYS = {"ee_xyz": "float32", "ee_rot": "float32", "ee_pixel": "float32", "jacobian": "float32",
+                "qvel": "float32", "touch": "float32", "episode": "int32", "t": "float32", "target": "float32"}
 
 
 @dataclass

@@ -30,7 +30,7 @@ from bodyschema.datagen.store.schema import SCHEMA_VERSION, now, versions
 from bodyschema.errors import must_be
 
 logger = logging.getLogger(__name__)
-FK_ARRAYS = ("ee_xyz", "ee_pixel", "jacobian")
+FK_ARRAYS = ("ee_xyz", "ee_rot", "ee_pixel", "jacobian")
 
 
 def import_recording(config: ImportConfig) -> Path:
@@ -132,7 +132,8 @@ def _extras(rec: Recording, config: ImportConfig) -> dict[str, np.ndarray]:
 
 
 EPISODE_MAX = 2 ** 31 - 1        # the store keeps episode as int32
-WIDTHS = {"ee_xyz": (3,), "ee_pixel": (2,), "touch": None, "episode": (), "t": ()}   # per-frame shape (None: any)
+# per-frame shape (None: any)
+WIDTHS = {"ee_xyz": (3,), "ee_rot": (9,), "ee_pixel": (2,), "touch": None, "episode": (), "t": ()}
 
 
 def name_of(rec: Recording, config: ImportConfig) -> str:
@@ -156,6 +157,8 @@ def _check_range(name: str, values: np.ndarray, where: str, labels: list[str]) -
         if bad.any():
             raise ValueError(must_be(f"episode in {where}", f"a whole number in [0, {EPISODE_MAX}]",
                                      f"{flat[bad][0].item()!r} at {at(bad)}", "Number the episodes 0, 1, 2, ..."))
+    if name == "ee_rot":
+        _check_rotations(flat, where, at)
     if name in ("t", "touch"):
         bad = (flat < 0).any(axis=1)
         if bad.any():
@@ -164,8 +167,24 @@ def _check_range(name: str, values: np.ndarray, where: str, labels: list[str]) -
                                      f"{at(bad)} ({int(bad.sum())} rows)", "Shift or repair the column."))
 
 
+ROTATION_TOL = 1e-3    # |RᵀR − I|, |det R − 1|: float32 rotations are within 1e-6, a recording rounded to 4 digits 1e-4
+
+
+def _check_rotations(flat: np.ndarray, where: str, at) -> None:
+    """ee_rot rows (N, 9) must be rotation matrices read row by row: orthonormal, determinant +1."""
+    rot = flat.reshape(-1, 3, 3).astype(np.float64)
+    off = np.abs(rot @ rot.transpose(0, 2, 1) - np.eye(3)).max(axis=(1, 2))
+    bad = (off > ROTATION_TOL) | (np.abs(np.linalg.det(rot) - 1.0) > ROTATION_TOL)
+    if bad.any():
+        raise ValueError(must_be(f"ee_rot in {where}", f"rotation matrices read row by row (RᵀR = I and det R = 1, "
+                                 f"±{ROTATION_TOL})", f"|RᵀR − I| = {off[bad][0]:.3g} at {at(bad)} "
+                                 f"({int(bad.sum())} rows)", "Convert quaternions or angles to the matrix, or "
+                                 "drop the column and import with --fk."))
+
+
 def _forward_kinematics(body: Body, q: np.ndarray, arrays: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """ee_xyz (N, 3) m, ee_pixel (N, 2) px and jacobian (N, 3, Dq) m/rad of the robot at the recorded q."""
+    """ee_xyz (N, 3) m, ee_rot (N, 9), ee_pixel (N, 2) px and jacobian (N, 3, Dq) m/rad of the robot at the
+    recorded q."""
     observed = body.robot.observe(q, image=False)
     replaced = [k for k in FK_ARRAYS if k in arrays]
     if "ee_xyz" in replaced:
