@@ -75,7 +75,7 @@ class Modality:
 MODALITIES: dict[str, Modality] = {m.name: m for m in (
     Modality("joints", "rad", ("Dq",), ("joint",), 1.0 / math.radians(1.0) ** 2, array="q", error_unit="deg"),
     Modality("ee_xyz", "m", (3,), ("x", "y", "z"), 1.0 / 1e-3 ** 2, error_unit="mm"),
-    Modality("ee_rot", "1", (9,), tuple(f"r{i}{k}" for i in range(3) for k in range(3)),
+    Modality("ee_rot", "", (9,), tuple(f"r{i}{k}" for i in range(3) for k in range(3)),
              1.0 / math.radians(1.0) ** 2),
     Modality(EE_PIXEL, "px", (2,), ("u", "v"), 1.0),
     Modality(IMAGE, "intensity", ("image",), ("row", "col", "channel"), dtype="uint8", kind="image", camera="",

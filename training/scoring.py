@@ -15,6 +15,7 @@ import torch
 from tqdm.auto import tqdm
 
 from bodyschema.base import modalities
+from bodyschema.errors import must_be
 from bodyschema.training import plots
 from bodyschema.training.data import Dataset, Split, as_float
 from bodyschema.training.model_card import metric_name
@@ -95,3 +96,24 @@ def _subset(split: Split, n: int, seed: int) -> Split:
     if len(split) <= n:
         return split
     return split.take(np.sort(np.random.default_rng(seed).choice(len(split), n, replace=False)))
+
+
+SENSOR_FRACTION = 0.25    # a model perceived at its sensor's precision should err by well under the sensor's σ
+
+
+def sensor_warning(member, scores: dict[str, float], prefix: str = "") -> str | None:
+    """The house warning for a model perceived at its sensor's precision (the precision rule: a GP, an MDN) whose
+    held-out RMSE is not well under that sensor's σ: perception would trust its errors as readings. None if fine."""
+    pi = member.sensor_precision if getattr(member, "precision_varies", False) else None
+    rmse = scores.get(prefix + METRIC)
+    if pi is None or rmse is None:
+        return None
+    sigma, unit = pi ** -0.5, modalities.unit(member.modality, "")
+    unit = f" {unit}" if unit else ""
+    if rmse <= SENSOR_FRACTION * sigma:
+        return None
+    return must_be(f"{member.kind} of {member.modality}: held-out RMSE", f"at most {SENSOR_FRACTION:g} × the "
+                   f"sensor's σ = {sigma:.3g}{unit}, the precision perception weighs it by",
+                   f"{rmse:.3g}{unit} ({rmse / sigma:.2f} σ)", "Its errors will read as the body being elsewhere: "
+                   "fit on more poses (`datagen --n`; the kinematic kernel on D joints has 3^D features, give it "
+                   "≥ 2 × 3^D poses), or name the precision it deserves (`--perception.precisions`).")

@@ -205,6 +205,8 @@ def _train_owned(config: TrainConfig, client, data: Dataset, model, members: dic
                 scores, plot = scoring.score_and_plot(member, data, m, config.seed, run_dir / "plots", prefix,
                                                config.progress, plots.run_title(config.kind, m, data.body.robot))
             metrics.update({prefix + k: v for k, v in scores.items()})
+            if warning := scoring.sensor_warning(member, scores):
+                _log.warning(warning)
             made.update(plot)
             model_dirs[m] = run_dir / ("model" if not multi else f"model-{m}")
             shutil.rmtree(model_dirs[m], ignore_errors=True)    # stale files would change the digest

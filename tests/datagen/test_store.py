@@ -38,7 +38,7 @@ def test_features_pin_the_store_format_key_order_included():
 
     assert list(f.items()) == list({
         "q": vec([4], "rad", ["joint"]), "ee_xyz": vec([3], "m", ["x", "y", "z"]),
-        "ee_rot": vec([9], "1", ["r00", "r01", "r02", "r10", "r11", "r12", "r20", "r21", "r22"]),
+        "ee_rot": vec([9], "", ["r00", "r01", "r02", "r10", "r11", "r12", "r20", "r21", "r22"]),
         "ee_pixel": vec([2], "px", ["u", "v"]),
         "jacobian": vec([3, 4], "m/rad", ["xyz", "joint"]),
         "image": {"dtype": "uint8", "shape": [56, 80], "unit": "intensity", "names": ["row", "col"]},

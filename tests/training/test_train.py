@@ -218,3 +218,19 @@ def test_per_joint_scores_name_every_joint_with_characters_mlflow_accepts():
     pred, target = np.array([[1.0, -2.0], [3.0, 2.0]]), np.zeros((2, 2))
     scores = per_joint(pred, target, ["arm/elbow:1", "wrist roll"])
     assert scores == {"val_abs_error.arm_elbow_1": 2.0, "val_abs_error.wrist roll": 2.0}
+
+
+def test_a_model_perceived_at_its_sensors_precision_is_warned_when_it_errs_like_the_sensor(kin_store):
+    from bodyschema.models.analytic import AnalyticModel
+    from bodyschema.models.gpr import GPRModel
+    from bodyschema.training.scoring import score, sensor_warning
+
+    data = load_dataset(kin_store, "ee_xyz", max_train=200)
+    gp = GPRModel(data.body, "ee_xyz", (3,)).fit(data.train.q, data.train.x, progress=False)
+    pred = gp.predict(torch.as_tensor(data.val.q, dtype=torch.float64)).numpy()
+    assert sensor_warning(gp, score(pred, data.val.x, "val")) is None            # µm off, the sensor's σ is 1 mm
+    off = score(pred + 0.5e-3, data.val.x, "val")                               # 0.5 mm off in every coordinate
+    warning = sensor_warning(gp, off)
+    assert warning.startswith("gpr of ee_xyz: held-out RMSE must be at most 0.25 × the sensor's σ = 0.001 m")
+    assert "Got '0.0005 m (0.50 σ)'" in warning and "3^D" in warning
+    assert sensor_warning(AnalyticModel("planar2", "ee_xyz"), off) is None      # exact: perceived at its own Π
