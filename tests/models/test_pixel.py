@@ -3,7 +3,7 @@
 import pytest
 import torch
 
-from bodyschema.models.pixel import PixelDecoder
+from bodyschema.models.pixel import SIZES, PixelDecoder
 from tests.models.contract import SensoryModelContract
 from tests.threads import one_thread
 from tests.toy_models import ToyPlanarArm
@@ -266,6 +266,8 @@ def test_each_size_has_its_schedule_unless_told():
         return PixelDecoder(ToyPlanarArm().body, "image", HW, size=size, **kw).settings.lr_schedule
     assert (schedule("lean"), schedule("pixel_aif"), schedule("splat")) == ("wsd", "constant", "constant")
     assert schedule("lean", lr_schedule="constant") == "constant"
+    # a size's preset is merged over lean's: one that did not state its own step and schedule would inherit lean's
+    assert all({"lr", "schedule"} <= set(preset) for preset in SIZES.values()), SIZES
 
 
 @pytest.mark.usefixtures("tiny_threads")
