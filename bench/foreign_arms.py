@@ -2,15 +2,15 @@
 
     MUJOCO_GL=egl .venv/bin/python bench/foreign_arms.py [--arms ur5 so_arm ...] [--n 3000] [--epochs 40]
         [--trials 50] [--pixel-size lean|pixel_aif|splat] [--pixel-lr LR] [--pixel-schedule constant|cosine|wsd]
-        [--pixel-loss cross_entropy|mse]
+        [--pixel-loss cross_entropy|mse] [--gpr-n 6000]
         [--work bench_out/foreign] [--kinematics-only] [--quick]
 
 Per arm, in a folder of its own (its own MLflow store): `robot init` (a file: the visuals it can load, nothing
-edited by hand) and `robot camera`, then `datagen` (uniform poses, the record's image size), `train gpr` (ee_xyz, and
-ee_rot: the ee's orientation) and the GPR levels (level 1, ee_xyz alone and with ee_rot), `train pixel` and
-`train encoder` and the pixel levels 1–3 with and without the encoder (its floor row: perception started at the
-truth, per joint), `evaluate reaching` with the GPR and the joints (AIF against the PD baseline);
-`--kinematics-only`: no images, the GPR columns and reaching.
+edited by hand) and `robot camera`; `train gpr` of ee_xyz and of ee_rot (the ee's orientation) on a store of
+--gpr-n poses without images, and the GPR levels (level 1, ee_xyz alone and with ee_rot); then `datagen` (--n
+uniform poses, the record's image size), `train pixel` and `train encoder` and the pixel levels 1–3 with and without
+the encoder (its floor row: perception started at the truth, per joint), `evaluate reaching` with the GPR and the
+joints (AIF against the PD baseline). `--kinematics-only`: the GPR columns and reaching, no images.
 The floor of a joint datagen's observability check does not see is in parentheses;
 the worst floor over the others is the issue's bar (≤ 2°). Prints one markdown row per arm and the wall minutes of
 each step (2 CPU cores: the recipe's CPU time) and writes them to <work>/table.md. Arms: the three shipped ones and
@@ -122,15 +122,15 @@ def measure(name: str, work: Path, o: argparse.Namespace) -> dict[str, str]:
     common = ["--tracking-uri", f"sqlite:///{folder}/mlflow.db"]
     minutes: dict[str, float] = {}
     robot = robot_of(name, folder, log, minutes)
-    data = folder / "data.zarr"
-    out, s = bodyschema(["datagen", "--robot", robot, "--n", str(o.n), "--out", str(data), "--no-progress",
-                         *(["--no-images", "--workspace", "camera"] if o.kinematics_only else [])], log)
-    minutes["datagen"], ms_per_image, unseen = s / 60, 1000 * s / o.n, unseen_joints(out)
-    train = [*common, "--run-root", str(folder / "runs"), "--no-progress", "--data", str(data)]
+    kin = folder / "kinematics.zarr"          # the GPRs need no images: a store of their own, as a user would make
+    _, s = bodyschema(["datagen", "--robot", robot, "--n", str(o.gpr_n), "--out", str(kin), "--no-progress",
+                       "--no-images", "--workspace", "camera"], log)
+    minutes["datagen kinematics"] = s / 60
     bench = [*common, "--no-progress", "--no-plots", "--trials", str(o.trials), "--runs", "1"]
     gpr = {}
     for modality in ("ee_xyz", "ee_rot"):
-        out, s = bodyschema(["train", "gpr", *train, "--modality", modality], log)
+        out, s = bodyschema(["train", "gpr", *common, "--run-root", str(folder / "runs"), "--no-progress",
+                             "--data", str(kin), "--modality", modality], log)
         gpr[modality], minutes[f"train gpr {modality}"] = registered(out), s / 60
     gpr_l1 = {}
     for sensed in (("ee_xyz",), ("ee_xyz", "ee_rot")):
@@ -146,6 +146,10 @@ def measure(name: str, work: Path, o: argparse.Namespace) -> dict[str, str]:
         return {**kinematics, **reaching(robot, gpr["ee_xyz"], folder, common, o, log, minutes),
                 "recipe minutes": f"{sum(minutes.values()):.1f}",
                 "steps": ", ".join(f"{k} {v:.1f}" for k, v in minutes.items())}
+    data = folder / "data.zarr"
+    out, s = bodyschema(["datagen", "--robot", robot, "--n", str(o.n), "--out", str(data), "--no-progress"], log)
+    minutes["datagen"], ms_per_image, unseen = s / 60, 1000 * s / o.n, unseen_joints(out)
+    train = [*common, "--run-root", str(folder / "runs"), "--no-progress", "--data", str(data)]
     out, s = bodyschema(["train", "pixel", *train, "--epochs", str(o.epochs), "--size", o.pixel_size,
                          *(["--lr", str(o.pixel_lr)] if o.pixel_lr else []),
                          *(["--lr-schedule", o.pixel_schedule] if o.pixel_schedule else []),
@@ -185,7 +189,9 @@ def reaching(robot: str, gpr: str, folder: Path, common: list[str], o: argparse.
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--arms", nargs="+", default=[*FILES, *SHIPPED])
-    parser.add_argument("--n", type=int, default=3000)
+    parser.add_argument("--n", type=int, default=3000, help="poses with images (the pixel decoder and encoder)")
+    parser.add_argument("--gpr-n", type=int, default=6000, help="poses without images (the GPRs; a 7-joint arm's "
+                        "orientation has 3^7 features: 3 000 poses fit it to 0.4 σ, 6 000 to 0.002 σ)")
     parser.add_argument("--epochs", type=int, default=40)
     parser.add_argument("--pixel-size", default="lean", help="train pixel's --size (models/pixel.py SIZES)")
     parser.add_argument("--pixel-lr", type=float, default=None, help="train pixel's --lr (default: the size's)")
@@ -199,7 +205,7 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="tiny sizes: checks the script, not the arms")
     o = parser.parse_args()
     if o.quick:
-        o.n, o.epochs, o.trials, o.reach_trials = 200, 1, 3, 2
+        o.n, o.gpr_n, o.epochs, o.trials, o.reach_trials = 200, 200, 1, 3, 2
     o.work.mkdir(parents=True, exist_ok=True)
     table = o.work / "table.md"
     header = None
