@@ -101,11 +101,11 @@ def _subset(split: Split, n: int, seed: int) -> Split:
 SENSOR_FRACTION = 0.25    # a model perceived at its sensor's precision should err by well under the sensor's σ
 
 
-def sensor_warning(member, scores: dict[str, float], prefix: str = "") -> str | None:
+def sensor_warning(member, scores: dict[str, float]) -> str | None:
     """The house warning for a model perceived at its sensor's precision (the precision rule: a GP, an MDN) whose
     held-out RMSE is not well under that sensor's σ: perception would trust its errors as readings. None if fine."""
     pi = member.sensor_precision if getattr(member, "precision_varies", False) else None
-    rmse = scores.get(prefix + METRIC)
+    rmse = scores.get(METRIC)
     if pi is None or rmse is None:
         return None
     sigma, unit = pi ** -0.5, modalities.unit(member.modality, "")
