@@ -115,5 +115,6 @@ def sensor_warning(member, scores: dict[str, float]) -> str | None:
     return must_be(f"{member.kind} of {member.modality}: held-out RMSE", f"at most {SENSOR_FRACTION:g} × the "
                    f"sensor's σ = {sigma:.3g}{unit}, the precision perception weighs it by",
                    f"{rmse:.3g}{unit} ({rmse / sigma:.2f} σ)", "Its errors will read as the body being elsewhere: "
-                   "fit on more poses (`datagen --n`; the kinematic kernel on D joints has 3^D features, give it "
-                   "≥ 2 × 3^D poses), or name the precision it deserves (`--perception.precisions`).")
+                   "fit on more poses or longer (`datagen --n`, `--epochs`; a GP's kinematic kernel on D joints has "
+                   "3^D features: give it ≥ 2 × 3^D poses), or name the precision it deserves "
+                   "(`--perception.precisions`).")
