@@ -84,7 +84,9 @@ def load_dataset(path: str | Path, modality: str | tuple[str, ...], *, val_fract
     path = Path(path)
     modalities = tuple(m.strip() for m in modality.split(",")) if isinstance(modality, str) else tuple(modality)
     store = check_store(path, ("q", *modalities), what="data",
-                        hints=dict.fromkeys(modalities, "Choose --modality among the store's arrays."))
+                        hints=dict.fromkeys(modalities, "Choose --modality among the store's arrays, or remake the "
+                                            "store (`datagen --overwrite`, the same poses) if it was made before "
+                                            "datagen recorded this one."))
     if store.problems:
         raise ValueError(f"Dataset {str(path)!r} cannot be used for training:\n - " + "\n - ".join(store.problems))
     root, attrs = store.root, store.attrs
