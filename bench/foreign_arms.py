@@ -122,26 +122,7 @@ def measure(name: str, work: Path, o: argparse.Namespace) -> dict[str, str]:
     common = ["--tracking-uri", f"sqlite:///{folder}/mlflow.db"]
     minutes: dict[str, float] = {}
     robot = robot_of(name, folder, log, minutes)
-    kin = folder / "kinematics.zarr"          # the GPRs need no images: a store of their own, as a user would make
-    _, s = bodyschema(["datagen", "--robot", robot, "--n", str(o.gpr_n), "--out", str(kin), "--no-progress",
-                       "--no-images", "--workspace", "camera"], log)
-    minutes["datagen kinematics"] = s / 60
-    bench = [*common, "--no-progress", "--no-plots", "--trials", str(o.trials), "--runs", "1"]
-    gpr = {}
-    for modality in ("ee_xyz", "ee_rot"):
-        out, s = bodyschema(["train", "gpr", *common, "--run-root", str(folder / "runs"), "--no-progress",
-                             "--data", str(kin), "--modality", modality], log)
-        gpr[modality], minutes[f"train gpr {modality}"] = registered(out), s / 60
-    gpr_l1 = {}
-    for sensed in (("ee_xyz",), ("ee_xyz", "ee_rot")):
-        models = [arg for m in sensed for arg in ("--model", gpr[m])]
-        out_dir = folder / f"levels_gpr_{'_'.join(sensed)}"
-        _, s = bodyschema(["evaluate", "levels", *bench, *models, "--levels", "1", "--multistart", "0",
-                           "--no-floor", "--out", str(out_dir)], log)
-        minutes[f"levels gpr {'+'.join(sensed)}"] = s / 60
-        gpr_l1[sensed] = f"{float(levels_rows(out_dir)['1']['joint_err_deg']):.2f}"
-    kinematics = {"arm": name, "GPR L1 (°)": gpr_l1[("ee_xyz",)],
-                  "GPR L1, ee_xyz + ee_rot (°)": gpr_l1[("ee_xyz", "ee_rot")]}
+    kinematics, gpr = gpr_levels(name, robot, folder, common, o, log, minutes)
     if o.kinematics_only:
         return {**kinematics, **reaching(robot, gpr["ee_xyz"], folder, common, o, log, minutes),
                 "recipe minutes": f"{sum(minutes.values()):.1f}",
@@ -157,8 +138,8 @@ def measure(name: str, work: Path, o: argparse.Namespace) -> dict[str, str]:
     pixel, minutes["train pixel"] = registered(out), s / 60
     out, s = bodyschema(["train", "encoder", *train, "--epochs", str(o.epochs)], log)
     encoder, minutes["train encoder"] = registered(out), s / 60
-    _, s = bodyschema(["evaluate", "levels", *bench, "--model", pixel, "--encoder", encoder, "--multistart", "0",
-                       "--out", str(folder / "levels_pixel")], log)
+    _, s = bodyschema(["evaluate", "levels", *levels_flags(common, o), "--model", pixel, "--encoder", encoder,
+                       "--multistart", "0", "--out", str(folder / "levels_pixel")], log)
     minutes["levels pixel"] = s / 60
     px = levels_rows(folder / "levels_pixel")
     reached = reaching(robot, gpr["ee_xyz"], folder, common, o, log, minutes)
@@ -171,6 +152,37 @@ def measure(name: str, work: Path, o: argparse.Namespace) -> dict[str, str]:
             "+ encoder": " / ".join(level.get(k, "–") for k in ("1+enc", "2+enc", "3+enc")),
             **reached, "datagen ms/image": f"{ms_per_image:.1f}", "recipe minutes": f"{sum(minutes.values()):.1f}",
             "steps": ", ".join(f"{k} {v:.1f}" for k, v in minutes.items())}
+
+
+def levels_flags(common: list[str], o: argparse.Namespace) -> list[str]:
+    """What every `evaluate levels` of the table shares: the arm's MLflow store, no bars or plots, o.trials × 1 run."""
+    return [*common, "--no-progress", "--no-plots", "--trials", str(o.trials), "--runs", "1"]
+
+
+def gpr_levels(name: str, robot: str, folder: Path, common: list[str], o: argparse.Namespace, log: Path,
+               minutes: dict[str, float]) -> tuple[dict[str, str], dict[str, str]]:
+    """GPRs of ee_xyz and ee_rot on a store of their own without images, as a user would make (a 7-joint arm's
+    orientation needs more poses than the images give), and level 1 through ee_xyz alone and with ee_rot: the
+    table's GPR columns, and the registered GPRs by modality."""
+    kin = folder / "kinematics.zarr"
+    _, s = bodyschema(["datagen", "--robot", robot, "--n", str(o.gpr_n), "--out", str(kin), "--no-progress",
+                       "--no-images", "--workspace", "camera"], log)
+    minutes["datagen kinematics"] = s / 60
+    gpr = {}
+    for modality in ("ee_xyz", "ee_rot"):
+        out, s = bodyschema(["train", "gpr", *common, "--run-root", str(folder / "runs"), "--no-progress",
+                             "--data", str(kin), "--modality", modality], log)
+        gpr[modality], minutes[f"train gpr {modality}"] = registered(out), s / 60
+    level_1 = {}
+    for sensed in (("ee_xyz",), ("ee_xyz", "ee_rot")):
+        models = [arg for m in sensed for arg in ("--model", gpr[m])]
+        out_dir = folder / f"levels_gpr_{'_'.join(sensed)}"
+        _, s = bodyschema(["evaluate", "levels", *levels_flags(common, o), *models, "--levels", "1",
+                           "--multistart", "0", "--no-floor", "--out", str(out_dir)], log)
+        minutes[f"levels gpr {'+'.join(sensed)}"] = s / 60
+        level_1[sensed] = f"{float(levels_rows(out_dir)['1']['joint_err_deg']):.2f}"
+    return {"arm": name, "GPR L1 (°)": level_1[("ee_xyz",)],
+            "GPR L1, ee_xyz + ee_rot (°)": level_1[("ee_xyz", "ee_rot")]}, gpr
 
 
 def reaching(robot: str, gpr: str, folder: Path, common: list[str], o: argparse.Namespace, log: Path,
