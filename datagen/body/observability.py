@@ -10,7 +10,8 @@ and the images are compared with the pose's own (same size and colour as the rec
 - px/°: pixels whose grey value changes by more than CHANGED_GREY, per degree (the mean over poses and signs);
 - mm/°: how far the ee moves per degree (forward kinematics);
 - the fraction of the image the moving arm covers (segmentation render), and of poses whose ee is in the image.
-A joint under MIN_PX_PER_DEG is flagged (`weak`); see the constants for why those values.
+A joint under MIN_PX_PER_DEG, or whose axis the ee lies on (a roll about the tool's own axis, whatever its px/°), is
+flagged (`weak`); see the constants for why those values.
 Cost: n·(1 + 2·Dq) renders at the record's image size (16 poses, 6 joints, 64×64: 208 renders, ≈ 0.2-0.5 s).
 """
 
@@ -30,7 +31,10 @@ MIN_PX_PER_DEG = 10.0    # px/°: below, a joint is flagged as not seen. Measure
                          # 1.2, 0.9, 2.3, 15.7 and 55°: floor × px/° = 49-121 °, so under 10 px/° the floor is ≥ 5°
                          # (2° needs ≈ 35 px/°); a joint flagged cannot be perceived to 2°, and those between 10 and
                          # 35 px/° may not be either on that decoder recipe
-ROLL_MM = 10.0           # mm: an ee this close to a joint's axis is on it (a roll about the tool's own axis)
+ROLL_MM = 10.0           # mm: an ee this close to a joint's axis is on it (a roll about the tool's own axis). Such a
+                         # roll changes the image only by the tool's asymmetry, and no decoder here learned one at
+                         # any px/°: floors of 109–169° (SO-101's wrist_roll at 14.6 px/°, the UR5's wrist_3, both
+                         # Pandas' joint 7, Jaco's last joint; README "On the defaults: nine arms")
 _BT601 = np.array([0.299, 0.587, 0.114])
 
 
@@ -42,12 +46,23 @@ class JointView:
     axis_mm: float          # the ee's mean distance from the joint's axis, mm (≈ mm/° · 180/π)
 
     @property
-    def weak(self) -> bool:
+    def on_axis(self) -> bool:
+        """The ee lies on this joint's axis: a roll about the tool's own axis."""
+        return self.axis_mm < ROLL_MM
+
+    @property
+    def few_pixels(self) -> bool:
+        """Under MIN_PX_PER_DEG: the image changes too little for a decoder to perceive it to 2°."""
         return self.px_per_deg < MIN_PX_PER_DEG
+
+    @property
+    def weak(self) -> bool:
+        """Not seen: too few pixels, or a roll about the tool's own axis."""
+        return self.few_pixels or self.on_axis
 
     def why(self) -> str:
         """Why a weak joint is not seen, from its geometry."""
-        if self.axis_mm < ROLL_MM:
+        if self.on_axis:
             return (f"the ee lies on its axis ({self.axis_mm:.1f} mm off, {self.mm_per_deg:.2f} mm/°): a roll about "
                     "the tool's own axis, seen only through bodies beyond it that are not round about that axis")
         return (f"it moves the ee {self.mm_per_deg:.2f} mm/°, but the bodies it moves cover too few pixels or are "
@@ -80,7 +95,7 @@ class Observability:
                  f"covers {self.arm_fraction:.1%} of the image{in_view}",
                  f"  {'joint':<{width}}   px/°    mm/°",
                  *(f"  {j.name:<{width}} {j.px_per_deg:7.1f} {j.mm_per_deg:7.2f}"
-                   f"{'   < ' + format(MIN_PX_PER_DEG, 'g') + ' px/°: not seen' if j.weak else ''}"
+                   f"{_flag(j)}"
                    for j in self.joints),
                  f"  (px/°: pixels whose grey value changes by > {CHANGED_GREY}/255 per degree; a joint under "
                  f"{MIN_PX_PER_DEG:g} px/° cannot be perceived to 2° from this camera)"]
@@ -89,9 +104,24 @@ class Observability:
     def warnings(self) -> list[str]:
         """The house warning per weak joint: the joint, its figure and why."""
         from bodyschema.errors import must_be
-        return [must_be(f"joint {j.name!r} seen by camera {self.camera!r}",
-                        f"at least {MIN_PX_PER_DEG:g} pixels changed per degree to be perceived to 2°",
-                        f"{j.px_per_deg:.2f} px/°", f"Not seen: {j.why()}.") for j in self.weak]
+        return [must_be(f"joint {j.name!r} seen by camera {self.camera!r}", *_expected_and_got(j),
+                        f"Not seen: {j.why()}.") for j in self.weak]
+
+
+def _flag(joint: JointView) -> str:
+    """The table's mark of a joint not seen, and which rule."""
+    if joint.on_axis:
+        return "   on its axis: not seen"
+    return f"   < {MIN_PX_PER_DEG:g} px/°: not seen" if joint.few_pixels else ""
+
+
+def _expected_and_got(joint: JointView) -> tuple[str, str]:
+    """The house warning's expectation and figure for a joint not seen."""
+    if joint.on_axis:
+        return ("a joint that moves the ee, to be perceived from an image",
+                f"{joint.mm_per_deg:.2f} mm/° ({joint.axis_mm:.1f} mm off its axis; {joint.px_per_deg:.1f} px/°)")
+    return (f"at least {MIN_PX_PER_DEG:g} pixels changed per degree to be perceived to 2°",
+            f"{joint.px_per_deg:.2f} px/°")
 
 
 def observability(robot, ranges: np.ndarray | None = None, rng: np.random.Generator | None = None,
