@@ -65,7 +65,7 @@ class Choice:
 class FurtherChoice:
     camera: dict                    # the entry of the record's `cameras`: {name, pos, xyaxes, fovy}
     seen: Observability             # its own view, measured at POSES poses
-    unseen: tuple[str, ...]         # the joints neither view sees (under MIN_PX_PER_DEG in both)
+    unseen: tuple[str, ...]         # the joints neither view sees (under MIN_PX_PER_DEG in both, or a tool roll)
 
 
 def _measure(record, box: np.ndarray, camera: dict, size: tuple[int, int], n: int,
@@ -140,7 +140,8 @@ def choose_further_camera(record, box: np.ndarray, first: Observability) -> Furt
     camera = {**place_camera(points, size, **framing), "name": FURTHER}
     seen = _measure(record, box, camera, size, first.poses, MIN_VIEW)
     pair = _best_of(first, seen)
-    return FurtherChoice(camera, seen, tuple(j.name for j, px in zip(first.joints, pair) if px < MIN_PX_PER_DEG))
+    return FurtherChoice(camera, seen, tuple(j.name for j, px in zip(first.joints, pair)
+                                             if px < MIN_PX_PER_DEG or j.on_axis))
 
 
 def _few_pixels(seen: Observability) -> int:
