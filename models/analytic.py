@@ -71,7 +71,7 @@ class AnalyticModel(BaseSensoryModel):
         if self.modality == "joints":
             return z.clone()
         if self.modality == "ee_rot":
-            return torch.from_numpy(self.robot.ee_rot_and_jacobian(_numpy(z), check=False)[0]).to(z)
+            return torch.from_numpy(self.robot.ee_rot(_numpy(z), check=False)).to(z)
         q = _numpy(z)                                                     # (B, Dz) rad, float64
         xyz = self.robot.fk(q, check=False)                               # (B, 3) m
         x = self.robot.project(xyz, self.modality) if self.image_size else xyz   # (B, 2) px | (B, 3) m

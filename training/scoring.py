@@ -14,6 +14,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
+from bodyschema.aif.precisions import sensor_precision
 from bodyschema.base import modalities
 from bodyschema.errors import must_be
 from bodyschema.training import plots
@@ -104,7 +105,7 @@ SENSOR_FRACTION = 0.25    # a model perceived at its sensor's precision should e
 def sensor_warning(member, scores: dict[str, float]) -> str | None:
     """The house warning for a model perceived at its sensor's precision (the precision rule: a GP, an MDN) whose
     held-out RMSE is not well under that sensor's σ: perception would trust its errors as readings. None if fine."""
-    pi = member.sensor_precision if getattr(member, "precision_varies", False) else None
+    pi = sensor_precision(member)                        # None: perceived at its own precision (aif/precisions.py)
     rmse = scores.get(METRIC)
     if pi is None or rmse is None:
         return None

@@ -45,9 +45,13 @@ class HingeChain:
         jac = np.cross(axes, xyz[None] - anchors)                               # (Dq, N, 3) m/rad
         return xyz, jac.transpose(1, 2, 0)                                      # (N, 3), (N, 3, Dq)
 
-    def rotation(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(N, Dq) rad → the site's orientation R (N, 3, 3) (its axes as columns, in the world, as MuJoCo's
-        site_xmat) and dR/dq (N, 3, 3, Dq): a hinge turns R about its world axis a_j, dR/dq_j = [a_j]× R."""
+    def rotation(self, q: np.ndarray) -> np.ndarray:
+        """(N, Dq) rad → the site's orientation R (N, 3, 3): its axes as columns, in the world, as MuJoCo's
+        site_xmat."""
+        return self._walk(q)[1]
+
+    def rotation_and_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """`rotation` and dR/dq (N, 3, 3, Dq): a hinge turns R about its world axis a_j, dR/dq_j = [a_j]× R."""
         _, rot, _, axes = self._walk(q)
         turned = np.cross(axes[:, :, :, None], rot[None], axis=2)               # (Dq, N, 3, 3): a_j × each column
         return rot, turned.transpose(1, 2, 3, 0)

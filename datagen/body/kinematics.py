@@ -2,7 +2,7 @@
 
 `fk` calls MuJoCo per pose (mj_kinematics: the reference); `fk_and_jacobian` uses the same hinge recursion
 vectorized over the batch (`chain.HingeChain`, equal to 1e-12) from VECTORIZE_FROM poses up, MuJoCo per pose
-(mj_kinematics + mj_comPos + mj_jacSite) below; `rotation_and_jacobian` (the site's orientation) the chain always.
+(mj_kinematics + mj_comPos + mj_jacSite) below; `rotation` (the site's orientation) and its Jacobian the chain always.
 `Robot` queries through it, and so does `robot init`'s camera placement (infer.py) before any Robot exists.
 """
 
@@ -52,10 +52,14 @@ class ArmKinematics:
         """Unchecked (any finite q, limits not enforced): (N, 3) m and (N, 3, Dq) m/rad, the fastest way."""
         return self._chain(q) if q.shape[0] >= VECTORIZE_FROM else self.mj_fk_and_jacobian(q)
 
-    def rotation_and_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Unchecked: the site's orientation (N, 3, 3) (MuJoCo's site_xmat) and its derivative (N, 3, 3, Dq) per
-        rad, by the vectorized chain at every batch size (no caller needs it per pose at camera rate)."""
+    def rotation(self, q: np.ndarray) -> np.ndarray:
+        """Unchecked: the site's orientation (N, 3, 3) (MuJoCo's site_xmat), by the vectorized chain at every batch
+        size (no caller needs it per pose at camera rate)."""
         return self._chain.rotation(q)
+
+    def rotation_and_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Unchecked: `rotation` and its derivative (N, 3, 3, Dq) per rad."""
+        return self._chain.rotation_and_jacobian(q)
 
     def mj_fk_and_jacobian(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The reference: mj_kinematics + mj_comPos + mj_jacSite per pose."""

@@ -181,10 +181,14 @@ class Robot:
         chain for large batches (≥ VECTORIZE_FROM poses), MuJoCo per pose otherwise; check as in `fk`."""
         return self._fk_and_jacobian(self.check_q(q) if check else np.asarray(q, dtype=np.float64))
 
-    def ee_rot_and_jacobian(self, q, check: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    def ee_rot(self, q, check: bool = True) -> np.ndarray:
         """(N, Dq) rad → the `ee` site's orientation as its rotation matrix read row by row (N, 9) (the ee_rot
-        modality: entry 3i + k is world axis i's component of the site's axis k) and its derivative (N, 9, Dq)
-        per rad; check as in `fk`."""
+        modality: entry 3i + k is world axis i's component of the site's axis k); check as in `fk`."""
+        rot = self._kinematics.rotation(self.check_q(q) if check else np.asarray(q, dtype=np.float64))
+        return rot.reshape(len(rot), 9)
+
+    def ee_rot_and_jacobian(self, q, check: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """`ee_rot` and its derivative (N, 9, Dq) per rad; check as in `fk`."""
         rot, jac = self._kinematics.rotation_and_jacobian(self.check_q(q) if check else np.asarray(q, dtype=np.float64))
         return rot.reshape(len(rot), 9), jac.reshape(len(jac), 9, self.dq)
 
@@ -236,8 +240,7 @@ class Robot:
         image_<name> when `image`, touch (N,1) float32 when the robot has a touch sensor."""
         q = self.check_q(q)
         xyz, jac = self._fk_and_jacobian(q)
-        rot = self.ee_rot_and_jacobian(q, check=False)[0]
-        out = {"ee_xyz": xyz.astype(np.float32), "ee_rot": rot.astype(np.float32),
+        out = {"ee_xyz": xyz.astype(np.float32), "ee_rot": self.ee_rot(q, check=False).astype(np.float32),
                **{m: view.project(xyz).astype(np.float32) for m, view in self._views.items()},
                "jacobian": jac.astype(np.float32)}
         if image:

@@ -32,7 +32,7 @@ def sense(robot, modality: str, q: np.ndarray, xyz: np.ndarray | None = None,
     if is_image(modality):
         return _image(robot, modality, q, marker_offsets, image_dtype)
     if modality == "ee_rot":
-        return robot.ee_rot_and_jacobian(q, check=False)[0]
+        return robot.ee_rot(q, check=False)
     xyz = robot.fk(q, check=False) if xyz is None else xyz                # (N, 3) m; q may pass the limits
     if is_projection(modality):
         return _project(robot, modality, xyz)

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from bodyschema.base.modalities import images_in, is_image, is_projection
+from bodyschema.base.modalities import KINEMATIC, images_in, is_image, is_projection
 from bodyschema.datagen.samplers import uniform
 from bodyschema.errors import must_be
 from bodyschema.models.scaling import IMAGE_SCALE
@@ -45,7 +45,7 @@ def make_targets(robot, n: int, rng: np.random.Generator, image: bool = False,
     (standard deviation per modality, in its units: m, px, rad, intensity) added to the observations."""
     q = uniform(rng, robot.sampling_ranges, n)                            # (N, Dq) rad
     sensed = robot.observe(q, image=image)
-    obs = {m: sensed[m].astype(np.float64) for m in sensed if m in ("ee_xyz", "ee_rot") or is_projection(m)}
+    obs = {m: sensed[m].astype(np.float64) for m in sensed if m in KINEMATIC or is_projection(m)}
     obs["joints"] = q.copy()                                              # ee_xyz, ee_rot, ee_pixel[_<camera>], joints
     for camera in images_in(sensed):                                      # uint8 → [0, 1]
         obs[camera] = sensed[camera].astype(np.float64) / IMAGE_SCALE

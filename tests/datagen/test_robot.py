@@ -157,6 +157,7 @@ def test_ee_rot_is_mujocos_site_frame_and_its_jacobian_finite_differences(name):
     r = robot(name)
     q = random_q(r, 5, seed=4)
     rot, jac = r.ee_rot_and_jacobian(q)
+    np.testing.assert_array_equal(r.ee_rot(q), rot)
     data = mujoco.MjData(r.model)
     for q_i, rot_i in zip(q, rot):
         data.qpos[:] = q_i
