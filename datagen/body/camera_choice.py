@@ -4,11 +4,12 @@ joints that cannot be and why (`bodyschema robot camera`).
 Candidates, each framing the ee over the workspace (`infer.place_camera`): the principal-axes view it always
 placed, and views from AZIMUTHS around the ee's workspace at ELEVATIONS above it, each framing all the ee positions
 or COVER_TIGHT of them (closer; the ee must stay in view in ≥ GOOD_VIEW of the poses). Each is scored by its
-observability (`observability.py`, SEARCH_POSES poses at the record's image size): first how many joints reach
-MIN_PX_PER_DEG, then Σ log min(px/°, MIN_PX_PER_DEG) (a weak joint made less weak counts, a strong one made
-stronger does not). The best view then gets the smallest image size, up to `max_side` px a side, that sees more
-joints; a size that sees no more is not taken (a roll of a round tool is not seen at any size, and a larger image
-costs every later render and model). Joints left under the threshold are named with why (`JointView.why`).
+observability (`observability.py`, SEARCH_POSES poses at the record's image size): first how many joints pass
+both of its thresholds (MIN_PX_PER_DEG pixels, MIN_SHARE_PER_DEG of the image), then Σ log min(%/°,
+MIN_SHARE_PER_DEG) (a weak joint made less weak counts, a strong one made stronger does not). The best view then gets
+the smallest image size, up to `max_side` px a side, that sees more joints; a size that does not is not taken (a
+larger image keeps each joint's share of it, so it helps only where a joint's pixel count is short, and costs every
+later render and model). Joints left under a threshold are named with why (`JointView.why`).
 Cost: 1 + len(AZIMUTHS)·len(ELEVATIONS)·2 candidates × SEARCH_POSES·(1 + 2·Dq) renders, then a few sizes
 (README's UR5, 5 joints, 64×64, 2 shared cores: ≈ 10 s).
 
@@ -30,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bodyschema.datagen.body.infer import GOOD_VIEW, MIN_VIEW, ee_samples, place_camera, view_fraction
-from bodyschema.datagen.body.observability import MIN_PX_PER_DEG, Observability, observability
+from bodyschema.datagen.body.observability import MIN_SHARE_PER_DEG, JointView, Observability, observability
 from bodyschema.errors import must_be
 
 AZIMUTHS = np.deg2rad(np.arange(0, 360, 60))   # views around the workspace's vertical axis (6)
@@ -65,7 +66,7 @@ class Choice:
 class FurtherChoice:
     camera: dict                    # the entry of the record's `cameras`: {name, pos, xyaxes, fovy}
     seen: Observability             # its own view, measured at POSES poses
-    unseen: tuple[str, ...]         # the joints neither view sees (under MIN_PX_PER_DEG in both, or a tool roll)
+    unseen: tuple[str, ...]         # the joints neither view sees (weak in both: `JointView.weak`)
 
 
 def _measure(record, box: np.ndarray, camera: dict, size: tuple[int, int], n: int,
@@ -119,9 +120,9 @@ def choose_camera(record, box: np.ndarray, max_side: int = MAX_SIDE) -> Choice:
         if max(bigger) > max_side:
             break
         larger = _measure(record, box, place_camera(points, bigger, **framing), bigger, SEARCH_POSES)
-        if larger is not None and _few_pixels(larger) < _few_pixels(seen):
+        if larger is not None and _unseen_by_pixels(larger.joints) < _unseen_by_pixels(seen.joints):
             size, seen = bigger, larger
-            if not _few_pixels(seen):
+            if not _unseen_by_pixels(seen.joints):
                 break
     camera = place_camera(points, size, **framing)
     return Choice(camera, size, _measure(record, box, camera, size, before.poses) or seen, before, len(scored),
@@ -139,26 +140,24 @@ def choose_further_camera(record, box: np.ndarray, first: Observability) -> Furt
                      key=lambda pair: _pair_score(first, pair[1]))
     camera = {**place_camera(points, size, **framing), "name": FURTHER}
     seen = _measure(record, box, camera, size, first.poses, MIN_VIEW)
-    pair = _best_of(first, seen)
-    return FurtherChoice(camera, seen, tuple(j.name for j, px in zip(first.joints, pair)
-                                             if px < MIN_PX_PER_DEG or j.on_axis))
+    return FurtherChoice(camera, seen, tuple(j.name for j in _best_of(first, seen) if j.weak))
 
 
-def _few_pixels(seen: Observability) -> int:
-    """The joints under MIN_PX_PER_DEG. The size step counts these, rolls about the tool's axis included (`weak`
-    leaves those out at any size): an image that lifted SO-101's roll over the threshold was the larger one
-    (128×128) before the roll rule, and kept as it was, since the other joints gain from it too (SO-101's first four
-    floors were lower at 128×128 than at 64×64 in the README's runs) and every store made since would move."""
-    return sum(j.few_pixels for j in seen.joints)
+def _unseen_by_pixels(joints: tuple[JointView, ...]) -> int:
+    """The joints under either pixel threshold (a roll about the tool's axis is not seen in any view or size, and is
+    left out). Only the count MIN_PX_PER_DEG grows with the image; where every joint's share passes
+    MIN_SHARE_PER_DEG at 64×64 or more, so does its count, and the image keeps its size (SO-101: 80 000 poses at
+    64×64 floored lower than 20 000 at 128×128, the same CPU time; README "The image's share")."""
+    return sum((j.few_pixels or j.small_share) and not j.on_axis for j in joints)
 
 
-def _best_of(first: Observability, second: Observability) -> np.ndarray:
-    """Per joint, px/° of the better of two views. # (Dq,)"""
-    return np.maximum([j.px_per_deg for j in first.joints], [j.px_per_deg for j in second.joints])
+def _best_of(first: Observability, second: Observability) -> tuple[JointView, ...]:
+    """Per joint, its figures in the view that changes more of the image (both views are of one size)."""
+    return tuple(max(a, b, key=lambda j: j.share_per_deg) for a, b in zip(first.joints, second.joints))
 
 
 def _pair_score(first: Observability, second: Observability) -> tuple[int, float]:
-    return _px_score(_best_of(first, second))
+    return _rank(_best_of(first, second))
 
 
 def _direction(azimuth: float, elevation: float) -> np.ndarray:
@@ -167,9 +166,11 @@ def _direction(azimuth: float, elevation: float) -> np.ndarray:
 
 
 def _score(seen: Observability) -> tuple[int, float]:
-    return _px_score(np.array([j.px_per_deg for j in seen.joints]))
+    return _rank(seen.joints)
 
 
-def _px_score(px: np.ndarray) -> tuple[int, float]:
-    """A view's rank from its px/° per joint (Dq,): first how many joints are seen, then Σ log min(px/°, threshold)."""
-    return -int((px < MIN_PX_PER_DEG).sum()), float(np.log(np.minimum(px, MIN_PX_PER_DEG) + 0.01).sum())
+def _rank(joints: tuple[JointView, ...]) -> tuple[int, float]:
+    """A view's rank from its joints' figures: first how many pass the pixel thresholds, then
+    Σ log min(%/°, MIN_SHARE_PER_DEG)."""
+    share = np.array([j.share_per_deg for j in joints])
+    return -_unseen_by_pixels(joints), float(np.log(np.minimum(share, MIN_SHARE_PER_DEG) + 1e-4).sum())

@@ -8,10 +8,13 @@ data is made or any model trained.
 At `n` poses uniform in the camera workspace (seeded, the generator passed in), each chosen joint is moved by ±δ
 and the images are compared with the pose's own (same size and colour as the record's images, grey by BT.601):
 - px/°: pixels whose grey value changes by more than CHANGED_GREY, per degree (the mean over poses and signs);
+- %/°: the same as a share of the image's pixels (px/° ÷ H·W), a figure of the framing that the image size leaves
+  alone (SO-101's joints: 0.61, 0.63, 0.47, 0.24 %/° at 128×128, 0.63, 0.67, 0.50, 0.26 at 64×64);
 - mm/°: how far the ee moves per degree (forward kinematics);
 - the fraction of the image the moving arm covers (segmentation render), and of poses whose ee is in the image.
-A joint under MIN_PX_PER_DEG, or whose axis the ee lies on (a roll about the tool's own axis, whatever its px/°), is
-flagged (`weak`); see the constants for why those values.
+A joint under MIN_SHARE_PER_DEG or MIN_PX_PER_DEG, or whose axis the ee lies on (a roll about the tool's own axis,
+whatever its px/°), is flagged (`weak`); see the constants for why those values: of the two figures, the floors
+followed the share, and a larger image raises only the count.
 Cost: n·(1 + 2·Dq) renders at the record's image size (16 poses, 6 joints, 64×64: 208 renders, ≈ 0.2-0.5 s).
 """
 
@@ -26,11 +29,17 @@ DELTA_DEG = 2.0          # the perturbation: the 2° a perceived joint should be
 POSES = 16               # typical poses sampled (uniform in the camera workspace)
 CHANGED_GREY = 8         # grey levels (of 255): a change below this is within a trained pixel decoder's error
                          # (held-out RMSE 0.037 ≈ 9.4 levels on a UR5, README "Your own robot"), so it is not counted
-MIN_PX_PER_DEG = 10.0    # px/°: below, a joint is flagged as not seen. Measured on the README's UR5 (64×64, its
-                         # placed camera, 5 joints): 40.9, 50.4, 30.1, 5.2 and 2.2 px/° at pixel-decoder floors of
-                         # 1.2, 0.9, 2.3, 15.7 and 55°: floor × px/° = 49-121 °, so under 10 px/° the floor is ≥ 5°
-                         # (2° needs ≈ 35 px/°); a joint flagged cannot be perceived to 2°, and those between 10 and
-                         # 35 px/° may not be either on that decoder recipe
+MIN_PX_PER_DEG = 10.0    # px/°: below, too few pixels change for a decoder to draw the motion. Measured on the
+                         # README's UR5 (64×64, its placed camera, 5 joints): 40.9, 50.4, 30.1, 5.2 and 2.2 px/° at
+                         # pixel-decoder floors of 1.2, 0.9, 2.3, 15.7 and 55°: under 10 px/° the floor is ≥ 5°
+MIN_SHARE_PER_DEG = 0.25 # %/° of the image: below, a joint is not seen at any image size. 10 px/° of a 64×64 image,
+                         # where MIN_PX_PER_DEG was measured, as a share: a larger image raised the pixel count and not
+                         # the floor (the UR5's wrist_1 passed at 128×128 with 10.1 px/°, 0.06 %/°, and floored at
+                         # 168°; SO-101 on 20 000 poses: 1.46, 2.02, 3.47, 8.02° at 128×128 against 2.21, 3.12, 5.00,
+                         # 9.67° at 64×64, 1.2–1.5× apart where its px/° are 4× apart). Above it, 2° needs more share
+                         # as the arm has more joints: at 80 000 poses (64×64, lean, 40 epochs) SO-101 (5 joints)
+                         # floored at 1.13, 1.63, 3.41, 7.18° with 0.63, 0.67, 0.50, 0.26 %/°, Z1 (6 joints) at 2.61,
+                         # 3.87, 5.71, 13.8, 8.64° with 0.89, 0.97, 0.61, 0.30, 0.29 %/°
 ROLL_MM = 10.0           # mm: an ee this close to a joint's axis is on it (a roll about the tool's own axis). Such a
                          # roll changes the image only by the tool's asymmetry, and no decoder here learned one at
                          # any px/°: floors of 109–169° (SO-101's wrist_roll at 14.6 px/°, the UR5's wrist_3, both
@@ -42,6 +51,7 @@ _BT601 = np.array([0.299, 0.587, 0.114])
 class JointView:
     name: str
     px_per_deg: float       # pixels changed (> CHANGED_GREY) per degree, mean over poses and ±δ
+    share_per_deg: float    # the same as a percentage of the image's pixels, %/°
     mm_per_deg: float       # ee displacement per degree, mm, mean over poses
     axis_mm: float          # the ee's mean distance from the joint's axis, mm (≈ mm/° · 180/π)
 
@@ -52,22 +62,32 @@ class JointView:
 
     @property
     def few_pixels(self) -> bool:
-        """Under MIN_PX_PER_DEG: the image changes too little for a decoder to perceive it to 2°."""
+        """Under MIN_PX_PER_DEG: too few pixels change for a decoder to draw the motion (a larger image helps)."""
         return self.px_per_deg < MIN_PX_PER_DEG
 
     @property
+    def small_share(self) -> bool:
+        """Under MIN_SHARE_PER_DEG: too small a part of the image changes (a larger image does not help)."""
+        return self.share_per_deg < MIN_SHARE_PER_DEG
+
+    @property
     def weak(self) -> bool:
-        """Not seen: too few pixels, or a roll about the tool's own axis."""
-        return self.few_pixels or self.on_axis
+        """Not seen: too few pixels, too small a share of the image, or a roll about the tool's own axis."""
+        return self.few_pixels or self.small_share or self.on_axis
 
     def why(self) -> str:
         """Why a weak joint is not seen, from its geometry."""
         if self.on_axis:
             return (f"the ee lies on its axis ({self.axis_mm:.1f} mm off, {self.mm_per_deg:.2f} mm/°): a roll about "
                     "the tool's own axis, seen only through bodies beyond it that are not round about that axis")
-        return (f"it moves the ee {self.mm_per_deg:.2f} mm/°, but the bodies it moves cover too few pixels or are "
-                "hidden behind the arm at this framing: move the camera closer (a narrower workspace, `robot "
-                "camera`), raise image_size, or add a second view for it (`robot camera --add`)")
+        if self.small_share:
+            return (f"it moves the ee {self.mm_per_deg:.2f} mm/°, but the pixels it changes are "
+                    f"{self.share_per_deg:.2f} % of the image per degree (the bodies it moves are small or hidden "
+                    "behind the arm at this framing), and a larger image keeps that share: move the camera closer (a "
+                    "narrower workspace, `robot camera`), or add a second view for it (`robot camera --add`)")
+        return (f"it moves the ee {self.mm_per_deg:.2f} mm/°, and changes {self.share_per_deg:.2f} % of the image per "
+                "degree, but in too few pixels at this image size: raise image_size (`robot camera "
+                "--max-image-size`)")
 
 
 @dataclass(frozen=True)
@@ -93,12 +113,12 @@ class Observability:
         in_view = "" if self.in_view is None else f", ee in view {self.in_view:.1%}"
         lines = [f"observability: camera {self.camera!r}, {h}×{w} px, {self.poses} poses, ±{DELTA_DEG:g}°: the arm "
                  f"covers {self.arm_fraction:.1%} of the image{in_view}",
-                 f"  {'joint':<{width}}   px/°    mm/°",
-                 *(f"  {j.name:<{width}} {j.px_per_deg:7.1f} {j.mm_per_deg:7.2f}"
-                   f"{_flag(j)}"
+                 f"  {'joint':<{width}}   px/°     %/°    mm/°",
+                 *(f"  {j.name:<{width}} {j.px_per_deg:7.1f} {j.share_per_deg:7.2f} {j.mm_per_deg:7.2f}{_flag(j)}"
                    for j in self.joints),
-                 f"  (px/°: pixels whose grey value changes by > {CHANGED_GREY}/255 per degree; a joint under "
-                 f"{MIN_PX_PER_DEG:g} px/° cannot be perceived to 2° from this camera)"]
+                 f"  (px/°: pixels whose grey value changes by > {CHANGED_GREY}/255 per degree, %/°: as a share of "
+                 f"the image; under {MIN_SHARE_PER_DEG:g} %/° or {MIN_PX_PER_DEG:g} px/° a joint is not perceived to "
+                 "2° from this camera; above, 2° takes a larger share the more joints the arm has)"]
         return "\n".join(lines)
 
     def warnings(self) -> list[str]:
@@ -112,6 +132,8 @@ def _flag(joint: JointView) -> str:
     """The table's mark of a joint not seen, and which rule."""
     if joint.on_axis:
         return "   on its axis: not seen"
+    if joint.small_share:
+        return f"   < {MIN_SHARE_PER_DEG:g} %/°: not seen"
     return f"   < {MIN_PX_PER_DEG:g} px/°: not seen" if joint.few_pixels else ""
 
 
@@ -120,6 +142,9 @@ def _expected_and_got(joint: JointView) -> tuple[str, str]:
     if joint.on_axis:
         return ("a joint that moves the ee, to be perceived from an image",
                 f"{joint.mm_per_deg:.2f} mm/° ({joint.axis_mm:.1f} mm off its axis; {joint.px_per_deg:.1f} px/°)")
+    if joint.small_share:
+        return (f"at least {MIN_SHARE_PER_DEG:g} % of the image changed per degree to be perceived to 2°",
+                f"{joint.share_per_deg:.2f} %/° ({joint.px_per_deg:.1f} px/°)")
     return (f"at least {MIN_PX_PER_DEG:g} pixels changed per degree to be perceived to 2°",
             f"{joint.px_per_deg:.2f} px/°")
 
@@ -146,8 +171,9 @@ def observability(robot, ranges: np.ndarray | None = None, rng: np.random.Genera
     jac = robot.jacobian(q, check=False)                                          # (n, 3, Dq) m/rad
     arm = np.linalg.norm(jac, axis=1)                                             # (n, Dq) m/rad: the lever
     mm = arm.mean(axis=0) * 1e3 * np.pi / 180                                     # (Dq,) mm/°
-    joints = tuple(JointView(name, float(p), float(m), float(a)) for name, p, m, a
-                   in zip(robot.joint_names, px, mm, arm.mean(axis=0) * 1e3))
+    share = 100 * px / base[0].size                                              # (Dq,) %/° of the image
+    joints = tuple(JointView(name, float(p), float(s), float(m), float(a)) for name, p, s, m, a
+                   in zip(robot.joint_names, px, share, mm, arm.mean(axis=0) * 1e3))
     own = modality == "image"
     camera = robot.camera_name if own else robot.model.camera(robot.cameras[modality]).name
     return Observability(joints, arm_fraction(robot, q, modality), view_fraction(robot, ranges) if own else None,
