@@ -85,8 +85,8 @@ def levels_rows(run: Path) -> dict[str, dict[str, str]]:
         return {row["level"]: row for row in csv.DictReader(f)}
 
 
-FLAGGED = re.compile(r"^ +(\S+) +[\d.]+ +[\d.]+ +(?:< [\d.]+ px/°|on its axis): not seen$", re.MULTILINE)
-JOINT_ROW = re.compile(r"^ +(\S+) +[\d.]+ +[\d.]+(?: +(?:<|on its axis).*)?$", re.MULTILINE)
+FLAGGED = re.compile(r"^ +(\S+)(?: +[\d.]+){3} +(?:< [\d.]+ (?:px|%)/°|on its axis): not seen$", re.MULTILINE)
+JOINT_ROW = re.compile(r"^ +(\S+)(?: +[\d.]+){3}(?: +(?:<|on its axis).*)?$", re.MULTILINE)
 
 
 def unseen_joints(datagen_output: str) -> set[str]:

@@ -147,7 +147,7 @@ def _unseen_by_pixels(joints: tuple[JointView, ...]) -> int:
     """The joints under either pixel threshold (a roll about the tool's axis is not seen in any view or size, and is
     left out). Only the count MIN_PX_PER_DEG grows with the image; where every joint's share passes
     MIN_SHARE_PER_DEG at 64×64 or more, so does its count, and the image keeps its size (SO-101: 80 000 poses at
-    64×64 floored lower than 20 000 at 128×128, the same CPU time; README "The image's share")."""
+    64×64 floored lower than 20 000 at 128×128, the same CPU time; README "The image's share of a joint")."""
     return sum((j.few_pixels or j.small_share) and not j.on_axis for j in joints)
 
 

@@ -58,10 +58,11 @@ class RobotShowArgs:
 @dataclass(frozen=True)
 class RobotCameraArgs:
     """Place a record's camera anew from sampled forward kinematics, framing the ee over one of its workspaces
-    (after you narrowed it, or changed image_size): of several views and framings, the one whose image changes most
-    for its weakest joints, and a larger image (up to --max-image-size) where that sees more joints; joints still
-    not seen are named with why; --add places a second view for those joints too. Rewrites the record in place
-    (its leading comment kept, other comments not)."""
+    (after you narrowed it, or changed image_size): of several views and framings, the one that changes the largest
+    share of its image for its weakest joints, and a larger image (up to --max-image-size) where that sees more joints
+    (one whose share passes and pixel count does not: images under 64×64); joints still not seen are named with why;
+    --add places a second view for those joints too. Rewrites the record in place (its leading comment kept, other
+    comments not)."""
 
     record: Annotated[Path, Positional("RECORD")]   # a robot record (.toml)
     workspace: str = "camera"          # the joint box whose ee positions the camera frames
@@ -136,7 +137,8 @@ def run_camera(args: RobotCameraArgs) -> int:
         if further.unseen:
             logger.warning(must_be(f"joints {unseen} of {record.name}", "seen by one of the two cameras",
                                    "under the threshold in both", "A roll about the tool's own axis is not seen by "
-                                   "any camera; else narrow the workspace or raise --max-image-size."))
+                                   "any camera; else narrow the workspace (a closer camera: a larger image keeps a "
+                                   "joint's share of it)."))
     print(f"record: {args.record}")
     return 0
 
