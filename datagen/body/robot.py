@@ -165,31 +165,35 @@ class Robot:
         return self._view_of(modality).project_jacobian(checked_points(xyz))
 
     # ---- kinematics ----------------------------------------------------------------------------------
+    def _checked(self, q, check: bool) -> np.ndarray:
+        """q as float64 (N, Dq), through `check_q` when `check` (every public query's `check` flag)."""
+        return self.check_q(q) if check else np.asarray(q, dtype=np.float64)
+
     def fk(self, q, check: bool = True) -> np.ndarray:
         """(N, Dq) rad → (N, 3) m, the `ee` site position in the world (mj_kinematics per pose).
 
         check=False skips `check_q` (shape, finiteness, joint limits): for simulated states, which may pass the
         limits by a little, in hot loops."""
-        return self._fk(self.check_q(q) if check else np.asarray(q, dtype=np.float64))
+        return self._fk(self._checked(q, check))
 
     def jacobian(self, q, check: bool = True) -> np.ndarray:
         """(N, Dq) rad → (N, 3, Dq) m/rad, d ee / d q from mj_jacSite; check as in `fk`."""
-        return self._jacobian(self.check_q(q) if check else np.asarray(q, dtype=np.float64))
+        return self._jacobian(self._checked(q, check))
 
     def fk_and_jacobian(self, q, check: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """(N, Dq) rad → ee (N, 3) m and d ee / d q (N, 3, Dq) m/rad, the fastest way: vectorized over the hinge
         chain for large batches (≥ VECTORIZE_FROM poses), MuJoCo per pose otherwise; check as in `fk`."""
-        return self._fk_and_jacobian(self.check_q(q) if check else np.asarray(q, dtype=np.float64))
+        return self._fk_and_jacobian(self._checked(q, check))
 
     def ee_rot(self, q, check: bool = True) -> np.ndarray:
         """(N, Dq) rad → the `ee` site's orientation as its rotation matrix read row by row (N, 9) (the ee_rot
         modality: entry 3i + k is world axis i's component of the site's axis k); check as in `fk`."""
-        rot = self._kinematics.rotation(self.check_q(q) if check else np.asarray(q, dtype=np.float64))
+        rot = self._kinematics.rotation(self._checked(q, check))
         return rot.reshape(len(rot), 9)
 
     def ee_rot_and_jacobian(self, q, check: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """`ee_rot` and its derivative (N, 9, Dq) per rad; check as in `fk`."""
-        rot, jac = self._kinematics.rotation_and_jacobian(self.check_q(q) if check else np.asarray(q, dtype=np.float64))
+        rot, jac = self._kinematics.rotation_and_jacobian(self._checked(q, check))
         return rot.reshape(len(rot), 9), jac.reshape(len(jac), 9, self.dq)
 
     @property
@@ -214,7 +218,7 @@ class Robot:
         if modality not in self.cameras:
             raise ValueError(must_be("modality", f"one of {self.name}'s cameras {list(self.cameras)}", modality,
                                      "Name further cameras in the robot record's `cameras`."))
-        return self._render(self.check_q(q) if check else np.asarray(q, dtype=np.float64), modality)
+        return self._render(self._checked(q, check), modality)
 
     def _render(self, q: np.ndarray, modality: str = IMAGE) -> np.ndarray:
         return self._ensure_renderer(modality).render(self.model, self._kin, q)

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from bodyschema.base import modalities
 from bodyschema.datagen.exchange.importers.body import (
     RANGE_TOL,
     Body,
@@ -132,8 +133,9 @@ def _extras(rec: Recording, config: ImportConfig) -> dict[str, np.ndarray]:
 
 
 EPISODE_MAX = 2 ** 31 - 1        # the store keeps episode as int32
-# per-frame shape (None: any)
-WIDTHS = {"ee_xyz": (3,), "ee_rot": (9,), "ee_pixel": (2,), "touch": None, "episode": (), "t": ()}
+# per-frame shape (None: any); the kinematic arrays' from the modality table
+WIDTHS = {**{m: modalities.get(m).shape for m in ("ee_xyz", "ee_rot", modalities.EE_PIXEL)},
+          "touch": None, "episode": (), "t": ()}
 
 
 def name_of(rec: Recording, config: ImportConfig) -> str:
