@@ -2,7 +2,7 @@
 
     MUJOCO_GL=egl .venv/bin/python bench/foreign_arms.py [--arms ur5 so_arm ...] [--n 3000] [--epochs 40]
         [--trials 50] [--pixel-size lean|pixel_aif|splat] [--pixel-lr LR] [--pixel-schedule constant|cosine|wsd]
-        [--pixel-loss cross_entropy|mse] [--gpr-n 6000]
+        [--pixel-loss cross_entropy|mse] [--pixel-inputs products|unit|kinematic] [--gpr-n 6000]
         [--work bench_out/foreign] [--kinematics-only] [--quick]
 
 Per arm, in a folder of its own (its own MLflow store): `robot init` (a file: the visuals it can load, nothing
@@ -134,7 +134,8 @@ def measure(name: str, work: Path, o: argparse.Namespace) -> dict[str, str]:
     out, s = bodyschema(["train", "pixel", *train, "--epochs", str(o.epochs), "--size", o.pixel_size,
                          *(["--lr", str(o.pixel_lr)] if o.pixel_lr else []),
                          *(["--lr-schedule", o.pixel_schedule] if o.pixel_schedule else []),
-                         *(["--loss", o.pixel_loss] if o.pixel_loss else [])], log)
+                         *(["--loss", o.pixel_loss] if o.pixel_loss else []),
+                         *(["--inputs", o.pixel_inputs] if o.pixel_inputs else [])], log)
     pixel, minutes["train pixel"] = registered(out), s / 60
     out, s = bodyschema(["train", "encoder", *train, "--epochs", str(o.epochs)], log)
     encoder, minutes["train encoder"] = registered(out), s / 60
@@ -210,6 +211,8 @@ def main() -> None:
     parser.add_argument("--pixel-schedule", default=None, help="train pixel's --lr-schedule (default: the size's)")
     parser.add_argument("--pixel-loss", default=None, help="train pixel's --loss (default: the size's; the README's "
                         "nine-arm table: mse)")
+    parser.add_argument("--pixel-inputs", default=None, help="train pixel's --inputs (default: products; unit: the "
+                        "decoders before 2026-11-30, models/pose_inputs.py)")
     parser.add_argument("--trials", type=int, default=50)
     parser.add_argument("--reach-trials", type=int, default=20)
     parser.add_argument("--work", type=Path, default=Path("bench_out/foreign"))

@@ -112,6 +112,8 @@ class PixelConfig(ModelConfig):
     weight_decay: float = 0.0  # Adam's L2 penalty
     lr_schedule: Literal["constant", "cosine", "wsd"] | None = None  # cosine: to 0 over epochs; wsd: in the last 20 %;
     # None: the preset's (lean wsd, the others constant)
+    inputs: Literal["unit", "products", "kinematic"] = "products"  # what the conv sizes' first layer reads of the
+    # pose: u, learned products of the joints' (1, cos q, sin q), or all 3^D of them (models/pose_inputs.py)
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,9 @@ Both are minimised by the pixel's mean given the pose; they differ in the gradie
 pushes every logit far down in the first epochs, σ(1 − σ) vanishes there, and no pose is learned after: one dark
 image for every pose (SO-101 at 64×64, README "Your own robot"). The cross-entropy's gradient does not vanish.
 
+What the first layer reads of the pose (`inputs`, models/pose_inputs.py): by default learned products of the
+joints' (1, cos q, sin q), the form in which a revolute chain places its links; "unit" reads the scaled angles u.
+
 Two named capacities (`size`), each with its Adam step: "lean" (FC 64, channels 32/16/8, lr 4e-3 and wsd) and
 "pixel_aif" (lr 2e-3; 5e-4 with the squared error, at 2e-3 a black image: see SIZES), the size of Pixel-AIF's
 NAO decoder (FC 4→512→1120 = 16×7×10 at 56×80, transposed convolutions 16→64→16→C, each but the last
@@ -37,6 +40,7 @@ from bodyschema.models import splat
 from bodyschema.models._nn_fit import TrainSettings, build, check_fit_data, check_val, evaluate, train
 from bodyschema.models._nn_model import NetModel
 from bodyschema.models.contract import BaseSensoryModel, register_kind
+from bodyschema.models.pose_inputs import DEFAULT_INPUTS, ProductInputs, UnitInputs, pose_inputs
 from bodyschema.models.scaling import BodySpec
 
 ONEDNN_MIN_BATCH = 4   # latents per inference call from which oneDNN's convolutions pay: below, its per-call setup
@@ -78,14 +82,15 @@ class PixelDecoderNet(nn.Module):
     """u (B, Dz) in [-1, 1] → image (B, *output_shape) in (0, 1)."""
 
     def __init__(self, latent_dim: int, output_shape: tuple[int, ...], fc_hidden: int,
-                 channels: tuple[int, ...], kernel: int = 4, refine: bool = False):
+                 channels: tuple[int, ...], kernel: int = 4, refine: bool = False, inputs: nn.Module | None = None):
         super().__init__()
+        self.inputs = UnitInputs(latent_dim) if inputs is None else inputs      # what the first layer reads of u
         self.output_shape = tuple(output_shape)
         self.h, self.w, c_out = image_layout(self.output_shape)
         scale = 2 ** len(channels)                                       # one ×2 stage per entry of `channels`
         self.h0, self.w0 = math.ceil(self.h / scale), math.ceil(self.w / scale)
         self.c0 = channels[0]
-        self.fc = nn.Sequential(nn.Linear(latent_dim, fc_hidden), nn.ELU(),
+        self.fc = nn.Sequential(nn.Linear(self.inputs.size, fc_hidden), nn.ELU(),
                                 nn.Linear(fc_hidden, self.c0 * self.h0 * self.w0), nn.ELU())
         stages = []
         for i, (a, b) in enumerate(zip(channels, (*channels[1:], c_out))):
@@ -101,7 +106,7 @@ class PixelDecoderNet(nn.Module):
 
     def logits(self, u):
         """The image before its sigmoid: what the cross-entropy loss reads. u (B, Dz) → (B, *output_shape)"""
-        y = self.fc(u).reshape(-1, self.c0, self.h0, self.w0)            # (B, C0, h0, w0)
+        y = self.fc(self.inputs(u)).reshape(-1, self.c0, self.h0, self.w0)   # (B, C0, h0, w0)
         y = self.up(y)                                                   # (B, C, h0·2^n, w0·2^n)
         top, left = (y.shape[2] - self.h) // 2, (y.shape[3] - self.w) // 2
         y = y[:, :, top:top + self.h, left:left + self.w]                # (B, C, H, W), centre crop
@@ -116,8 +121,8 @@ class PixelDecoderNet(nn.Module):
         a per-layer overhead that dwarfs these small convolutions (bench/tracking_jacobian.py).
         # u (B, Dz) → (B, *output_shape), (B, O, Dz)"""
         b, dz = u.shape
-        eye = torch.eye(dz, dtype=u.dtype, device=u.device)
-        x = torch.cat([u, eye.repeat_interleave(b, 0)])                 # ((1+Dz)·B, Dz): row (1+j)·B + i is ∂u_i/∂u_ij
+        phi, slopes = self.inputs.with_derivatives(u)                   # (B, P), (B, Dz, P)
+        x = torch.cat([phi, slopes.transpose(0, 1).flatten(0, 1)])      # ((1+Dz)·B, P): row (1+j)·B + i is ∂φ_i/∂u_ij
         x = _with_tangents(self.fc, x, b).reshape(-1, self.c0, self.h0, self.w0)
         x = _with_tangents(self.up, x, b)                                # ((1+Dz)·B, C, H', W')
         top, left = (x.shape[2] - self.h) // 2, (x.shape[3] - self.w) // 2
@@ -181,7 +186,8 @@ class PixelDecoder(NetModel, BaseSensoryModel):
                  loss: str | None = None,                   # what the fit minimises (LOSSES); None: CONV_LOSS
                  precision: float | None = None,            # None: 1/σ² from the validation residuals
                  epochs: int = 100, batch_size: int = 64, lr: float | None = None, patience: int = 10,
-                 weight_decay: float = 0.0, lr_schedule: str | None = None):   # None: the preset's
+                 weight_decay: float = 0.0, lr_schedule: str | None = None,   # None: the preset's
+                 inputs: str = DEFAULT_INPUTS):             # what the conv sizes read of the pose (pose_inputs.py)
         super().__init__(body, modality, output_shape)
         image_layout(self.output_shape)
         if size not in SIZES:
@@ -199,6 +205,8 @@ class PixelDecoder(NetModel, BaseSensoryModel):
             raise ValueError(must_be("precision", "> 0 or None (fitted)", precision))
         self.size, self.fc_hidden, self.channels, self.fixed_precision = size, fc_hidden, tuple(channels), precision
         self.refine = bool(preset["refine"] if refine is None else refine)
+        pose_inputs(inputs, body)                                # the house error for a bad kind, here
+        self.inputs = inputs
         self.loss = ("mse" if size == "splat" else CONV_LOSS) if loss is None else loss
         if self.loss not in LOSSES:
             raise ValueError(must_be("loss", f"one of {sorted(LOSSES)}", self.loss))
@@ -223,6 +231,8 @@ class PixelDecoder(NetModel, BaseSensoryModel):
         net = fast_layout(build(self._factory, gen))
         if self.size == "splat":
             net.start_from(x, gen)
+        elif isinstance(net.inputs, ProductInputs):
+            net.inputs.start(gen)
         to_unit = self.body.to_unit
         self.fit_info_ = train(net, LOSSES[self.loss], (to_unit(q), x), self.settings, gen,
                                val=(to_unit(val[0]), val[1]) if val is not None else None,
@@ -238,7 +248,8 @@ class PixelDecoder(NetModel, BaseSensoryModel):
         if self.size == "splat":
             return splat.SplatNet(self.body, self.output_shape, SIZES["splat"]["points"],
                                   image_layout(self.output_shape)[2])
-        return PixelDecoderNet(self.latent_dim, self.output_shape, self.fc_hidden, self.channels, refine=self.refine)
+        return PixelDecoderNet(self.latent_dim, self.output_shape, self.fc_hidden, self.channels, refine=self.refine,
+                               inputs=pose_inputs(self.inputs, self.body))
 
     # ---- hooks ----------------------------------------------------------------------------------------
     def _outputs(self, net, u):
@@ -269,15 +280,16 @@ class PixelDecoder(NetModel, BaseSensoryModel):
                 "refine": self.refine, "loss": self.loss, "precision": self.fixed_precision,
                 "epochs": self.settings.epochs, "batch_size": self.settings.batch_size, "lr": self.settings.lr,
                 "patience": self.settings.patience, "weight_decay": self.settings.weight_decay,
-                "lr_schedule": self.settings.lr_schedule}
+                "lr_schedule": self.settings.lr_schedule, "inputs": self.inputs}
 
     def _state(self):
         return {**super()._state(), "precision": torch.tensor(self.precision_, dtype=torch.float64)}
 
     @classmethod
     def _from_saved(cls, body, modality, output_shape, config, state):
-        # saved before `loss` existed: the fit was by squared error (only a fit reads it)
-        model = cls(body, modality, output_shape, **{"loss": "mse", **config, "channels": tuple(config["channels"])})
+        # saved before `loss` existed: the fit was by squared error (only a fit reads it); before `inputs`: u read
+        model = cls(body, modality, output_shape,
+                    **{"loss": "mse", "inputs": "unit", **config, "channels": tuple(config["channels"])})
         model.precision_ = float(state["precision"])
         model._restore_net(lambda: fast_layout(model._factory()), state)
         return model

@@ -35,13 +35,14 @@ def _mdn(mode):
     return MDNModel(BODY, "ee_pixel", (3,), mode=mode, hidden=(16,), epochs=3).fit(q, xyz, progress=False)
 
 
-def _pixel(rgb: bool = False):
+def _pixel(rgb: bool = False, inputs: str = "products"):
     from bodyschema.models.pixel import PixelDecoder
     q, _, image = _data()
     if rgb:                                                           # (n, H, W, 3): the channel axis last
         image = torch.stack([image, 1 - image, image.roll(3, -1)], -1)
     shape = (*IMAGE, 3) if rgb else IMAGE
-    return PixelDecoder(BODY, "image", shape, channels=(8, 4), fc_hidden=16, epochs=2).fit(q, image, progress=False)
+    return PixelDecoder(BODY, "image", shape, channels=(8, 4), fc_hidden=16, epochs=2, inputs=inputs).fit(
+        q, image, progress=False)
 
 
 def _splat():
@@ -72,12 +73,14 @@ def _gpr(kernel: str = "rbf"):
 
 
 KINDS = {"mdn-mean": lambda: _mdn("mean"), "mdn-max": lambda: _mdn("max"), "pixel": _pixel,
-         "pixel-rgb": lambda: _pixel(rgb=True), "pixel-splat": _splat,
+         "pixel-rgb": lambda: _pixel(rgb=True), "pixel-unit": lambda: _pixel(inputs="unit"),
+         "pixel-kinematic": lambda: _pixel(inputs="kinematic"), "pixel-splat": _splat,
          "multimodal-mlp": lambda: _member("mlp"), "multimodal-pixel": lambda: _member("pixel"),
          "encoder": _encoder, "gpr": _gpr, "gpr-kinematic": lambda: _gpr("kinematic")}
 
 
 UNITS = {"mdn-mean": "in px", "mdn-max": "in px", "pixel": "in intensity [0, 1]", "pixel-rgb": "in intensity [0, 1]",
+         "pixel-unit": "in intensity [0, 1]", "pixel-kinematic": "in intensity [0, 1]",
          "pixel-splat": "in intensity [0, 1]",
          "multimodal-mlp": "in m", "multimodal-pixel": "in intensity [0, 1]", "encoder": "rad", "gpr": "in px",
          "gpr-kinematic": "in px"}

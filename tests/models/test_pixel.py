@@ -231,6 +231,30 @@ def test_the_loss_defaults_to_cross_entropy_is_saved_a_save_without_it_loads_as_
         tiny_decoder(size="splat", loss="cross_entropy")
 
 
+def test_inputs_default_to_products_are_saved_and_a_save_without_them_loads_as_u(tmp_path):
+    import json
+
+    from bodyschema.models.contract import load_model
+    model = TestPixelDecoder().make_model(seed=0)
+    assert model.inputs == "products" and model.net_.fc[0].in_features == 3 ** 2   # no more than the 3^D terms
+    with pytest.raises(ValueError, match=r"inputs must be one of \('unit', 'products', 'kinematic'\). Got 'u'"):
+        tiny_decoder(inputs="u")
+    q = joint_angles(64, seed=0)
+    unit = tiny_decoder(inputs="unit").fit(q, blob_images(q), progress=False)
+    assert unit.net_.fc[0].in_features == 2
+    unit.save(tmp_path / "m")
+    meta_path = tmp_path / "m" / "meta.json"
+    meta = json.loads(meta_path.read_text())
+    assert meta["config"].pop("inputs") == "unit"
+    meta_path.write_text(json.dumps(meta))                      # as saved before `inputs` existed
+    z = joint_angles(3, seed=5)
+    loaded = load_model(tmp_path / "m")
+    assert loaded.inputs == "unit"
+    torch.testing.assert_close(loaded.predict(z), unit.predict(z), rtol=0, atol=0)
+    products = load_model(model.save(tmp_path / "p") or tmp_path / "p")
+    torch.testing.assert_close(products.predict(z), model.predict(z), rtol=0, atol=0)   # the learned factors too
+
+
 def blob_on_black_scores(fit_predict) -> tuple[dict, dict]:
     """A blob covering 2 % of a black image (a small arm in a frame of its whole reach), fitted by each loss.
     fit_predict(q, x, q_val, loss) → predicted images. {loss: median px from the true blob}, {loss: how much the

@@ -1,5 +1,6 @@
 """The pixel decoder's written-out forward-mode Jacobian against autograd's (`vmap(jacfwd)`, the generic NetModel
-path) and against central finite differences, for both capacities, grayscale and colour, in float32 and float64."""
+path) and against central finite differences, for both capacities, each input (pose_inputs.py), grayscale and
+colour, in float32 and float64."""
 
 import pytest
 import torch
@@ -14,24 +15,27 @@ TOL = {torch.float32: 1e-5, torch.float64: 1e-12}
 FD_STEP, FD_TOL = 1e-6, 1e-7    # float64 central differences: O(h²) truncation + O(eps/h) rounding, relative
 
 
-def trained(size: str, shape=HW):
+def trained(size: str, shape=HW, inputs: str = "products"):
     """A briefly trained decoder (non-trivial weights) of the `size` preset at `shape`."""
     q = joint_angles(64, seed=0)
     gen = torch.Generator().manual_seed(1)
     images = torch.rand(64, *shape, generator=gen)
     overrides = {"fc_hidden": None, "channels": None} if size == "pixel_aif" else {}
     with one_thread():
-        return tiny_decoder(shape, size=size, epochs=2, **overrides).fit(q, images, seed=0, progress=False)
+        return tiny_decoder(shape, size=size, epochs=2, inputs=inputs, **overrides).fit(q, images, seed=0,
+                                                                                       progress=False)
 
 
 def relative(a: torch.Tensor, b: torch.Tensor) -> float:
     return float((a - b).abs().max() / b.abs().max())
 
 
-@pytest.mark.parametrize("size,shape", [("lean", HW), ("lean", (*HW, 3)), ("pixel_aif", HW)])
+@pytest.mark.parametrize("size,shape,inputs", [("lean", HW, "products"), ("lean", HW, "unit"),
+                                               ("lean", HW, "kinematic"), ("lean", (*HW, 3), "products"),
+                                               ("pixel_aif", HW, "products")])
 @pytest.mark.parametrize("dtype", [torch.float32, torch.float64])
-def test_jacobian_equals_autograd_jacfwd(size, shape, dtype):
-    model = trained(size, shape)
+def test_jacobian_equals_autograd_jacfwd(size, shape, inputs, dtype):
+    model = trained(size, shape, inputs)
     z = joint_angles(5, seed=7).to(dtype)
     with one_thread():
         jac = model.jacobian(z)                                      # (B, O, Dz)
@@ -40,8 +44,9 @@ def test_jacobian_equals_autograd_jacfwd(size, shape, dtype):
     assert relative(jac, reference) < TOL[dtype]
 
 
-def test_jacobian_equals_central_finite_differences():
-    model = trained("lean")
+@pytest.mark.parametrize("inputs", ["products", "unit", "kinematic"])
+def test_jacobian_equals_central_finite_differences(inputs):
+    model = trained("lean", inputs=inputs)
     z = joint_angles(3, seed=8).double()
     jac = model.jacobian(z)                                          # (B, O, Dz)
     columns = []
