@@ -1,13 +1,15 @@
 """The pixel decoder's Jacobian, the tracker's per-frame cost: four ways side by side in one run.
 
     .venv/bin/python bench/tracking_jacobian.py [--decoder DIR] [--batches 1 2 8] [--threads 1] [--repeats 200]
+        [--inputs unit products kinematic]
 
 - predict: one forward of B latents (the unit every other figure is divided by);
 - vmap(jacfwd): autograd forward mode, Dz JVPs under vmap (the generic NetModel path, the baseline);
 - forward_and_jacobian: the same JVPs written out, primal and tangents as one batch of B·(1 + Dz) per layer
   (what `PixelDecoder.jacobian` runs; the prediction comes with it);
 - forward differences: one forward of B·(1 + Dz) latents, h = 1e-3 rad (float32: ~1e-2 relative error).
-The lean decoder at 56×80 on nao_arm's joints; `--decoder` times a saved one instead (weights do not change the
+The lean decoder at 56×80 on nao_arm's joints, once per `--inputs` (what its first layer reads of the pose,
+models/pose_inputs.py); `--decoder` times a saved one instead (weights do not change the
 cost). Prints medians interleaved per repeat (fair under a varying load), ratios to vmap(jacfwd), and the largest
 relative difference of each Jacobian to it.
 """
@@ -19,20 +21,20 @@ import argparse
 import torch
 from jacobian import interleaved_medians  # bench/jacobian.py: this folder is on sys.path when run as a script
 
-from bodyschema.models._nn_fit import build
 from bodyschema.models._nn_model import NetModel
 from bodyschema.models.contract import load_model
-from bodyschema.models.pixel import PixelDecoder, fast_layout
+from bodyschema.models.pixel import PixelDecoder
+from bodyschema.models.pose_inputs import INPUTS
 from bodyschema.models.scaling import BodySpec
 
 FD_STEP = 1e-3    # rad: float32 forward differences, truncation ~h, rounding ~1e-7/h
 
 
-def lean_decoder() -> PixelDecoder:
+def lean_decoder(inputs: str) -> PixelDecoder:
     body = BodySpec("nao_arm", ("LShoulderPitch", "LShoulderRoll", "LElbowYaw", "LElbowRoll"),
                     (-0.115, 0.07, -1.585, -0.88), (0.58, 0.815, 1.07, -0.044))
-    model = PixelDecoder(body, "image", (56, 80))
-    model._set_net(fast_layout(build(model._factory, torch.Generator().manual_seed(0))))
+    model = PixelDecoder(body, "image", (56, 80), inputs=inputs)
+    model._set_net(model.new_net(torch.Generator().manual_seed(0)))
     model.precision_ = 1.0
     return model
 
@@ -56,15 +58,22 @@ def main() -> None:
     parser.add_argument("--batches", type=int, nargs="+", default=[1, 2, 8])
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--repeats", type=int, default=200)
+    parser.add_argument("--inputs", nargs="+", default=list(INPUTS), help="what the decoders read of the pose")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
-    model = load_model(args.decoder) if args.decoder else lean_decoder()
+    models = {"saved": load_model(args.decoder)} if args.decoder else {k: lean_decoder(k) for k in args.inputs}
+    for name, model in models.items():
+        print(f"-- {name}")
+        table(model, args.batches, args.repeats)
+
+
+def table(model, batches: list[int], repeats: int) -> None:
     gen = torch.Generator().manual_seed(1)
     print(f"{'B':>3} {'method':<22} {'ms':>8} {'vs jacfwd':>10} {'vs predict':>11} {'max rel. diff':>14}")
-    for b in args.batches:
+    for b in batches:
         z = model.body.from_unit(torch.rand(b, model.latent_dim, generator=gen) * 2 - 1)   # (B, Dz) rad, float32
         fns = methods(model, z)
-        ms = {k: 1e3 * v for k, v in interleaved_medians(fns, args.repeats)[0].items()}
+        ms = {k: 1e3 * v for k, v in interleaved_medians(fns, repeats)[0].items()}
         reference = NetModel._jacobian(model, z)
         scale = float(reference.abs().max())
         for name, t in ms.items():

@@ -228,11 +228,7 @@ class PixelDecoder(NetModel, BaseSensoryModel):
         q, x = check_fit_data(q, x, self.latent_dim, self.output_shape)     # (N, Dz), (N, *out) in [0, 1]
         val = check_val(val, self.latent_dim, self.output_shape)
         gen = torch.Generator().manual_seed(seed)
-        net = fast_layout(build(self._factory, gen))
-        if self.size == "splat":
-            net.start_from(x, gen)
-        elif isinstance(net.inputs, ProductInputs):
-            net.inputs.start(gen)
+        net = self.new_net(gen, x)
         to_unit = self.body.to_unit
         self.fit_info_ = train(net, LOSSES[self.loss], (to_unit(q), x), self.settings, gen,
                                val=(to_unit(val[0]), val[1]) if val is not None else None,
@@ -243,6 +239,15 @@ class PixelDecoder(NetModel, BaseSensoryModel):
         self.precision_ = self.fixed_precision or 1.0 / max(self.residual_var_, 1e-8)
         self._set_net(net)
         return self
+
+    def new_net(self, gen: torch.Generator, x: torch.Tensor | None = None) -> PixelDecoderNet | splat.SplatNet:
+        """The network before training, every weight drawn from `gen` (splat's start from the images x)."""
+        net = fast_layout(build(self._factory, gen))
+        if self.size == "splat":
+            net.start_from(x, gen)
+        elif isinstance(net.inputs, ProductInputs):
+            net.inputs.start(gen)
+        return net
 
     def _factory(self) -> PixelDecoderNet | splat.SplatNet:
         if self.size == "splat":
