@@ -209,21 +209,27 @@ def test_one_cameras_batch_runs_without_onednn_to_the_same_values_and_leaves_the
 
 
 
-def test_the_loss_defaults_to_cross_entropy_is_saved_a_save_without_it_loads_as_mse_splat_takes_mse(tmp_path):
+def saved_without(model, key: str, folder):
+    """model saved to folder with `key` dropped from its config (as saved before the option existed), loaded back:
+    (the value it had, the loaded model)."""
     import json
 
     from bodyschema.models.contract import load_model
+    model.save(folder)
+    meta_path = folder / "meta.json"
+    meta = json.loads(meta_path.read_text())
+    value = meta["config"].pop(key)
+    meta_path.write_text(json.dumps(meta))
+    return value, load_model(folder)
+
+
+def test_the_loss_defaults_to_cross_entropy_is_saved_a_save_without_it_loads_as_mse_splat_takes_mse(tmp_path):
     model = TestPixelDecoder().make_model(seed=0)
     assert model.loss == "cross_entropy" and tiny_decoder(loss="mse").loss == "mse"          # the conv sizes' default
     assert tiny_decoder(size="splat").loss == "mse"
-    model.save(tmp_path / "m")
-    meta_path = tmp_path / "m" / "meta.json"
-    meta = json.loads(meta_path.read_text())
-    assert meta["config"].pop("loss") == "cross_entropy"
-    meta_path.write_text(json.dumps(meta))                      # as saved before `loss` existed
+    saved, loaded = saved_without(model, "loss", tmp_path / "m")
     z = joint_angles(3, seed=5)
-    loaded = load_model(tmp_path / "m")
-    assert loaded.loss == "mse"
+    assert saved == "cross_entropy" and loaded.loss == "mse"
     torch.testing.assert_close(loaded.predict(z), model.predict(z), rtol=0, atol=0)
     with pytest.raises(ValueError, match=r"loss must be one of \['cross_entropy', 'mse'\]. Got 'l1'"):
         tiny_decoder(loss="l1")
@@ -232,8 +238,6 @@ def test_the_loss_defaults_to_cross_entropy_is_saved_a_save_without_it_loads_as_
 
 
 def test_inputs_default_to_products_are_saved_and_a_save_without_them_loads_as_u(tmp_path):
-    import json
-
     from bodyschema.models.contract import load_model
     model = TestPixelDecoder().make_model(seed=0)
     assert model.inputs == "products" and model.net_.fc[0].in_features == 3 ** 2   # no more than the 3^D terms
@@ -242,16 +246,12 @@ def test_inputs_default_to_products_are_saved_and_a_save_without_them_loads_as_u
     q = joint_angles(64, seed=0)
     unit = tiny_decoder(inputs="unit").fit(q, blob_images(q), progress=False)
     assert unit.net_.fc[0].in_features == 2
-    unit.save(tmp_path / "m")
-    meta_path = tmp_path / "m" / "meta.json"
-    meta = json.loads(meta_path.read_text())
-    assert meta["config"].pop("inputs") == "unit"
-    meta_path.write_text(json.dumps(meta))                      # as saved before `inputs` existed
+    saved, loaded = saved_without(unit, "inputs", tmp_path / "m")
     z = joint_angles(3, seed=5)
-    loaded = load_model(tmp_path / "m")
-    assert loaded.inputs == "unit"
+    assert saved == "unit" and loaded.inputs == "unit"
     torch.testing.assert_close(loaded.predict(z), unit.predict(z), rtol=0, atol=0)
-    products = load_model(model.save(tmp_path / "p") or tmp_path / "p")
+    model.save(tmp_path / "p")
+    products = load_model(tmp_path / "p")
     torch.testing.assert_close(products.predict(z), model.predict(z), rtol=0, atol=0)   # the learned factors too
 
 
