@@ -40,7 +40,7 @@ from bodyschema.models import splat
 from bodyschema.models._nn_fit import TrainSettings, build, check_fit_data, check_val, evaluate, train
 from bodyschema.models._nn_model import NetModel
 from bodyschema.models.contract import BaseSensoryModel, register_kind
-from bodyschema.models.pose_inputs import DEFAULT_INPUTS, ProductInputs, UnitInputs, pose_inputs
+from bodyschema.models.pose_inputs import DEFAULT_INPUTS, ProductInputs, UnitInputs, check_inputs, pose_inputs
 from bodyschema.models.scaling import BodySpec
 
 ONEDNN_MIN_BATCH = 4   # latents per inference call from which oneDNN's convolutions pay: below, its per-call setup
@@ -205,7 +205,7 @@ class PixelDecoder(NetModel, BaseSensoryModel):
             raise ValueError(must_be("precision", "> 0 or None (fitted)", precision))
         self.size, self.fc_hidden, self.channels, self.fixed_precision = size, fc_hidden, tuple(channels), precision
         self.refine = bool(preset["refine"] if refine is None else refine)
-        pose_inputs(inputs, body)                                # the house error for a bad kind, here
+        check_inputs(inputs, self.latent_dim)
         self.inputs = inputs
         self.loss = ("mse" if size == "splat" else CONV_LOSS) if loss is None else loss
         if self.loss not in LOSSES:

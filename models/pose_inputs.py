@@ -107,7 +107,11 @@ class ProductInputs(_TrigInputs):
         return torch.einsum("bdk,rdk->brd", basis, self.factors.weight)
 
     def _values(self, q):
-        return self._factors(q).prod(-1) - self.factors.weight[..., 0].prod(-1)
+        return self._centred(self._factors(q))
+
+    def _centred(self, factor: torch.Tensor) -> torch.Tensor:
+        """Π_d factor less its constant part Π_d a_rd0. (B, R, D) → (B, R)"""
+        return factor.prod(-1) - self.factors.weight[..., 0].prod(-1)
 
     def _values_and_slopes(self, q):
         factor = self._factors(q)                                          # (B, R, D)
@@ -116,17 +120,20 @@ class ProductInputs(_TrigInputs):
         ones = torch.ones_like(factor[..., :1])
         before = torch.cat([ones, factor[..., :-1]], -1).cumprod(-1)      # Π_{e<d}: no division by a factor near 0
         after = torch.cat([factor[..., 1:], ones], -1).flip(-1).cumprod(-1).flip(-1)   # Π_{e>d}
-        return (factor.prod(-1) - self.factors.weight[..., 0].prod(-1),
-                (factor_slope * before * after).transpose(1, 2))          # (B, R), (B, D, R)
+        return self._centred(factor), (factor_slope * before * after).transpose(1, 2)   # (B, R), (B, D, R)
+
+
+def check_inputs(kind: str, joints: int) -> None:
+    """The house error for an unknown kind (INPUTS) or a "kinematic" one past 7 joints."""
+    if kind not in INPUTS:
+        raise ValueError(must_be("inputs", f"one of {INPUTS}", kind))
+    if kind == "kinematic" and feature_count(joints) > MAX_FEATURES:
+        raise ValueError(must_be("inputs 'kinematic'", "used on at most 7 joints (3^D features)", joints,
+                                 "Use inputs 'products', which takes any number of joints."))
 
 
 def pose_inputs(kind: str, body: BodySpec) -> nn.Module:
-    """The module for `kind` (INPUTS) on `body`'s joints; raises the house error for an unknown kind or a
-    "kinematic" one past 7 joints."""
-    if kind not in INPUTS:
-        raise ValueError(must_be("inputs", f"one of {INPUTS}", kind))
-    if kind == "kinematic" and feature_count(body.latent_dim) > MAX_FEATURES:
-        raise ValueError(must_be("inputs 'kinematic'", "used on at most 7 joints (3^D features)", body.latent_dim,
-                                 "Use inputs 'products', which takes any number of joints."))
+    """The module for `kind` (INPUTS) on `body`'s joints (check_inputs' errors)."""
+    check_inputs(kind, body.latent_dim)
     return {"unit": lambda: UnitInputs(body.latent_dim), "products": lambda: ProductInputs(body),
             "kinematic": lambda: KinematicInputs(body)}[kind]()
