@@ -18,7 +18,6 @@ from tracking_jacobian import lean_decoder
 
 from bodyschema.models import pixel
 from bodyschema.models.contract import load_model
-from bodyschema.models.pose_inputs import DEFAULT_INPUTS
 
 JACOBIAN_MAX_BATCH = 32
 
@@ -52,7 +51,7 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=200)
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
-    model = load_model(args.decoder) if args.decoder else lean_decoder(DEFAULT_INPUTS)
+    model = load_model(args.decoder) if args.decoder else lean_decoder()
     threshold, pixel.ONEDNN_MIN_BATCH = pixel.ONEDNN_MIN_BATCH, 0      # the decoder leaves the flag as set here
     print(f"ms per call, {args.threads} thread(s); the decoder uses oneDNN from B = {threshold}")
     for b in args.batches:

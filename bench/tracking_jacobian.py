@@ -24,13 +24,13 @@ from jacobian import interleaved_medians  # bench/jacobian.py: this folder is on
 from bodyschema.models._nn_model import NetModel
 from bodyschema.models.contract import load_model
 from bodyschema.models.pixel import PixelDecoder
-from bodyschema.models.pose_inputs import INPUTS
+from bodyschema.models.pose_inputs import DEFAULT_INPUTS, INPUTS
 from bodyschema.models.scaling import BodySpec
 
 FD_STEP = 1e-3    # rad: float32 forward differences, truncation ~h, rounding ~1e-7/h
 
 
-def lean_decoder(inputs: str) -> PixelDecoder:
+def lean_decoder(inputs: str = DEFAULT_INPUTS) -> PixelDecoder:
     body = BodySpec("nao_arm", ("LShoulderPitch", "LShoulderRoll", "LElbowYaw", "LElbowRoll"),
                     (-0.115, 0.07, -1.585, -0.88), (0.58, 0.815, 1.07, -0.044))
     model = PixelDecoder(body, "image", (56, 80), inputs=inputs)

@@ -1,8 +1,11 @@
 """The pixel decoder under the shared contract on tiny blob images, plus its training and its layout."""
 
+import json
+
 import pytest
 import torch
 
+from bodyschema.models.contract import load_model
 from bodyschema.models.pixel import SIZES, PixelDecoder
 from tests.models.contract import SensoryModelContract
 from tests.threads import one_thread
@@ -212,9 +215,6 @@ def test_one_cameras_batch_runs_without_onednn_to_the_same_values_and_leaves_the
 def saved_without(model, key: str, folder):
     """model saved to folder with `key` dropped from its config (as saved before the option existed), loaded back:
     (the value it had, the loaded model)."""
-    import json
-
-    from bodyschema.models.contract import load_model
     model.save(folder)
     meta_path = folder / "meta.json"
     meta = json.loads(meta_path.read_text())
@@ -238,7 +238,6 @@ def test_the_loss_defaults_to_cross_entropy_is_saved_a_save_without_it_loads_as_
 
 
 def test_inputs_default_to_products_are_saved_and_a_save_without_them_loads_as_u(tmp_path):
-    from bodyschema.models.contract import load_model
     model = TestPixelDecoder().make_model(seed=0)
     assert model.inputs == "products" and model.net_.fc[0].in_features == 3 ** 2   # no more than the 3^D terms
     with pytest.raises(ValueError, match=r"inputs must be one of \('unit', 'products', 'kinematic'\). Got 'u'"):
