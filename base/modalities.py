@@ -160,15 +160,15 @@ def is_image(name: str) -> bool:
 
 
 def stored(image: bool, sensors: Iterable[str] = ()) -> tuple[Modality, ...]:
-    """The rows a store holds, in its order: those every store has (computed from q), the ee's projection into
-    each further camera among `sensors` (computed from q too: with or without images), then, when it holds images,
-    the robot's own camera and the further cameras, then the robot's sensor rows among `sensors` (what
-    `Robot.sensors` names)."""
+    """The rows a store holds, in its order: those every store has (computed from q), the ee's projections into
+    further cameras among `sensors` (ee_pixel_<c>, computed from q too: with or without images), then, when it holds
+    images, the robot's own camera and the further cameras among `sensors`, then the robot's sensor rows among
+    `sensors` (what `Robot.sensors` names)."""
     rows = MODALITIES.values()
     sensors = list(dict.fromkeys(sensors))
     further = tuple(row for s in sensors if (row := find(s)) is not None and row.is_image and row.camera)
     cameras = tuple(m for m in images() if not m.camera) + further
-    projections = tuple(get(pixel_modality(row.name)) for row in further)
+    projections = tuple(get(s) for s in sensors if s != EE_PIXEL and is_projection(s))
     return (tuple(m for m in rows if not m.is_image and not m.sensor) + projections + (cameras if image else ())
             + tuple(m for m in rows if m.sensor and m.name in sensors))
 

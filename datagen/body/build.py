@@ -8,7 +8,8 @@ From the model file (read by its format, formats.py: MJCF, URDF, ...) the spec i
 - a continuous hinge (no limits) gets the limits ±π;
 - with `collisions = "none"` (what `robot init` writes) no geom of the arm collides, as in the shipped arms;
 - the ee becomes a site (an ee given as a body plus an offset adds one, `record.EE_SITE`);
-- a camera placed by the record is added to the world (with a light beside it when the model has none);
+- a camera placed by the record is added to the world, or to the body a further camera names (`body`: a camera
+  riding on a link), with a light beside the first when the model has none;
 - with [actuators] kind = "servos" the chosen joints get position servos with the record's gains;
 - `actuators="torque"` turns every actuator into a motor (ctrlrange = its force range, N·m).
 """
@@ -254,11 +255,23 @@ def _camera(spec: mujoco.MjSpec, camera: dict, robot: str) -> str:
     y /= np.linalg.norm(y)
     quat = np.empty(4)
     mujoco.mju_mat2Quat(quat, np.stack([x, y, np.cross(x, y)], axis=1).ravel())   # columns: camera axes in world
-    spec.worldbody.add_camera(name=name, pos=list(camera["pos"]), quat=quat, fovy=float(camera["fovy"]))
+    _mount(spec, camera, robot).add_camera(name=name, pos=list(camera["pos"]), quat=quat, fovy=float(camera["fovy"]))
     if not spec.lights:                           # a model without lights (URDF) would render near black
         spec.worldbody.add_light(name=f"{name}_light", pos=list(camera["pos"]), dir=list(-np.cross(x, y)),
                                  diffuse=[0.8, 0.8, 0.8], ambient=[0.3, 0.3, 0.3])
     return name
+
+
+def _mount(spec: mujoco.MjSpec, camera: dict, robot: str) -> mujoco.MjsBody:
+    """The body a placed camera rides on: the world, or the record's `body` (pose in that body's frame)."""
+    if "body" not in camera:
+        return spec.worldbody
+    body = spec.body(camera["body"])
+    if body is None:
+        bodies = [b.name for b in spec.bodies if b.name and b.name != "world"]
+        raise ValueError(must_be(f"camera {camera['name']!r} body", f"one of the model's bodies {bodies} for {robot}",
+                                 camera["body"], "Fix the camera's `body` in the record's `cameras`."))
+    return body
 
 
 def _implicit_servo_damping(spec: mujoco.MjSpec) -> None:

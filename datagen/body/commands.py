@@ -69,6 +69,9 @@ class RobotCameraArgs:
     max_image_size: int = 128          # px: the image's longer side may grow up to this (never shrinks)
     add: bool = False                  # also place a further camera (`cameras`: image_auto2) for the joints the
                                        # first does not see; it may be a close-up that loses the ee in some poses
+    # also place a camera riding on a link (`cameras`: image_mounted, as a wrist camera), looking at the bodies
+    # beyond it: "auto" on the link under which the weakest joint is seen best, or a joint's name (its parent link)
+    mount: str = ""
 
 
 def run_init(args: RobotInitArgs) -> int:
@@ -97,8 +100,11 @@ def run_camera(args: RobotCameraArgs) -> int:
 
     import numpy as np
 
+    from bodyschema.base.modalities import camera_modality
     from bodyschema.datagen.body.camera_choice import FURTHER, choose_camera, choose_further_camera
+    from bodyschema.datagen.body.camera_mount import AUTO_MOUNT, MOUNTED, choose_mount, mount_camera
     from bodyschema.datagen.body.infer import check_view
+    from bodyschema.datagen.body.observability import observability
     from bodyschema.datagen.body.record import RECORD_SUFFIX, read_record, write_record
     from bodyschema.datagen.body.robot import Robot
 
@@ -111,12 +117,22 @@ def run_camera(args: RobotCameraArgs) -> int:
     if not isinstance(args.max_image_size, int) or args.max_image_size < 1:
         raise ValueError(must_be("--max-image-size", "an integer >= 1 (px)", args.max_image_size))
     box = np.array(record.workspaces[args.workspace])
+    if args.mount and args.mount != AUTO_MOUNT:          # a joint that cannot take one: refused before the search
+        with Robot.load(record) as robot:
+            on_link = mount_camera(robot, args.mount, box)
     choice = choose_camera(record, box, max(args.max_image_size, *record.image_size))
     placed = dataclasses.replace(record, camera=choice.camera, image_size=choice.image_size)
     further = choose_further_camera(placed, box, choice.seen) if args.add else None
     if further is not None:
-        kept = tuple(c for c, name in zip(record.cameras, record.further_cameras) if name != FURTHER)
-        placed = dataclasses.replace(placed, cameras=(*kept, further.camera))
+        placed = _with_further(placed, further.camera)
+    mounted = None
+    if args.mount == AUTO_MOUNT:
+        camera, mounted = choose_mount(placed, box, (choice.seen, *((further.seen,) if further else ())))
+        placed = _with_further(placed, camera)
+    elif args.mount:
+        placed = _with_further(placed, on_link)
+        with Robot.load(placed) as robot:
+            mounted = observability(robot, box, np.random.default_rng(0), modality=camera_modality(MOUNTED))
     with Robot.load(placed) as robot:
         fraction = check_view(robot, box)                    # refused before the record is touched
     lines = args.record.read_text().splitlines()
@@ -139,8 +155,18 @@ def run_camera(args: RobotCameraArgs) -> int:
                                    "under the threshold in both", "A roll about the tool's own axis is not seen by "
                                    "any camera; else narrow the workspace (a closer camera: a larger image keeps a "
                                    "joint's share of it)."))
+    if mounted is not None:
+        print(f"mounted camera {MOUNTED!r} (image_{MOUNTED}) on link {placed.cameras[-1]['body']!r}: "
+              f"{mounted.table()}")
     print(f"record: {args.record}")
     return 0
+
+
+def _with_further(record, camera: dict):
+    """`record` with the placed further camera `camera` in `cameras`, replacing one of its name."""
+    import dataclasses
+    kept = tuple(c for c, name in zip(record.cameras, record.further_cameras) if name != camera["name"])
+    return dataclasses.replace(record, cameras=(*kept, camera))
 
 
 def _replaced_note(record) -> str:

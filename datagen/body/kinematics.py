@@ -75,6 +75,12 @@ class ArmKinematics:
         return xyz, jac
 
 
+def camera_moves(model: mujoco.MjModel, camera: int) -> bool:
+    """Whether the model's camera `camera` (id) moves with the arm: it rides on a body a joint moves, or tracks one."""
+    return bool(model.body_weldid[model.cam_bodyid[camera]] != 0
+                or model.cam_mode[camera] != mujoco.mjtCamLight.mjCAMLIGHT_FIXED)
+
+
 def fixed_camera(model: mujoco.MjModel, data: mujoco.MjData, camera: int, image_size: tuple[int, int]) -> FixedCamera:
     """The model's camera `camera` (id) as a FixedCamera. Cameras are fixed in the world: its pose is computed once,
     at qpos0 (mj_camlight sets cam_xpos/xmat after mj_kinematics), with `data` (whose state it changes)."""

@@ -22,6 +22,8 @@ REQUIRED_WORKSPACES = ("full", "camera")     # every record names these two (dat
 NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}")   # a file name everywhere: stores, models, runs
 # tables a benchmark reads from a record, held as given: their keys are the benchmark's to check, not datagen's
 BENCHMARK_SECTIONS = ("reaching",)
+PLACED_KEYS = ("name", "pos", "xyaxes", "fovy")   # a placed camera's pose (in the world; a further camera may add
+                                                  # `body`: then pos and xyaxes are in that body's frame)
 
 
 def record_problems(r) -> list[str]:
@@ -91,7 +93,8 @@ def _further_camera_problems(cameras, camera: dict) -> list[str]:
     from bodyschema.base.modalities import CAMERA_NAME
     if not isinstance(cameras, tuple):
         return [must_be("record `cameras`", "a list", cameras)]
-    p = [problem for c in cameras if isinstance(c, dict) for problem in _camera_problems(c) if "pos" in c]
+    p = [problem for c in cameras if isinstance(c, dict) for problem in _camera_problems(c, mounted=True)
+         if "pos" in c]
     p += [must_be("record `cameras` entry", "a camera name of the model file or {name, pos, xyaxes, fovy}", c)
           for c in cameras if isinstance(c, dict) and "pos" not in c]
     names = [c.get("name") if isinstance(c, dict) else c for c in cameras]
@@ -104,15 +107,23 @@ def _further_camera_problems(cameras, camera: dict) -> list[str]:
     return p
 
 
-def _camera_problems(camera: dict) -> list[str]:
+def _camera_problems(camera: dict, mounted: bool = False) -> list[str]:
+    """A placed camera's values; `mounted`: it may name the `body` it rides on (a further camera only: the record's
+    [camera] gives ee_pixel and frames the workspace, so it stays fixed in the world)."""
     if not isinstance(camera, dict) or not isinstance(camera.get("name"), str) or not camera.get("name"):
         return [must_be("record [camera]", "name = a camera of the model, or name, pos, xyaxes, fovy", camera)]
     if "pos" not in camera:
         extra = sorted(set(camera) - {"name"})
         return [must_be("record [camera]", "name alone for a camera of the model", extra)] if extra else []
+    extra = sorted(set(camera) - set(PLACED_KEYS) - ({"body"} if mounted else set()))
+    if extra:
+        hint = "A camera riding on a link goes in `cameras` (body = the link)." if "body" in extra else ""
+        return [must_be(f"record camera {camera['name']!r}", f"keys among {list(PLACED_KEYS)}", extra, hint)]
     pos, axes, fovy = camera.get("pos"), camera.get("xyaxes"), camera.get("fovy")
     if not (_vector(pos, 3) and _vector(axes, 6) and isinstance(fovy, (int, float)) and 0 < fovy < 180):
         return [must_be("record [camera]", "pos = [x, y, z] m, xyaxes = [6 numbers], fovy in (0, 180) deg", camera)]
+    if "body" in camera and not (isinstance(camera["body"], str) and camera["body"]):
+        return [must_be(f"record camera {camera['name']!r} body", "the name of a body of the model", camera["body"])]
     return []
 
 

@@ -25,6 +25,8 @@ import copy
 import mujoco
 import numpy as np
 
+from bodyschema.datagen.body.kinematics import camera_moves
+
 HIDDEN_GROUP = 5             # mjvOption shows geom groups 0-2 by default
 LOD_PX = 1.0                 # the clustering cell, in pixels at the mesh's nearest depth
 SLICES, STACKS = 12, 6       # facets of capsules, cylinders, spheres (MuJoCo: 28 × 16)
@@ -34,17 +36,18 @@ FAR_M = 0.15                 # m: a held geom this far from everything the arm s
 
 def render_model(model: mujoco.MjModel, camera: int, image_size: tuple[int, int], poses: np.ndarray | None,
                  simplify: bool) -> mujoco.MjModel:
-    """The render copy of `model` for fixed camera `camera`; `poses` (N, nq) rad: where the moving meshes may be
-    (their nearest depth sets their detail); `simplify`: the below-a-pixel steps too."""
+    """The render copy of `model` for camera `camera`; `poses` (N, nq) rad: where the moving meshes may be (their
+    nearest depth sets their detail); `simplify`: the below-a-pixel steps too. A camera that moves with the arm
+    (`camera_moves`) hides nothing (every geom may come into its view) but has its meshes simplified alike."""
     out = copy.copy(model)
     out.vis.quality.shadowsize = 0
     out.light_castshadow[:] = 0
     data = mujoco.MjData(out)
     mujoco.mj_kinematics(out, data)
     mujoco.mj_camlight(out, data)
-    if out.body_weldid[out.cam_bodyid[camera]] != 0 or out.cam_mode[camera] != mujoco.mjtCamLight.mjCAMLIGHT_FIXED:
-        return out                                        # a moving camera: nothing is out of view for good
-    static = out.body_weldid[out.geom_bodyid] == 0
+    moving = camera_moves(out, camera)
+    # geoms that keep their depth in every pose: held ones before a fixed camera (none before a moving one)
+    static = (out.body_weldid[out.geom_bodyid] == 0) & (not moving)
     depth = _depth(out, data, camera)                     # (ngeom,) m along the view, at qpos0
     hidden = static & _outside(out, data, camera, image_size)
     out.geom_group[hidden] = HIDDEN_GROUP
@@ -53,12 +56,13 @@ def render_model(model: mujoco.MjModel, camera: int, image_size: tuple[int, int]
     out.vis.quality.numslices, out.vis.quality.numstacks = SLICES, STACKS
     nearest = depth - out.geom_rbound
     swept = []                                            # (centre, radius) of the moving geoms at each pose
-    for q in [] if poses is None else poses:             # moving geoms: their nearest depth over the poses
+    for q in [] if poses is None else poses:             # the others: their nearest depth over the poses
         data.qpos[:] = q
         mujoco.mj_kinematics(out, data)
+        mujoco.mj_camlight(out, data)
         nearest = np.where(static, nearest, np.minimum(nearest, _depth(out, data, camera) - out.geom_rbound))
         swept.append(data.geom_xpos[~static].copy())
-    if swept:
+    if swept and not moving:
         hidden |= static & _far(out, data, camera, image_size, np.concatenate(swept), nearest, static)
         out.geom_group[hidden] = HIDDEN_GROUP
     footprint = 2 * np.tan(np.deg2rad(out.cam_fovy[camera]) / 2) / image_size[0]   # m per px per m of depth

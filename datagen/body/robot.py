@@ -23,7 +23,7 @@ import numpy as np
 from bodyschema.base.modalities import EE_PIXEL, IMAGE, camera_modality, pixel_modality
 from bodyschema.datagen.body.build import ACTUATOR_KINDS, Built, build_model
 from bodyschema.datagen.body.infer import robot_record
-from bodyschema.datagen.body.kinematics import ArmKinematics, fixed_camera
+from bodyschema.datagen.body.kinematics import ArmKinematics, camera_moves, fixed_camera
 from bodyschema.datagen.body.record import RobotRecord, shipped_dir
 from bodyschema.datagen.body.robot_checks import check_ranges, checked_image_size, checked_points, finite_float
 from bodyschema.datagen.body.robot_render import CameraRenderer, fit_offscreen
@@ -71,9 +71,14 @@ class Robot:
         self.workspace = workspace                                                  # the one sampled from
         self.sampling_ranges = self.workspaces[workspace].copy()                    # (Dq, 2) rad
         self._renderers: dict[str, CameraRenderer] = {}
-        # ee projection modality → its camera's view: ee_pixel (the robot's own), ee_pixel_<name> (further ones)
+        if camera_moves(model, self._cam):
+            raise ValueError(must_be(f"camera {self.camera_name!r} of {self.name}", "a camera fixed in the world",
+                                     "a camera that moves with the arm", "It gives ee_pixel and frames the "
+                                     "workspace: name a camera riding on a link in the record's `cameras` instead."))
+        # ee projection modality → its camera's view: ee_pixel (the robot's own), ee_pixel_<name> (further cameras
+        # fixed in the world; one riding on a link has no fixed projection, so no ee_pixel_<name>)
         self._views = {pixel_modality(m): fixed_camera(model, self._kin, cam, self.image_size)
-                       for m, cam in self.cameras.items()}
+                       for m, cam in self.cameras.items() if not camera_moves(model, cam)}
 
     # ---- pickling (a worker process gets its own copy) ----------------------------------------------------
     def __getstate__(self) -> dict:
@@ -226,8 +231,10 @@ class Robot:
     @property
     def sensors(self) -> tuple[str, ...]:
         """What `observe` reads for this robot beyond its kinematics and its own camera: sensor rows of
-        base/modalities.py and its further cameras' image modalities (those only with images)."""
-        return (*(("touch",) if self._touch_adr is not None else ()), *list(self.cameras)[1:])
+        base/modalities.py, its further cameras' image modalities (those only with images) and the ee's projection
+        into each further camera fixed in the world."""
+        return (*(("touch",) if self._touch_adr is not None else ()), *list(self.cameras)[1:],
+                *self.projections()[1:])
 
     def touch(self, q) -> np.ndarray | None:
         """(N, Dq) rad → (N, 1) fingertip touch (N) with the arm held at q at rest; None without a sensor."""

@@ -27,8 +27,10 @@ def test_a_further_camera_has_its_ee_projection_by_rule():
     assert modalities.is_projection("ee_pixel_side") and modalities.is_projection("ee_pixel")
     assert modalities.find("ee_pixel_") is None and not modalities.is_projection("ee_xyz")
     assert not modalities.is_projection("ee_pixel_a b")                            # not a camera name
-    kinematics_only = features(2, None, sensors=("image_side",), babble=False)   # computed from q: also without images
+    kinematics_only = features(2, None, sensors=("image_side", "ee_pixel_side"), babble=False)   # from q: no images
     assert kinematics_only["ee_pixel_side"] == kinematics_only["ee_pixel"]
+    assert "ee_pixel_side" not in features(2, (8, 12), sensors=("image_side",), babble=False)   # a camera riding
+                                                                                                # on a link: none
     assert "ee_pixel_side" not in features(2, (8, 12), sensors=(), babble=False)
 
 

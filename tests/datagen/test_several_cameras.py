@@ -55,7 +55,7 @@ def test_the_store_holds_a_further_camera_only_for_robots_that_have_it():
 
 def test_a_robot_renders_every_camera_of_its_record(tmp_path):
     with Robot.load(two_camera_record(tmp_path)) as robot:
-        assert list(robot.cameras) == ["image", "image_side"] and robot.sensors == ("image_side",)
+        assert list(robot.cameras) == ["image", "image_side"] and robot.sensors == ("image_side", "ee_pixel_side")
         q = np.array([[0.3, -0.7], [1.1, 0.4]])
         seen = robot.observe(q)
         assert seen["image_side"].shape == seen["image"].shape == (2, 32, 32)
