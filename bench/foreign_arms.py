@@ -3,14 +3,16 @@
     MUJOCO_GL=egl .venv/bin/python bench/foreign_arms.py [--arms ur5 so_arm ...] [--n 3000] [--epochs 40]
         [--trials 50] [--pixel-size lean|pixel_aif|splat] [--pixel-lr LR] [--pixel-schedule constant|cosine|wsd]
         [--pixel-loss cross_entropy|mse] [--pixel-inputs products|unit|kinematic] [--gpr-n 6000]
-        [--work bench_out/foreign] [--kinematics-only] [--quick]
+        [--mount] [--work bench_out/foreign] [--kinematics-only | --pixel-only] [--quick]
 
 Per arm, in a folder of its own (its own MLflow store): `robot init` (a file: the visuals it can load, nothing
 edited by hand) and `robot camera`; `train gpr` of ee_xyz and of ee_rot (the ee's orientation) on a store of
 --gpr-n poses without images, and the GPR levels (level 1, ee_xyz alone and with ee_rot); then `datagen` (--n
 uniform poses, the record's image size), `train pixel` and `train encoder` and the pixel levels 1–3 with and without
 the encoder (its floor row: perception started at the truth, per joint), `evaluate reaching` with the GPR and the
-joints (AIF against the PD baseline). `--kinematics-only`: the GPR columns and reaching, no images.
+joints (AIF against the PD baseline). `--kinematics-only`: the GPR columns and reaching, no images. `--mount`:
+`robot camera --mount auto` adds a camera riding on a link, and the pixel rows perceive through both cameras (a
+decoder each).
 The floor of a joint datagen's observability check does not see is in parentheses;
 the worst floor over the others is the issue's bar (≤ 2°). Prints one markdown row per arm and the wall minutes of
 each step (2 CPU cores: the recipe's CPU time) and writes them to <work>/table.md. Arms: the three shipped ones and
@@ -22,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import dataclasses
 import importlib.metadata
 import re
 import shutil
@@ -29,6 +32,8 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+
+from bodyschema.datagen.body.record import read_record, shipped_dir, write_record
 
 ERD = "cmeel.prefix/share/example-robot-data/robots"
 FILES = {   # name → (distribution, file inside it, robot init's --visual)
@@ -64,18 +69,26 @@ def registered(output: str) -> str:
     return found[-1]
 
 
-def robot_of(name: str, folder: Path, log: Path, minutes: dict[str, float]) -> str:
-    """The --robot argument: a shipped name, or the record `robot init` + `robot camera` write for a file."""
+def robot_of(name: str, folder: Path, log: Path, minutes: dict[str, float], mount: bool) -> str:
+    """The --robot argument: a shipped name, or the record `robot init` + `robot camera` write for a file;
+    `mount`: `robot camera --mount auto` adds a camera riding on a link (a shipped arm: on a copy of its record)."""
+    record = folder / f"{name}.toml"
     if name in SHIPPED:
-        return name
+        if not mount:
+            return name
+        shipped = read_record(shipped_dir() / f"{name}.toml")
+        write_record(dataclasses.replace(shipped, name=f"{name}_mounted", model=str(shipped.model_path),
+                                         base=folder), record)
+        _, camera_s = bodyschema(["robot", "camera", str(record), "--mount", "auto"], log)
+        minutes["camera"] = camera_s / 60
+        return str(record)
     dist, relative, visual = FILES[name]
     model = Path(importlib.metadata.distribution(dist).locate_file(relative))
     if name == "talos_bare":                     # the URDF alone: none of its meshes on disk
         shutil.copy(model, folder / "model.urdf")
         model = folder / "model.urdf"
-    record = folder / f"{name}.toml"
     _, init_s = bodyschema(["robot", "init", str(model), "--visual", visual, "--out", str(record)], log)
-    _, camera_s = bodyschema(["robot", "camera", str(record)], log)
+    _, camera_s = bodyschema(["robot", "camera", str(record), *(["--mount", "auto"] if mount else [])], log)
     minutes["init+camera"] = (init_s + camera_s) / 60
     return str(record)
 
@@ -121,8 +134,9 @@ def measure(name: str, work: Path, o: argparse.Namespace) -> dict[str, str]:
     log = folder / "commands.log"
     common = ["--tracking-uri", f"sqlite:///{folder}/mlflow.db"]
     minutes: dict[str, float] = {}
-    robot = robot_of(name, folder, log, minutes)
-    kinematics, gpr = gpr_levels(name, robot, folder, common, o, log, minutes)
+    robot = robot_of(name, folder, log, minutes, o.mount)
+    kinematics, gpr = ({"arm": name}, {}) if o.pixel_only else gpr_levels(name, robot, folder, common, o, log,
+                                                                           minutes)
     if o.kinematics_only:
         return {**kinematics, **reaching(robot, gpr["ee_xyz"], folder, common, o, log, minutes),
                 "recipe minutes": f"{sum(minutes.values()):.1f}",
@@ -131,19 +145,22 @@ def measure(name: str, work: Path, o: argparse.Namespace) -> dict[str, str]:
     out, s = bodyschema(["datagen", "--robot", robot, "--n", str(o.n), "--out", str(data), "--no-progress"], log)
     minutes["datagen"], ms_per_image, unseen = s / 60, 1000 * s / o.n, unseen_joints(out)
     train = [*common, "--run-root", str(folder / "runs"), "--no-progress", "--data", str(data)]
-    out, s = bodyschema(["train", "pixel", *train, "--epochs", str(o.epochs), "--size", o.pixel_size,
-                         *(["--lr", str(o.pixel_lr)] if o.pixel_lr else []),
-                         *(["--lr-schedule", o.pixel_schedule] if o.pixel_schedule else []),
-                         *(["--loss", o.pixel_loss] if o.pixel_loss else []),
-                         *(["--inputs", o.pixel_inputs] if o.pixel_inputs else [])], log)
-    pixel, minutes["train pixel"] = registered(out), s / 60
+    pixel = []                                     # a decoder per camera: the record's, then the mounted one
+    for modality in ("image", *(["image_mounted"] if o.mount else [])):
+        out, s = bodyschema(["train", "pixel", *train, "--modality", modality, "--epochs", str(o.epochs),
+                             "--size", o.pixel_size, *(["--lr", str(o.pixel_lr)] if o.pixel_lr else []),
+                             *(["--lr-schedule", o.pixel_schedule] if o.pixel_schedule else []),
+                             *(["--loss", o.pixel_loss] if o.pixel_loss else []),
+                             *(["--inputs", o.pixel_inputs] if o.pixel_inputs else [])], log)
+        pixel += ["--model", registered(out)]
+        minutes[f"train pixel {modality}"] = s / 60
     out, s = bodyschema(["train", "encoder", *train, "--epochs", str(o.epochs)], log)
     encoder, minutes["train encoder"] = registered(out), s / 60
-    _, s = bodyschema(["evaluate", "levels", *levels_flags(common, o), "--model", pixel, "--encoder", encoder,
+    _, s = bodyschema(["evaluate", "levels", *levels_flags(common, o), *pixel, "--encoder", encoder,
                        "--multistart", "0", "--out", str(folder / "levels_pixel")], log)
     minutes["levels pixel"] = s / 60
     px = levels_rows(folder / "levels_pixel")
-    reached = reaching(robot, gpr["ee_xyz"], folder, common, o, log, minutes)
+    reached = {} if o.pixel_only else reaching(robot, gpr["ee_xyz"], folder, common, o, log, minutes)
     level = {k: f"{float(px[k]['joint_err_deg']):.2f}" for k in px if k != "floor"}
     per_joint = floors(px)
     return {**kinematics,
@@ -213,10 +230,13 @@ def main() -> None:
                         "nine-arm table: mse)")
     parser.add_argument("--pixel-inputs", default=None, help="train pixel's --inputs (default: products; unit: the "
                         "decoders before 2026-11-30, models/pose_inputs.py)")
+    parser.add_argument("--mount", action="store_true", help="`robot camera --mount auto`: a second camera riding "
+                        "on a link, a decoder of its own, perceived with the first (datagen/body/camera_mount.py)")
     parser.add_argument("--trials", type=int, default=50)
     parser.add_argument("--reach-trials", type=int, default=20)
     parser.add_argument("--work", type=Path, default=Path("bench_out/foreign"))
     parser.add_argument("--kinematics-only", action="store_true", help="no images: the GPR columns and reaching")
+    parser.add_argument("--pixel-only", action="store_true", help="the pixel columns alone (no GPR, no reaching)")
     parser.add_argument("--quick", action="store_true", help="tiny sizes: checks the script, not the arms")
     o = parser.parse_args()
     if o.quick:
