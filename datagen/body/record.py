@@ -4,7 +4,7 @@ A record names the model file (MJCF .xml or URDF .urdf, relative to the record) 
 or a body plus an offset), the joints used (hinges; every other joint is held at `hold` or its reference pose), the
 camera (one of the model's, or a pose placed to frame the ee workspace) and further cameras (`cameras`: each a
 camera of the model's or a placed pose, as [camera], one more image modality image_<name> rendered at the same
-size; a URDF has no cameras of its own), the image size, named joint boxes
+size; a URDF has no cameras of its own; a placed one may ride on a link, `body`), the image size, named joint boxes
 (`workspaces`, rad), the actuators (the model's own, or position servos with the gains given), the PD baseline's
 gains, and the tables benchmarks read ([reaching], held as given: its keys are the reaching benchmark's to check).
 The shipped robots are the records beside their MJCF (datagen/robots/<name>.toml). What each value may be:
@@ -51,7 +51,8 @@ class RobotRecord:
     hold: dict[str, float] = field(default_factory=dict)   # other joints' held values (rad | m); else reference
     camera: dict[str, Any] = field(default_factory=dict)   # {name} of the model's | {name="auto", pos, xyaxes, fovy}
     cameras: tuple = ()                                # further cameras: a name of the model's | {name, pos, xyaxes,
-                                                       # fovy} placed; each one more image modality, image_<name>
+                                                       # fovy[, body]} placed (in the world, or riding on `body`:
+                                                       # pose in its frame); each one more image modality
     actuators: dict[str, Any] = field(default_factory=lambda: {"kind": "model"})   # {kind, kp, kv (servos)}
     pd: dict[str, Any] = field(default_factory=dict)   # {kp, kd}: the torque PD baseline's gains per joint
     reaching: dict[str, Any] = field(default_factory=dict)   # the reaching benchmark's table, as given (its keys:
