@@ -2,12 +2,12 @@
 
 A camera fixed in the world sees a wrist joint through a hand that covers a few per cent of its image; a camera on
 the forearm sees the hand from the same place in every pose, large, and its image depends on the joints beyond the
-link alone (as the wrist cameras of LeRobot's arms). It goes on the parent link of the first joint the record's
-cameras see least (`choose_mount`), framing what that joint and those after it move: the ee and the centres of
-the geoms beyond the link, over POSES poses of the workspace, in the link's frame (`infer.place_camera`: along
-their direction of least spread, every point inside the frame's margin). The record
-names it in `cameras` with `body` (MOUNTED: image_mounted, no ee_pixel_mounted: a camera that moves has no fixed
-projection).
+link (and what of the rest of the arm comes into view behind them), as the wrist cameras of LeRobot's arms. It goes
+on the parent link of a joint (`--mount JOINT`, or the one `choose_mount` picks), framing what that joint and those
+after it move: the ee and the centres of the geoms beyond the link, over POSES poses of the workspace, in the link's
+frame (`infer.place_camera`: along their direction of least spread, every point inside the frame's margin). The
+record names it in `cameras` with `body` (MOUNTED: image_mounted; no ee_pixel_mounted: a camera that moves has no
+fixed projection).
 """
 
 from __future__ import annotations
