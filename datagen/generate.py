@@ -205,13 +205,13 @@ def _checked(config: DatagenConfig, path: Path) -> tuple[dict, dict]:
 
 def report_observability(robot: Robot, ranges: np.ndarray) -> None:
     """Log each camera's observability table (pixels changed, ee mm per degree of each joint) and a house warning
-    per joint under the threshold: a warning, not an error (the store is still worth making for the joints it
-    sees)."""
-    from bodyschema.datagen.body.observability import every_camera
-    for seen in every_camera(robot, ranges):
+    per joint no camera sees: a warning, not an error (the store is still worth making for the joints it sees)."""
+    from bodyschema.datagen.body.observability import every_camera, unseen_warnings
+    views = every_camera(robot, ranges)
+    for seen in views:
         logger.info(seen.table())
-        for warning in seen.warnings():
-            logger.warning(warning)
+    for warning in unseen_warnings(views):
+        logger.warning(warning)
 
 
 def _run(path: Path, config: DatagenConfig, feats: dict, attrs: dict, run_jobs: Runner, progress: bool) -> None:

@@ -104,7 +104,7 @@ def run_camera(args: RobotCameraArgs) -> int:
     from bodyschema.datagen.body.camera_choice import FURTHER, choose_camera, choose_further_camera
     from bodyschema.datagen.body.camera_mount import AUTO_MOUNT, MOUNTED, choose_mount, mount_camera
     from bodyschema.datagen.body.infer import check_view
-    from bodyschema.datagen.body.observability import observability
+    from bodyschema.datagen.body.observability import observability, unseen_warnings
     from bodyschema.datagen.body.record import RECORD_SUFFIX, read_record, write_record
     from bodyschema.datagen.body.robot import Robot
 
@@ -143,11 +143,14 @@ def run_camera(args: RobotCameraArgs) -> int:
     print(f"camera {record.camera.get('pos')} → {choice.camera['pos']} (m), image {tuple(record.image_size)} → "
           f"{choice.image_size} px, the best of {choice.tried} views and framings of the ee over workspace "
           f"{args.workspace!r}: ee in view {fraction:.1%}")
-    if further is None:
-        for warning in choice.warnings():
-            logger.warning(warning)
-    else:
+    if further is not None:
         print(f"further camera {FURTHER!r} (image_{FURTHER}): {further.seen.table()}")
+    if mounted is not None:
+        print(f"mounted camera {MOUNTED!r} (image_{MOUNTED}) on link {placed.cameras[-1]['body']!r}: "
+              f"{mounted.table()}")
+        for warning in unseen_warnings([choice.seen, *((further.seen,) if further else ()), mounted]):
+            logger.warning(warning)
+    elif further is not None:
         unseen = ", ".join(further.unseen) or "none"
         print(f"joints seen by neither camera (< the threshold in both): {unseen}")
         if further.unseen:
@@ -155,9 +158,9 @@ def run_camera(args: RobotCameraArgs) -> int:
                                    "under the threshold in both", "A roll about the tool's own axis is not seen by "
                                    "any camera; else narrow the workspace (a closer camera: a larger image keeps a "
                                    "joint's share of it)."))
-    if mounted is not None:
-        print(f"mounted camera {MOUNTED!r} (image_{MOUNTED}) on link {placed.cameras[-1]['body']!r}: "
-              f"{mounted.table()}")
+    else:
+        for warning in choice.warnings():
+            logger.warning(warning)
     print(f"record: {args.record}")
     return 0
 
@@ -190,7 +193,7 @@ def _rebased(record, folder: Path):
 
 def run_show(args: RobotShowArgs) -> int:
     from bodyschema.datagen.body.infer import check_view, infer_record
-    from bodyschema.datagen.body.observability import every_camera
+    from bodyschema.datagen.body.observability import every_camera, unseen_warnings
     from bodyschema.datagen.body.record import dumps_toml, load_record, robot_label
     from bodyschema.datagen.body.robot import Robot
 
@@ -206,10 +209,11 @@ def run_show(args: RobotShowArgs) -> int:
         print(f"record{note}:\n{dumps_toml(record.to_toml_dict())}")
         fraction = check_view(robot, robot.sampling_ranges)
         print(f"ee in view: {fraction:.1%} of uniform poses in workspace {robot.workspace!r}")
-        for seen in every_camera(robot, robot.sampling_ranges):   # its own camera, then the record's further ones
+        views = every_camera(robot, robot.sampling_ranges)   # its own camera, then the record's further ones
+        for seen in views:
             print(seen.table())
-            for warning in seen.warnings():
-                logger.warning(warning)
+        for warning in unseen_warnings(views):
+            logger.warning(warning)
         out = args.out or Path(f"{robot_label(args.robot)}_robot_sheet.png")
         print(f"contact sheet: {robot_sheet(robot, out, args.n)}")
     return 0

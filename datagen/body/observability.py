@@ -123,9 +123,23 @@ class Observability:
 
     def warnings(self) -> list[str]:
         """The house warning per weak joint: the joint, its figure and why."""
+        return [self.warning(j) for j in self.weak]
+
+    def warning(self, joint: JointView) -> str:
         from bodyschema.errors import must_be
-        return [must_be(f"joint {j.name!r} seen by camera {self.camera!r}", *_expected_and_got(j),
-                        f"Not seen: {j.why()}.") for j in self.weak]
+        return must_be(f"joint {joint.name!r} seen by camera {self.camera!r}", *_expected_and_got(joint),
+                       f"Not seen: {joint.why()}.")
+
+
+def unseen_warnings(views: list[Observability]) -> list[str]:
+    """The house warning per joint that none of a robot's cameras (`views`, one Observability each) sees, from the
+    camera that sees it best: a joint one camera sees is seen (perception sums the cameras' errors)."""
+    warnings = []
+    for i in range(len(views[0].joints)):
+        if all(view.joints[i].weak for view in views):
+            best = max(views, key=lambda view: view.joints[i].share_per_deg)
+            warnings.append(best.warning(best.joints[i]))
+    return warnings
 
 
 def _flag(joint: JointView) -> str:

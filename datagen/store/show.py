@@ -53,7 +53,7 @@ def store_observability(path: Path) -> str:
     import numpy as np
 
     from bodyschema.datagen.body.attrs import RECORD_KEY
-    from bodyschema.datagen.body.observability import every_camera
+    from bodyschema.datagen.body.observability import every_camera, unseen_warnings
     from bodyschema.datagen.body.robot import Robot
 
     attrs = dict(open_store(path).attrs)
@@ -61,7 +61,7 @@ def store_observability(path: Path) -> str:
         return ""
     with Robot.from_attrs(attrs) as robot:
         seen = every_camera(robot, np.array(attrs["sampling_ranges"]))
-    for warning in (w for table in seen for w in table.warnings()):
+    for warning in unseen_warnings(seen):
         logger.warning(warning)
     return "\n".join(table.table() for table in seen)
 

@@ -10,7 +10,14 @@ import pytest
 
 from bodyschema.cli import main
 from bodyschema.datagen.body.infer import ee_samples, infer_record, place_camera
-from bodyschema.datagen.body.observability import MIN_PX_PER_DEG, MIN_SHARE_PER_DEG, observability
+from bodyschema.datagen.body.observability import (
+    MIN_PX_PER_DEG,
+    MIN_SHARE_PER_DEG,
+    JointView,
+    Observability,
+    observability,
+    unseen_warnings,
+)
 from bodyschema.datagen.body.record import read_record, write_record
 from bodyschema.datagen.body.robot import Robot
 from bodyschema.datagen.config import DatagenConfig
@@ -164,3 +171,14 @@ def test_robot_camera_grows_an_image_only_where_a_joints_share_passes_and_its_pi
     assert choice.before.joints[0].few_pixels and not choice.before.joints[0].small_share
     assert 16 < choice.image_size[0] <= 32 and not shoulder.weak      # measured 32×32: ×2, the first size that sees it
     assert choice.seen.joints[1].on_axis                               # the roll, seen at no size, did not count
+
+
+def test_a_joint_one_camera_sees_is_seen():
+    """Several cameras: a warning only for a joint every camera misses, from the camera that sees it best."""
+    def view(camera, shares):
+        joints = tuple(JointView(name, 100 * share, share, 1.0, 57.0) for name, share in zip("abc", shares))
+        return Observability(joints, 0.1, None, (64, 64), camera, 16)
+    fixed, mounted = view("auto", (0.5, 0.1, 0.05)), view("mounted", (0.1, 1.2, 0.2))
+    (warning,) = unseen_warnings([fixed, mounted])
+    assert warning.startswith("joint 'c' seen by camera 'mounted' must be at least")
+    assert len(fixed.warnings()) == 2 and len(mounted.warnings()) == 2       # each camera alone misses two
