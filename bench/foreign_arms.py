@@ -3,7 +3,7 @@
     MUJOCO_GL=egl .venv/bin/python bench/foreign_arms.py [--arms ur5 so_arm ...] [--n 3000] [--epochs 40]
         [--trials 50] [--pixel-size lean|pixel_aif|splat] [--pixel-lr LR] [--pixel-schedule constant|cosine|wsd]
         [--pixel-loss cross_entropy|mse] [--pixel-inputs products|unit|kinematic] [--gpr-n 6000]
-        [--mount] [--work bench_out/foreign] [--kinematics-only | --pixel-only] [--quick]
+        [--mount [auto|JOINT ...]] [--work bench_out/foreign] [--kinematics-only | --pixel-only] [--quick]
 
 Per arm, in a folder of its own (its own MLflow store): `robot init` (a file: the visuals it can load, nothing
 edited by hand) and `robot camera`; `train gpr` of ee_xyz and of ee_rot (the ee's orientation) on a store of
@@ -11,8 +11,8 @@ edited by hand) and `robot camera`; `train gpr` of ee_xyz and of ee_rot (the ee'
 uniform poses, the record's image size), `train pixel` and `train encoder` and the pixel levels 1–3 with and without
 the encoder (its floor row: perception started at the truth, per joint), `evaluate reaching` with the GPR and the
 joints (AIF against the PD baseline). `--kinematics-only`: the GPR columns and reaching, no images. `--mount`:
-`robot camera --mount auto` adds a camera riding on a link, and the pixel rows perceive through both cameras (a
-decoder each).
+`robot camera --mount auto` (or the joints given) adds cameras riding on links, and the pixel rows perceive through
+every camera (a decoder each).
 The floor of a joint datagen's observability check does not see is in parentheses;
 the worst floor over the others is the issue's bar (≤ 2°). Prints one markdown row per arm and the wall minutes of
 each step (2 CPU cores: the recipe's CPU time) and writes them to <work>/table.md. Arms: the three shipped ones and
@@ -33,6 +33,7 @@ import sys
 import time
 from pathlib import Path
 
+from bodyschema.datagen.body.camera_mount import mounted_names
 from bodyschema.datagen.body.record import read_record, shipped_dir, write_record
 
 ERD = "cmeel.prefix/share/example-robot-data/robots"
@@ -69,9 +70,9 @@ def registered(output: str) -> str:
     return found[-1]
 
 
-def robot_of(name: str, folder: Path, log: Path, minutes: dict[str, float], mount: bool) -> str:
+def robot_of(name: str, folder: Path, log: Path, minutes: dict[str, float], mount: list[str]) -> str:
     """The --robot argument: a shipped name, or the record `robot init` + `robot camera` write for a file;
-    `mount`: `robot camera --mount auto` adds a camera riding on a link (a shipped arm: on a copy of its record)."""
+    `mount`: `robot camera --mount ...` adds cameras riding on links (a shipped arm: on a copy of its record)."""
     record = folder / f"{name}.toml"
     if name in SHIPPED:
         if not mount:
@@ -79,7 +80,7 @@ def robot_of(name: str, folder: Path, log: Path, minutes: dict[str, float], moun
         shipped = read_record(shipped_dir() / f"{name}.toml")
         write_record(dataclasses.replace(shipped, name=f"{name}_mounted", model=str(shipped.model_path),
                                          base=folder), record)
-        _, camera_s = bodyschema(["robot", "camera", str(record), "--mount", "auto"], log)
+        _, camera_s = bodyschema(["robot", "camera", str(record), "--mount", *mount], log)
         minutes["camera"] = camera_s / 60
         return str(record)
     dist, relative, visual = FILES[name]
@@ -88,7 +89,7 @@ def robot_of(name: str, folder: Path, log: Path, minutes: dict[str, float], moun
         shutil.copy(model, folder / "model.urdf")
         model = folder / "model.urdf"
     _, init_s = bodyschema(["robot", "init", str(model), "--visual", visual, "--out", str(record)], log)
-    _, camera_s = bodyschema(["robot", "camera", str(record), *(["--mount", "auto"] if mount else [])], log)
+    _, camera_s = bodyschema(["robot", "camera", str(record), *(["--mount", *mount] if mount else [])], log)
     minutes["init+camera"] = (init_s + camera_s) / 60
     return str(record)
 
@@ -145,8 +146,8 @@ def measure(name: str, work: Path, o: argparse.Namespace) -> dict[str, str]:
     out, s = bodyschema(["datagen", "--robot", robot, "--n", str(o.n), "--out", str(data), "--no-progress"], log)
     minutes["datagen"], ms_per_image, unseen = s / 60, 1000 * s / o.n, unseen_joints(out)
     train = [*common, "--run-root", str(folder / "runs"), "--no-progress", "--data", str(data)]
-    pixel = []                                     # a decoder per camera: the record's, then the mounted one
-    for modality in ("image", *(["image_mounted"] if o.mount else [])):
+    pixel = []                                     # a decoder per camera: the record's, then the mounted ones
+    for modality in ("image", *(f"image_{name}" for name in mounted_names(len(o.mount)))):
         out, s = bodyschema(["train", "pixel", *train, "--modality", modality, "--epochs", str(o.epochs),
                              "--size", o.pixel_size, *(["--lr", str(o.pixel_lr)] if o.pixel_lr else []),
                              *(["--lr-schedule", o.pixel_schedule] if o.pixel_schedule else []),
@@ -230,8 +231,9 @@ def main() -> None:
                         "nine-arm table: mse)")
     parser.add_argument("--pixel-inputs", default=None, help="train pixel's --inputs (default: products; unit: the "
                         "decoders before 2026-11-30, models/pose_inputs.py)")
-    parser.add_argument("--mount", action="store_true", help="`robot camera --mount auto`: a second camera riding "
-                        "on a link, a decoder of its own, perceived with the first (datagen/body/camera_mount.py)")
+    parser.add_argument("--mount", nargs="*", default=None, metavar="auto|JOINT", help="`robot camera --mount ...` "
+                        "(alone: auto): cameras riding on links, a decoder each, perceived with the first "
+                        "(datagen/body/camera_mount.py)")
     parser.add_argument("--trials", type=int, default=50)
     parser.add_argument("--reach-trials", type=int, default=20)
     parser.add_argument("--work", type=Path, default=Path("bench_out/foreign"))
@@ -239,6 +241,7 @@ def main() -> None:
     parser.add_argument("--pixel-only", action="store_true", help="the pixel columns alone (no GPR, no reaching)")
     parser.add_argument("--quick", action="store_true", help="tiny sizes: checks the script, not the arms")
     o = parser.parse_args()
+    o.mount = (o.mount or ["auto"]) if o.mount is not None else []
     if o.quick:
         o.n, o.gpr_n, o.epochs, o.trials, o.reach_trials = 200, 200, 1, 3, 2
     o.work.mkdir(parents=True, exist_ok=True)

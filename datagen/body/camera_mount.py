@@ -6,8 +6,8 @@ link (and what of the rest of the arm comes into view behind them), as the wrist
 on the parent link of a joint (`--mount JOINT`, or the one `choose_mount` picks), framing what that joint and those
 after it move: the ee and the centres of the geoms beyond the link, over POSES poses of the workspace, in the link's
 frame (`infer.place_camera`: along their direction of least spread, every point inside the frame's margin). The
-record names it in `cameras` with `body` (MOUNTED: image_mounted; no ee_pixel_mounted: a camera that moves has no
-fixed projection).
+record names it in `cameras` with `body` (MOUNTED: image_mounted, then image_mounted2, ... for more than one; no
+ee_pixel_mounted: a camera that moves has no fixed projection).
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import numpy as np
 
 from bodyschema.base.modalities import camera_modality
 from bodyschema.datagen.body.infer import place_camera
-from bodyschema.datagen.body.observability import Observability, observability
+from bodyschema.datagen.body.observability import observability
 from bodyschema.errors import must_be
 
 MOUNTED = "mounted"              # the further camera `robot camera --mount` places (image_mounted)
@@ -27,9 +27,14 @@ AUTO_MOUNT = "auto"              # `--mount auto`: the link `choose_mount` picks
 POSES = 256                      # workspace poses whose ee and geoms the mounted camera frames
 
 
-def mount_camera(robot, joint: str, box: np.ndarray, rng: np.random.Generator | None = None) -> dict:
-    """The record's `cameras` entry of a camera on the parent link of `joint` (a chosen joint of `robot`, a
-    datagen Robot), framing the ee and the geoms beyond that link over `box` (Dq, 2) rad."""
+def mounted_names(n: int) -> tuple[str, ...]:
+    """The names of n cameras `robot camera --mount` places: mounted, mounted2, mounted3, ..."""
+    return tuple(MOUNTED if i == 0 else f"{MOUNTED}{i + 1}" for i in range(n))
+
+
+def mount_camera(robot, joint: str, box: np.ndarray, name: str = MOUNTED) -> dict:
+    """The record's `cameras` entry (`name`) of a camera on the parent link of `joint` (a chosen joint of `robot`, a
+    datagen Robot), framing the ee and the geoms beyond that link over `box` (Dq, 2) rad (POSES poses, seed 0)."""
     model = robot.model
     if joint not in robot.joint_names:
         raise ValueError(must_be("joint to mount a camera for", f"one of {robot.name}'s joints {robot.joint_names}",
@@ -40,37 +45,37 @@ def mount_camera(robot, joint: str, box: np.ndarray, rng: np.random.Generator | 
         raise ValueError(must_be(f"joint {joint!r} of {robot.name}", "a joint after the first moving link, to "
                                  "mount a camera before it", "a joint on a link fixed in the world",
                                  "A camera fixed in the world sees it: `robot camera` places one."))
-    points = _points_beyond(model, link, moved, robot.ee_site, box, rng or np.random.default_rng(0))
+    points = _points_beyond(model, link, moved, robot.ee_site, box, np.random.default_rng(0))
     camera = place_camera(points, robot.image_size)
-    return {**camera, "name": MOUNTED, "body": model.body(link).name}
+    return {**camera, "name": name, "body": model.body(link).name}
 
 
-def choose_mount(record, box: np.ndarray, views) -> tuple[dict, Observability]:
+def choose_mount(record, box: np.ndarray, views, name: str = MOUNTED) -> dict:
     """`--mount auto`: of a camera on the parent link of each joint after the first moving link (`mount_camera`),
     the one under which the arm's weakest joint is seen best, and its observability. A joint beyond the link counts
     its share through the mounted camera, which sees the bodies it moves from the same place in every pose; a joint
     before it counts its best share in `views` (the fixed cameras' Observability): through a mounted camera it moves
     the whole background, which a decoder did not learn (SO-101's wrist_flex: floor 12° seen so, 0.5° from the link
-    before it). Rolls about the tool's own axis (`JointView.on_axis`) do not count: no camera sees them reliably."""
+    before it). Rolls about the tool's own axis (`JointView.on_axis`) do not count: no camera sees them reliably.
+    Returns the record's `cameras` entry, named `name`."""
     from bodyschema.datagen.body.robot import Robot
     fixed = {j.name: max(view.joints[i].share_per_deg for view in views) for i, j in enumerate(views[0].joints)}
     scored = []
     with Robot.load(record) as robot:
         names = robot.joint_names
-        candidates = [(j, mount_camera(robot, j, box)) for j in names if _on_moving_link(robot.model, j)]
+        candidates = [(j, mount_camera(robot, j, box, name)) for j in names if _on_moving_link(robot.model, j)]
     if not candidates:
         raise ValueError(must_be(f"robot {record.name}", "an arm with a joint after its first moving link, to mount "
                                  "a camera on that link", f"joints {names}, each on a link fixed in the world",
                                  "A camera fixed in the world sees them: leave out --mount."))
     for joint, camera in candidates:
         with Robot.load(dataclasses.replace(record, cameras=(*record.cameras, camera))) as robot:
-            seen = observability(robot, box, np.random.default_rng(0), modality=camera_modality(MOUNTED))
+            seen = observability(robot, box, np.random.default_rng(0), modality=camera_modality(name))
         beyond = names.index(joint)
         shares = [seen.joints[i].share_per_deg if i >= beyond else fixed[j.name]
                   for i, j in enumerate(seen.joints) if not j.on_axis]
-        scored.append((min(shares, default=0.0), camera, seen))
-    _, camera, seen = max(scored, key=lambda s: s[0])
-    return camera, seen
+        scored.append((min(shares, default=0.0), camera))
+    return max(scored, key=lambda s: s[0])[1]
 
 
 def _on_moving_link(model: mujoco.MjModel, joint: str) -> bool:

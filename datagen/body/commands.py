@@ -69,9 +69,10 @@ class RobotCameraArgs:
     max_image_size: int = 128          # px: the image's longer side may grow up to this (never shrinks)
     add: bool = False                  # also place a further camera (`cameras`: image_auto2) for the joints the
                                        # first does not see; it may be a close-up that loses the ee in some poses
-    # also place a camera riding on a link (`cameras`: image_mounted, as a wrist camera), looking at the bodies
-    # beyond it: "auto" on the link under which the weakest joint is seen best, or a joint's name (its parent link)
-    mount: str = ""
+    # also place cameras riding on links (`cameras`: image_mounted, image_mounted2, ..., as wrist cameras), each
+    # looking at the bodies beyond its link: one per value, "auto" (the link under which the weakest joint is seen
+    # best) or a joint's name (on its parent link); each replaces the record's camera of its name
+    mount: tuple[str, ...] = ()
 
 
 def run_init(args: RobotInitArgs) -> int:
@@ -102,7 +103,7 @@ def run_camera(args: RobotCameraArgs) -> int:
 
     from bodyschema.base.modalities import camera_modality
     from bodyschema.datagen.body.camera_choice import FURTHER, choose_camera, choose_further_camera
-    from bodyschema.datagen.body.camera_mount import AUTO_MOUNT, MOUNTED, choose_mount, mount_camera
+    from bodyschema.datagen.body.camera_mount import AUTO_MOUNT, choose_mount, mount_camera, mounted_names
     from bodyschema.datagen.body.infer import check_view
     from bodyschema.datagen.body.observability import observability, unseen_warnings
     from bodyschema.datagen.body.record import RECORD_SUFFIX, read_record, write_record
@@ -117,24 +118,21 @@ def run_camera(args: RobotCameraArgs) -> int:
     if not isinstance(args.max_image_size, int) or args.max_image_size < 1:
         raise ValueError(must_be("--max-image-size", "an integer >= 1 (px)", args.max_image_size))
     box = np.array(record.workspaces[args.workspace])
-    if args.mount and args.mount != AUTO_MOUNT:          # a joint that cannot take one: refused before the search
-        with Robot.load(record) as robot:
-            on_link = mount_camera(robot, args.mount, box)
+    names = mounted_names(len(args.mount))
+    with Robot.load(record) as robot:                    # a joint that cannot take one: refused before the search
+        on_links = {name: mount_camera(robot, joint, box, name) for name, joint in zip(names, args.mount)
+                    if joint != AUTO_MOUNT}
     choice = choose_camera(record, box, max(args.max_image_size, *record.image_size))
     placed = dataclasses.replace(record, camera=choice.camera, image_size=choice.image_size)
     further = choose_further_camera(placed, box, choice.seen) if args.add else None
     if further is not None:
         placed = _with_further(placed, further.camera)
-    mounted = None
-    if args.mount == AUTO_MOUNT:
-        camera, mounted = choose_mount(placed, box, (choice.seen, *((further.seen,) if further else ())))
-        placed = _with_further(placed, camera)
-    elif args.mount:
-        placed = _with_further(placed, on_link)
-        with Robot.load(placed) as robot:
-            mounted = observability(robot, box, np.random.default_rng(0), modality=camera_modality(MOUNTED))
+    fixed = (choice.seen, *((further.seen,) if further else ()))
+    for name in names:
+        placed = _with_further(placed, on_links[name] if name in on_links else choose_mount(placed, box, fixed, name))
     with Robot.load(placed) as robot:
         fraction = check_view(robot, box)                    # refused before the record is touched
+        mounted = [observability(robot, box, np.random.default_rng(0), modality=camera_modality(n)) for n in names]
     lines = args.record.read_text().splitlines()
     header = list(itertools.takewhile(lambda line: line.startswith("#"), lines))   # the leading comment is kept
     write_record(placed, args.record, "\n".join(line.lstrip("#").removeprefix(" ") for line in header))
@@ -145,10 +143,11 @@ def run_camera(args: RobotCameraArgs) -> int:
           f"{args.workspace!r}: ee in view {fraction:.1%}")
     if further is not None:
         print(f"further camera {FURTHER!r} (image_{FURTHER}): {further.seen.table()}")
-    if mounted is not None:
-        print(f"mounted camera {MOUNTED!r} (image_{MOUNTED}) on link {placed.cameras[-1]['body']!r}: "
-              f"{mounted.table()}")
-        for warning in unseen_warnings([choice.seen, *((further.seen,) if further else ()), mounted]):
+    links = {c["name"]: c["body"] for c in placed.cameras if isinstance(c, dict) and "body" in c}
+    for seen in mounted:
+        print(f"mounted camera {seen.camera!r} (image_{seen.camera}) on link {links[seen.camera]!r}: {seen.table()}")
+    if mounted:
+        for warning in unseen_warnings([*fixed, *mounted]):
             logger.warning(warning)
     elif further is not None:
         unseen = ", ".join(further.unseen) or "none"

@@ -79,25 +79,27 @@ def test_mount_camera_frames_the_bodies_beyond_the_link(tmp_path):
             assert view.sees(data.site_xpos[model.site(robot.ee_site).id][None])[0], q
         mounted = observability(robot, box, modality="image_mounted")
     assert mounted.joints[1].px_per_deg > fixed.joints[1].px_per_deg
-    chosen, seen = choose_mount(record, box, [fixed])                # the only joint on a moving link: the elbow
-    assert chosen == camera and seen.joints == mounted.joints
+    assert choose_mount(record, box, [fixed]) == camera                # the only joint on a moving link: the elbow
 
 
 def test_robot_camera_mount_writes_the_record(tmp_path, capsys):
-    path = planar2_with(tmp_path, size=(24, 24))
-    assert run_camera(RobotCameraArgs(record=path, mount="auto")) == 0
+    """One camera per --mount value, mounted, mounted2, ...; each replaces the record's camera of its name."""
+    path = planar2_with(tmp_path, {**ON_LINK1, "name": "mounted2"}, size=(24, 24))
+    assert run_camera(RobotCameraArgs(record=path, mount=("auto", "elbow"))) == 0
     record = read_record(path)
-    assert record.further_cameras == (MOUNTED,) and record.cameras[0]["body"] == "link1"
-    assert "mounted camera 'mounted' (image_mounted) on link 'link1'" in capsys.readouterr().out
+    assert record.further_cameras == (MOUNTED, "mounted2") and [c["body"] for c in record.cameras] == ["link1"] * 2
+    assert record.cameras[0] == record.cameras[1] | {"name": MOUNTED}      # the elbow's link, twice: the same pose
+    out = capsys.readouterr().out
+    assert "mounted camera 'mounted' (image_mounted) on link 'link1'" in out and "(image_mounted2)" in out
 
 
 def test_a_joint_on_a_fixed_link_has_no_link_to_mount_on(tmp_path):
     path = planar2_with(tmp_path)
     before = path.read_bytes()
     with pytest.raises(ValueError, match="joint 'shoulder' of mounted2 must be a joint after the first moving link"):
-        run_camera(RobotCameraArgs(record=path, mount="shoulder"))
+        run_camera(RobotCameraArgs(record=path, mount=("auto", "shoulder")))
     with pytest.raises(ValueError, match="joint to mount a camera for must be one of"):
-        run_camera(RobotCameraArgs(record=path, mount="knee"))
+        run_camera(RobotCameraArgs(record=path, mount=("knee",)))
     assert path.read_bytes() == before                                          # nothing written
 
 
