@@ -67,8 +67,9 @@ class RobotCameraArgs:
     record: Annotated[Path, Positional("RECORD")]   # a robot record (.toml)
     workspace: str = "camera"          # the joint box whose ee positions the camera frames
     max_image_size: int = 128          # px: the image's longer side may grow up to this (never shrinks)
-    add: bool = False                  # also place a further camera (`cameras`: image_auto2) for the joints the
-                                       # first does not see; it may be a close-up that loses the ee in some poses
+    # also place a further camera (`cameras`: image_auto2) for the joints the first does not see; it may be a
+    # close-up that loses the ee in some poses
+    add: bool = False
     # also place cameras riding on links (`cameras`: image_mounted, image_mounted2, ..., as wrist cameras), each
     # looking at the bodies beyond its link: one per value, "auto" (the link under which the weakest joint is seen
     # best) or a joint's name (on its parent link); each replaces the record's camera of its name
