@@ -45,9 +45,9 @@ class FlowSettings:
     dt: float = 1e3                # s; local_linear is stable for any Δt; Δt·k·λ ≫ 1 → Gauss–Newton steps
     k_z: float = 1.0               # gain on ∂F/∂μ̃
     integrator: str = "local_linear"   # "local_linear" | "implicit" | "euler" (generalized.py)
-    step_control: str = "auto"     # "descent": a step that raises F is undone and that trial's Δt shrinks (order 0);
-                                   # "none": every step is taken; "auto": descent at order 0 (the default of
-                                   # `evaluate levels`: monotone, no jitter at the noise floor), none above
+    # "descent": a step that raises F is undone and that trial's Δt shrinks (order 0); "none": every step is taken;
+    # "auto": descent at order 0 (the default of `evaluate levels`: monotone, no jitter at the noise floor), none above
+    step_control: str = "auto"
     divergence_step: float = 1e3   # rad; an Euler step larger than this marks the trial diverged
     divergence_ratio: float | None = 100.0   # E growing this much above max(E_start, 1) marks it diverged
 
@@ -92,27 +92,28 @@ class AdamSettings:
 class PerceptionConfig:
     order: int = 0                 # n: generalized coordinates μ, μ', …, μ^(n); n ∈ {0, 1, 2}
     max_steps: int = 300           # per trial
-    tol: float = 1e-5              # rad (6e-4°); converged when no coordinate moves more in a step: float32
-                                   # decoders jitter near 1e-6 rad, so a tighter tol never stops them
+    # rad (6e-4°); converged when no coordinate moves more in a step: float32 decoders jitter near 1e-6 rad, so a
+    # tighter tol never stops them
+    tol: float = 1e-5
     max_step: float | None = 0.2   # rad; trust region on one step of the joints (None: off)
     prior: str = "none"            # "none" | "damping" | "attractor" (priors.py)
     prior_precision: float = 1.0   # Π_z, same for every joint and order
     attractor_gain: float = 1.0    # β in f(μ) = β Jᵀ (x_d − g(μ)): Π_goal = β I
-    goal_precisions: tuple[tuple[str, float], ...] = ()   # Π_goal per goal modality instead of β, for goals of
-                                                          # several modalities in their own units (e.g. a pixel goal
-                                                          # with a joint-space depth cue): f = Σ_goals Jᵀ Π (x_d − g)
+    # Π_goal per goal modality instead of β, for goals of several modalities in their own units (e.g. a pixel goal with
+    # a joint-space depth cue): f = Σ_goals Jᵀ Π (x_d − g)
+    goal_precisions: tuple[tuple[str, float], ...] = ()
     precisions: tuple[tuple[str, float], ...] = ()   # per-modality overrides, e.g. (("ee_xyz", 1e4),)
     precision_update: str = "step"  # "step": Π from model.precision(μ) at every step; "initial": at μ0 only
     record: bool = False           # keep the trajectory of μ̃, F and the prediction errors
-    check_every: int = 1           # lm, adam: steps between two reads of whether a trial stopped (a host sync on a
-                                   # GPU); > 1: stopped trials stay in the batch, masked, and LM takes each trial's
-                                   # derivatives with it (an accepted step by a mask: no read-back inside the loop).
-                                   # A float32 network may round the others' rows differently in the larger batch,
-                                   # which the descent can amplify (measured K=4, 16×16 decoder: ≤ 4.9e-5 rad at 500
-                                   # trials, up to 9.7e-3 rad at 50): 1, exact, unless a read-back costs (a GPU)
-    method: str = "auto"           # "flow": generalized filtering; order 0 only: "lm" (Levenberg–Marquardt), "adam"
-                                   # (adaptive first-order flow) or "adam+lm" (Adam, then LM once in a basin);
-                                   # "auto": adam+lm at order 0 with an image model, else flow
+    # lm, adam: steps between two reads of whether a trial stopped (a host sync on a GPU); > 1: stopped trials stay in
+    # the batch, masked, and LM takes each trial's derivatives with it (an accepted step by a mask: no read-back inside
+    # the loop). A float32 network may round the others' rows differently in the larger batch, which the descent can
+    # amplify (measured K=4, 16×16 decoder: ≤ 4.9e-5 rad at 500 trials, up to 9.7e-3 rad at 50): 1, exact, unless a
+    # read-back costs (a GPU)
+    check_every: int = 1
+    # "flow": generalized filtering; order 0 only: "lm" (Levenberg–Marquardt), "adam" (adaptive first-order flow) or
+    # "adam+lm" (Adam, then LM once in a basin); "auto": adam+lm at order 0 with an image model, else flow
+    method: str = "auto"
     flow: Annotated[FlowSettings, Ungrouped()] = FlowSettings()   # the flow's integrator, step control, divergence
     lm: Annotated[LMSettings, Ungrouped()] = LMSettings()
     adam: Annotated[AdamSettings, Ungrouped()] = AdamSettings()

@@ -50,13 +50,13 @@ class RobotRecord:
     joints: tuple[str, ...] = ()                       # the hinges used, in order; () = every joint of the model
     hold: dict[str, float] = field(default_factory=dict)   # other joints' held values (rad | m); else reference
     camera: dict[str, Any] = field(default_factory=dict)   # {name} of the model's | {name="auto", pos, xyaxes, fovy}
-    cameras: tuple = ()                                # further cameras: a name of the model's | {name, pos, xyaxes,
-                                                       # fovy[, body]} placed (in the world, or riding on `body`:
-                                                       # pose in its frame); each one more image modality
+    # further cameras: a name of the model's | {name, pos, xyaxes, fovy[, body]} placed (in the world, or riding on
+    # `body`: pose in its frame); each one more image modality
+    cameras: tuple = ()
     actuators: dict[str, Any] = field(default_factory=lambda: {"kind": "model"})   # {kind, kp, kv (servos)}
     pd: dict[str, Any] = field(default_factory=dict)   # {kp, kd}: the torque PD baseline's gains per joint
-    reaching: dict[str, Any] = field(default_factory=dict)   # the reaching benchmark's table, as given (its keys:
-                                                             # control/robot_defaults.py)
+    # the reaching benchmark's table, as given (its keys: control/robot_defaults.py)
+    reaching: dict[str, Any] = field(default_factory=dict)
     mesh_dir: str = ""                                 # URDF: where package:// meshes are found besides the file's
     visual: str = "mesh"                               # URDF: "collision" | "primitives" (see VISUALS)
     # "none": no geom of the arm collides (as the shipped arms are built). A file's collision meshes often touch

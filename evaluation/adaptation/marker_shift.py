@@ -62,8 +62,8 @@ class MarkerShiftConfig(TrialsConfig):
     control_rate: float = 100.0        # Hz, whole 2 ms MuJoCo steps; at 50 Hz Π_v = 10 makes limit cycles
     visual_precisions: tuple[float, ...] = (0.1, 1.0, 10.0)   # Π of ee_pixel, px⁻²: low to high trust in vision
     goal: str = "ee_pixel"             # "ee_pixel": marker pixel at the goal pose | "joints": the pose | "image"
-    action: ActionConfig = ActionConfig(drive=("joints", "ee_pixel"))   # vision drives action too: driven by
-                                       # joints alone the conflict stays in the belief and the hand barely moves
+    # vision drives action too: driven by joints alone the conflict stays in the belief and the hand barely moves
+    action: ActionConfig = ActionConfig(drive=("joints", "ee_pixel"))
     perception: PerceptionConfig = PerceptionConfig(flow=FlowSettings(step_control="none"))   # the controller's
 
     def __post_init__(self):

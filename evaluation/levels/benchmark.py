@@ -90,8 +90,9 @@ class LevelsConfig(PerceptionRunConfig):
     plain_steps: int = PLAIN_STEPS     # --targets with an image model: Euler steps of the plain Pixel-AIF row (0: off)
     workers: int = 1                   # processes the runs go to, torch threads split among them (2–3 on 2 cores)
     run_batch: int = 0                 # runs inferred in one batch; 0: all of a worker's, 1 for image models on CPU
-    floor: bool = True                 # the "floor" row: perception started at the true pose, per joint (floor.py);
-                                       # one inference per run from the minimum's basin, cheap for every model
+    # the "floor" row: perception started at the true pose, per joint (floor.py); one inference per run from the
+    # minimum's basin, cheap for every model
+    floor: bool = True
     unobservable_deg: float = UNOBSERVABLE_DEG   # a joint whose floor is above this: "not observable" in summary.md
 
     def __post_init__(self):

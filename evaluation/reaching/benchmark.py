@@ -76,17 +76,20 @@ class ReachingRunConfig(TrialsConfig):
     action: ActionConfig = ActionConfig()  # the velocity controller; left at its default: the robot record's
     perception: PerceptionConfig = PerceptionConfig(flow=FlowSettings(step_control="none"))   # servo robots: per tick
     aic: AICConfig = AICConfig()           # torque robots: the AIC's gains and precisions
-    panda_controller: str = "velocity"     # torque robots: "velocity" (the velocity controller on the arm's joint
-                                           # impedance servo, like nao_arm's servos) | "aic" (torques, aif/aic.py)
+    # torque robots: "velocity" (the velocity controller on the arm's joint impedance servo, like nao_arm's servos) |
+    # "aic" (torques, aif/aic.py)
+    panda_controller: str = "velocity"
     success_mm: float = 10.0               # success: final simulator ee error below this
     pixel_tolerance: float = 1.0           # px; goal-space success of an ee_pixel goal
-    image_mse_threshold: float = 1e-2      # image goal success: the median MSE of a 1 cm ee offset (nao_arm, its
-                                           # hand, 56×80; 200 poses: 0.0105, 5 mm: 0.0043)
+    # image goal success: the median MSE of a 1 cm ee offset (nao_arm, its hand, 56×80; 200 poses: 0.0105, 5 mm: 0.0043)
+    image_mse_threshold: float = 1e-2
     image_size: tuple[int, int] | None = None   # robot camera (H, W); default: the image model's, else the robot's
-    depth_cue_deg: float = 0.0             # > 0: a second goal, the target's joint pose seen through σ° of noise
-                                           # (Π = 1/σ²), the depth an ee_pixel goal leaves open; needs a joints model
-    spread: float = 1.0                    # targets and starts uniform in the middle `spread` of each joint's
-                                           # sampling range: a goal across a joint limit stalls descent there
+    # > 0: a second goal, the target's joint pose seen through σ° of noise (Π = 1/σ²), the depth an ee_pixel goal leaves
+    # open; needs a joints model
+    depth_cue_deg: float = 0.0
+    # targets and starts uniform in the middle `spread` of each joint's sampling range: a goal across a joint limit
+    # stalls descent there
+    spread: float = 1.0
     goal_inference: str = "auto"           # imagine each goal's pose, then reach it: auto (image, ee_xyz) | on | off
     goal_starts: int = 8                   # starts of that search: the start pose, the encoder's guess, random
     encoder: str | None = None             # an image encoder spec: its guess starts an image goal's search

@@ -45,8 +45,9 @@ class ReportConfig:
     into one Markdown and one HTML page."""
 
     results: Path = Path("results")    # the folder benchmarks write into: results/<benchmark>/<run-id>/
-    runs: tuple[Path, ...] = ()        # run folders to report instead of the latest of their benchmark and robot
-                                       # (e.g. results/levels/20261124T201502.123Z-1a2b3c4d); the others: latest
+    # run folders to report instead of the latest of their benchmark and robot (e.g.
+    # results/levels/20261124T201502.123Z-1a2b3c4d); the others: latest
+    runs: tuple[Path, ...] = ()
     out: Path | None = None            # the Markdown page, HTML beside it (.html); None: <results>/report.md
     title: str = "bodyschema benchmark report"
     stale_after_s: float = 3600.0      # a plot/CSV this much older than its summary.md is left from an earlier run
