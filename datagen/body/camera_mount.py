@@ -68,8 +68,9 @@ def choose_mount(record, box: np.ndarray, views, name: str = MOUNTED) -> dict:
         raise ValueError(must_be(f"robot {record.name}", "an arm with a joint after its first moving link, to mount "
                                  "a camera on that link", f"joints {names}, each on a link fixed in the world",
                                  "A camera fixed in the world sees them: leave out --mount."))
+    others = tuple(c for c, n in zip(record.cameras, record.further_cameras) if n != name)   # one of its name: replaced
     for joint, camera in candidates:
-        with Robot.load(dataclasses.replace(record, cameras=(*record.cameras, camera))) as robot:
+        with Robot.load(dataclasses.replace(record, cameras=(*others, camera))) as robot:
             seen = observability(robot, box, np.random.default_rng(0), modality=camera_modality(name))
         beyond = names.index(joint)
         shares = [seen.joints[i].share_per_deg if i >= beyond else fixed[j.name]

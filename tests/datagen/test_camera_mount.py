@@ -84,7 +84,7 @@ def test_mount_camera_frames_the_bodies_beyond_the_link(tmp_path):
 
 def test_robot_camera_mount_writes_the_record(tmp_path, capsys):
     """One camera per --mount value, mounted, mounted2, ...; each replaces the record's camera of its name."""
-    path = planar2_with(tmp_path, {**ON_LINK1, "name": "mounted2"}, size=(24, 24))
+    path = planar2_with(tmp_path, {**ON_LINK1, "name": MOUNTED}, {**ON_LINK1, "name": "mounted2"}, size=(24, 24))
     assert run_camera(RobotCameraArgs(record=path, mount=("auto", "elbow"))) == 0
     record = read_record(path)
     assert record.further_cameras == (MOUNTED, "mounted2") and [c["body"] for c in record.cameras] == ["link1"] * 2
