@@ -201,11 +201,12 @@ def every_camera(robot, ranges: np.ndarray | None = None) -> list[Observability]
 
 def arm_fraction(robot, q: np.ndarray, modality: str = "image") -> float:
     """The mean fraction of image pixels that show a body moved by a chosen joint, at poses q (n, Dq) rad, through
-    the camera of `modality`."""
+    the camera of `modality`: moved relative to the camera (a camera riding on a link does not see its link move)."""
     view = robot._ensure_renderer(modality)
     renderer, camera = view.renderer, view.camera
     model = robot.model
-    moving = model.body_weldid[model.geom_bodyid] != 0                 # (ngeom,): held bodies are welded to world
+    weld = model.body_weldid[model.geom_bodyid]                        # (ngeom,): held bodies weld to the world
+    moving = (weld != 0) & (weld != model.body_weldid[model.cam_bodyid[robot.cameras[modality]]])
     data = mujoco.MjData(model)
     covered = []
     renderer.enable_segmentation_rendering()

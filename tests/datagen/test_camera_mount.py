@@ -131,3 +131,14 @@ def test_a_mounted_camera_on_a_body_the_file_lacks_is_the_house_error(tmp_path):
     record = read_record(planar2_with(tmp_path, {**ON_LINK1, "body": "forearm"}))
     with pytest.raises(ValueError, match=r"camera 'wrist' body must be one of the model's bodies \['link1', 'link2'\]"):
         Robot.load(record)
+
+
+def test_a_camera_on_the_last_link_sees_nothing_move(tmp_path):
+    """The arm's share of a mounted camera's image counts the bodies that move relative to it: looking down at the
+    marker from above link2, nothing does."""
+    above = {"name": "tip", "pos": [0.25, 0.0, 0.3], "xyaxes": [1.0, 0.0, 0.0, 0.0, 1.0, 0.0], "fovy": 20.0,
+             "body": "link2"}
+    with Robot.load(planar2_with(tmp_path, above)) as robot:
+        seen = observability(robot, modality="image_tip")
+        assert robot.render(np.zeros((1, 2)), modality="image_tip").any()         # the marker is in view
+    assert seen.arm_fraction == 0.0 and seen.joints[1].px_per_deg == 0.0
