@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bodyschema.datagen.body.infer import GOOD_VIEW, MIN_VIEW, ee_samples, place_camera, view_fraction
-from bodyschema.datagen.body.observability import MIN_SHARE_PER_DEG, JointView, Observability, observability
+from bodyschema.datagen.body.observability import MIN_SHARE_PER_DEG, JointView, Observability, best_views, observability
 from bodyschema.errors import must_be
 
 AZIMUTHS = np.deg2rad(np.arange(0, 360, 60))   # views around the workspace's vertical axis (6)
@@ -153,7 +153,7 @@ def _unseen_by_pixels(joints: tuple[JointView, ...]) -> int:
 
 def _best_of(first: Observability, second: Observability) -> tuple[JointView, ...]:
     """Per joint, its figures in the view that changes more of the image (both views are of one size)."""
-    return tuple(max(a, b, key=lambda j: j.share_per_deg) for a, b in zip(first.joints, second.joints))
+    return tuple(view.joints[i] for i, view in enumerate(best_views((first, second))))
 
 
 def _pair_score(first: Observability, second: Observability) -> tuple[int, float]:

@@ -19,7 +19,7 @@ import numpy as np
 
 from bodyschema.base.modalities import camera_modality
 from bodyschema.datagen.body.infer import place_camera
-from bodyschema.datagen.body.observability import observability
+from bodyschema.datagen.body.observability import best_views, observability
 from bodyschema.errors import must_be
 
 MOUNTED = "mounted"              # the further camera `robot camera --mount` places (image_mounted)
@@ -59,7 +59,7 @@ def choose_mount(record, box: np.ndarray, views, name: str = MOUNTED) -> dict:
     before it). Rolls about the tool's own axis (`JointView.on_axis`) do not count: no camera sees them reliably.
     Returns the record's `cameras` entry, named `name`."""
     from bodyschema.datagen.body.robot import Robot
-    fixed = {j.name: max(view.joints[i].share_per_deg for view in views) for i, j in enumerate(views[0].joints)}
+    fixed = [view.joints[i].share_per_deg for i, view in enumerate(best_views(views))]
     scored = []
     with Robot.load(record) as robot:
         names = robot.joint_names
@@ -73,7 +73,7 @@ def choose_mount(record, box: np.ndarray, views, name: str = MOUNTED) -> dict:
         with Robot.load(dataclasses.replace(record, cameras=(*others, camera))) as robot:
             seen = observability(robot, box, np.random.default_rng(0), modality=camera_modality(name))
         beyond = names.index(joint)
-        shares = [seen.joints[i].share_per_deg if i >= beyond else fixed[j.name]
+        shares = [seen.joints[i].share_per_deg if i >= beyond else fixed[i]
                   for i, j in enumerate(seen.joints) if not j.on_axis]
         scored.append((min(shares, default=0.0), camera))
     return max(scored, key=lambda s: s[0])[1]

@@ -120,9 +120,11 @@ def run_camera(args: RobotCameraArgs) -> int:
         raise ValueError(must_be("--max-image-size", "an integer >= 1 (px)", args.max_image_size))
     box = np.array(record.workspaces[args.workspace])
     names = mounted_names(len(args.mount))
-    with Robot.load(record) as robot:                    # a joint that cannot take one: refused before the search
-        on_links = {name: mount_camera(robot, joint, box, name) for name, joint in zip(names, args.mount)
-                    if joint != AUTO_MOUNT}
+    joints = {name: joint for name, joint in zip(names, args.mount) if joint != AUTO_MOUNT}
+    on_links = {}
+    if joints:                                           # a joint that cannot take one: refused before the search
+        with Robot.load(record) as robot:
+            on_links = {name: mount_camera(robot, joint, box, name) for name, joint in joints.items()}
     choice = choose_camera(record, box, max(args.max_image_size, *record.image_size))
     placed = dataclasses.replace(record, camera=choice.camera, image_size=choice.image_size)
     further = choose_further_camera(placed, box, choice.seen) if args.add else None

@@ -131,15 +131,16 @@ class Observability:
                        f"Not seen: {joint.why()}.")
 
 
-def unseen_warnings(views: list[Observability]) -> list[str]:
+def best_views(views) -> tuple[Observability, ...]:
+    """Per joint, the view (of one robot's cameras at one image size) that changes the largest share of its image:
+    where that view does not see it, none does."""
+    return tuple(max(views, key=lambda view: view.joints[i].share_per_deg) for i in range(len(views[0].joints)))
+
+
+def unseen_warnings(views) -> list[str]:
     """The house warning per joint that none of a robot's cameras (`views`, one Observability each) sees, from the
     camera that sees it best: a joint one camera sees is seen (perception sums the cameras' errors)."""
-    warnings = []
-    for i in range(len(views[0].joints)):
-        if all(view.joints[i].weak for view in views):
-            best = max(views, key=lambda view: view.joints[i].share_per_deg)
-            warnings.append(best.warning(best.joints[i]))
-    return warnings
+    return [view.warning(view.joints[i]) for i, view in enumerate(best_views(views)) if view.joints[i].weak]
 
 
 def _flag(joint: JointView) -> str:
