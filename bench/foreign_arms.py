@@ -3,7 +3,8 @@
     MUJOCO_GL=egl .venv/bin/python bench/foreign_arms.py [--arms ur5 so_arm ...] [--n 3000] [--epochs 40]
         [--trials 50] [--pixel-size lean|pixel_aif|splat] [--pixel-lr LR] [--pixel-schedule constant|cosine|wsd]
         [--pixel-loss cross_entropy|mse] [--pixel-inputs products|unit|kinematic] [--gpr-n 6000]
-        [--mount [auto|JOINT ...]] [--work bench_out/foreign] [--kinematics-only | --pixel-only] [--quick]
+        [--add] [--mount [auto|JOINT ...]] [--masked] [--work bench_out/foreign]
+        [--kinematics-only | --pixel-only] [--quick]
 
 Per arm, in a folder of its own (its own MLflow store): `robot init` (a file: the visuals it can load, nothing
 edited by hand) and `robot camera`; `train gpr` of ee_xyz and of ee_rot (the ee's orientation) on a store of
@@ -12,7 +13,8 @@ uniform poses, the record's image size), `train pixel` and `train encoder` and t
 the encoder (its floor row: perception started at the truth, per joint), `evaluate reaching` with the GPR and the
 joints (AIF against the PD baseline). `--kinematics-only`: the GPR columns and reaching, no images. `--mount`:
 `robot camera --mount auto` (or the joints given) adds cameras riding on links, and the pixel rows perceive through
-every camera (a decoder each).
+every camera (a decoder each); `--masked`: those cameras draw only their link and the bodies beyond; `--add`:
+`robot camera --add`'s second fixed camera too.
 The floor of a joint datagen's observability check does not see is in parentheses;
 the worst floor over the others is the issue's bar (≤ 2°). Prints one markdown row per arm and the wall minutes of
 each step (2 CPU cores: the recipe's CPU time) and writes them to <work>/table.md. Arms: the three shipped ones and
@@ -33,6 +35,7 @@ import sys
 import time
 from pathlib import Path
 
+from bodyschema.datagen.body.camera_choice import FURTHER
 from bodyschema.datagen.body.camera_mount import mounted_names
 from bodyschema.datagen.body.record import read_record, shipped_dir, write_record
 
@@ -70,17 +73,17 @@ def registered(output: str) -> str:
     return found[-1]
 
 
-def robot_of(name: str, folder: Path, log: Path, minutes: dict[str, float], mount: list[str]) -> str:
+def robot_of(name: str, folder: Path, log: Path, minutes: dict[str, float], cameras: list[str]) -> str:
     """The --robot argument: a shipped name, or the record `robot init` + `robot camera` write for a file;
-    `mount`: `robot camera --mount ...` adds cameras riding on links (a shipped arm: on a copy of its record)."""
+    `cameras`: `robot camera`'s flags that add cameras (a shipped arm: on a copy of its record)."""
     record = folder / f"{name}.toml"
     if name in SHIPPED:
-        if not mount:
+        if not cameras:
             return name
         shipped = read_record(shipped_dir() / f"{name}.toml")
         write_record(dataclasses.replace(shipped, name=f"{name}_mounted", model=str(shipped.model_path),
                                          base=folder), record)
-        _, camera_s = bodyschema(["robot", "camera", str(record), "--mount", *mount], log)
+        _, camera_s = bodyschema(["robot", "camera", str(record), *cameras], log)
         minutes["camera"] = camera_s / 60
         return str(record)
     dist, relative, visual = FILES[name]
@@ -89,7 +92,7 @@ def robot_of(name: str, folder: Path, log: Path, minutes: dict[str, float], moun
         shutil.copy(model, folder / "model.urdf")
         model = folder / "model.urdf"
     _, init_s = bodyschema(["robot", "init", str(model), "--visual", visual, "--out", str(record)], log)
-    _, camera_s = bodyschema(["robot", "camera", str(record), *(["--mount", *mount] if mount else [])], log)
+    _, camera_s = bodyschema(["robot", "camera", str(record), *cameras], log)
     minutes["init+camera"] = (init_s + camera_s) / 60
     return str(record)
 
@@ -135,7 +138,7 @@ def measure(name: str, work: Path, o: argparse.Namespace) -> dict[str, str]:
     log = folder / "commands.log"
     common = ["--tracking-uri", f"sqlite:///{folder}/mlflow.db"]
     minutes: dict[str, float] = {}
-    robot = robot_of(name, folder, log, minutes, o.mount)
+    robot = robot_of(name, folder, log, minutes, camera_flags(o))
     kinematics, gpr = ({"arm": name}, {}) if o.pixel_only else gpr_levels(name, robot, folder, common, o, log,
                                                                            minutes)
     if o.kinematics_only:
@@ -146,8 +149,9 @@ def measure(name: str, work: Path, o: argparse.Namespace) -> dict[str, str]:
     out, s = bodyschema(["datagen", "--robot", robot, "--n", str(o.n), "--out", str(data), "--no-progress"], log)
     minutes["datagen"], ms_per_image, unseen = s / 60, 1000 * s / o.n, unseen_joints(out)
     train = [*common, "--run-root", str(folder / "runs"), "--no-progress", "--data", str(data)]
-    pixel = []                                     # a decoder per camera: the record's, then the mounted ones
-    for modality in ("image", *(f"image_{name}" for name in mounted_names(len(o.mount)))):
+    pixel = []                                     # a decoder per camera: the record's, the added, the mounted ones
+    added = [FURTHER] if o.add else []
+    for modality in ("image", *(f"image_{name}" for name in [*added, *mounted_names(len(o.mount))])):
         out, s = bodyschema(["train", "pixel", *train, "--modality", modality, "--epochs", str(o.epochs),
                              "--size", o.pixel_size, *(["--lr", str(o.pixel_lr)] if o.pixel_lr else []),
                              *(["--lr-schedule", o.pixel_schedule] if o.pixel_schedule else []),
@@ -171,6 +175,12 @@ def measure(name: str, work: Path, o: argparse.Namespace) -> dict[str, str]:
             "+ encoder": " / ".join(level.get(k, "–") for k in ("1+enc", "2+enc", "3+enc")),
             **reached, "datagen ms/image": f"{ms_per_image:.1f}", "recipe minutes": f"{sum(minutes.values()):.1f}",
             "steps": ", ".join(f"{k} {v:.1f}" for k, v in minutes.items())}
+
+
+def camera_flags(o: argparse.Namespace) -> list[str]:
+    """`robot camera`'s flags for the cameras asked beside the fixed view."""
+    return [*(["--add"] if o.add else []), *(["--mount", *o.mount] if o.mount else []),
+            *(["--masked"] if o.masked else [])]
 
 
 def levels_flags(common: list[str], o: argparse.Namespace) -> list[str]:
@@ -234,6 +244,9 @@ def main() -> None:
     parser.add_argument("--mount", nargs="*", default=None, metavar="auto|JOINT", help="`robot camera --mount ...` "
                         "(alone: auto): cameras riding on links, a decoder each, perceived with the first "
                         "(datagen/body/camera_mount.py)")
+    parser.add_argument("--masked", action="store_true", help="`robot camera --masked`: the mounted cameras draw "
+                        "only their link and the bodies beyond")
+    parser.add_argument("--add", action="store_true", help="`robot camera --add`: a second fixed camera")
     parser.add_argument("--trials", type=int, default=50)
     parser.add_argument("--reach-trials", type=int, default=20)
     parser.add_argument("--work", type=Path, default=Path("bench_out/foreign"))

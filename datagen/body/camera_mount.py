@@ -19,6 +19,7 @@ import numpy as np
 
 from bodyschema.base.modalities import camera_modality
 from bodyschema.datagen.body.infer import place_camera
+from bodyschema.datagen.body.kinematics import subtree
 from bodyschema.datagen.body.observability import best_views, observability
 from bodyschema.errors import must_be
 
@@ -32,9 +33,10 @@ def mounted_names(n: int) -> tuple[str, ...]:
     return tuple(MOUNTED if i == 0 else f"{MOUNTED}{i + 1}" for i in range(n))
 
 
-def mount_camera(robot, joint: str, box: np.ndarray, name: str = MOUNTED) -> dict:
+def mount_camera(robot, joint: str, box: np.ndarray, name: str = MOUNTED, masked: bool = False) -> dict:
     """The record's `cameras` entry (`name`) of a camera on the parent link of `joint` (a chosen joint of `robot`, a
-    datagen Robot), framing the ee and the geoms beyond that link over `box` (Dq, 2) rad (POSES poses, seed 0)."""
+    datagen Robot), framing the ee and the geoms beyond that link over `box` (Dq, 2) rad (POSES poses, seed 0);
+    `masked`: it draws only that link and the bodies beyond (render_scope)."""
     model = robot.model
     if joint not in robot.joint_names:
         raise ValueError(must_be("joint to mount a camera for", f"one of {robot.name}'s joints {robot.joint_names}",
@@ -47,23 +49,24 @@ def mount_camera(robot, joint: str, box: np.ndarray, name: str = MOUNTED) -> dic
                                  "A camera fixed in the world sees it: `robot camera` places one."))
     points = _points_beyond(model, link, moved, robot.ee_site, box, np.random.default_rng(0))
     camera = place_camera(points, robot.image_size)
-    return {**camera, "name": name, "body": model.body(link).name}
+    return {**camera, "name": name, "body": model.body(link).name, **({"masked": True} if masked else {})}
 
 
-def choose_mount(record, box: np.ndarray, views, name: str = MOUNTED) -> dict:
+def choose_mount(record, box: np.ndarray, views, name: str = MOUNTED, masked: bool = False) -> dict:
     """`--mount auto`: of a camera on the parent link of each joint after the first moving link (`mount_camera`),
     the one under which the arm's weakest joint is seen best, and its observability. A joint beyond the link counts
     its share through the mounted camera, which sees the bodies it moves from the same place in every pose; a joint
     before it counts its best share in `views` (the fixed cameras' Observability): through a mounted camera it moves
     the whole background, which a decoder did not learn (SO-101's wrist_flex: floor 12° seen so, 0.5° from the link
     before it). Rolls about the tool's own axis (`JointView.on_axis`) do not count: no camera sees them reliably.
-    Returns the record's `cameras` entry, named `name`."""
+    Returns the record's `cameras` entry, named `name` (`masked`: see mount_camera)."""
     from bodyschema.datagen.body.robot import Robot
     fixed = [view.joints[i].share_per_deg for i, view in enumerate(best_views(views))]
     scored = []
     with Robot.load(record) as robot:
         names = robot.joint_names
-        candidates = [(j, mount_camera(robot, j, box, name)) for j in names if _on_moving_link(robot.model, j)]
+        candidates = [(j, mount_camera(robot, j, box, name, masked)) for j in names
+                      if _on_moving_link(robot.model, j)]
     if not candidates:
         raise ValueError(must_be(f"robot {record.name}", "an arm with a joint after its first moving link, to mount "
                                  "a camera on that link", f"joints {names}, each on a link fixed in the world",
@@ -88,8 +91,7 @@ def _points_beyond(model: mujoco.MjModel, link: int, moved: int, site: str, box:
                    rng: np.random.Generator) -> np.ndarray:
     """(POSES·(1 + G), 3) m in `link`'s frame: the ee and the centres of the G geoms on `moved` and the bodies below
     it, at POSES poses uniform in `box`."""
-    beyond = [b for b in range(model.nbody) if _below(model, b, moved)]
-    geoms = np.flatnonzero(np.isin(model.geom_bodyid, beyond))
+    geoms = np.flatnonzero(subtree(model, moved)[model.geom_bodyid])
     ee = model.site(site).id
     data = mujoco.MjData(model)
     out = []
@@ -99,9 +101,3 @@ def _points_beyond(model: mujoco.MjModel, link: int, moved: int, site: str, box:
         world = np.concatenate([data.site_xpos[ee][None], data.geom_xpos[geoms]])
         out.append((world - data.xpos[link]) @ data.xmat[link].reshape(3, 3))    # rows: points in the link's frame
     return np.concatenate(out)
-
-
-def _below(model: mujoco.MjModel, body: int, ancestor: int) -> bool:
-    while body > ancestor:
-        body = int(model.body_parentid[body])
-    return body == ancestor

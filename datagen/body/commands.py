@@ -74,6 +74,9 @@ class RobotCameraArgs:
     # looking at the bodies beyond its link: one per value, "auto" (the link under which the weakest joint is seen
     # best) or a joint's name (on its parent link); each replaces the record's camera of its name
     mount: tuple[str, ...] = ()
+    # the mounted cameras draw only their link and the bodies beyond it (the rest of the arm and the world left
+    # out, as a segmentation of the hand gives): their images change with the joints beyond the link alone
+    masked: bool = False
 
 
 def run_init(args: RobotInitArgs) -> int:
@@ -124,7 +127,7 @@ def run_camera(args: RobotCameraArgs) -> int:
     on_links = {}
     if joints:                                           # a joint that cannot take one: refused before the search
         with Robot.load(record) as robot:
-            on_links = {name: mount_camera(robot, joint, box, name) for name, joint in joints.items()}
+            on_links = {name: mount_camera(robot, joint, box, name, args.masked) for name, joint in joints.items()}
     choice = choose_camera(record, box, max(args.max_image_size, *record.image_size))
     placed = dataclasses.replace(record, camera=choice.camera, image_size=choice.image_size)
     further = choose_further_camera(placed, box, choice.seen) if args.add else None
@@ -132,7 +135,8 @@ def run_camera(args: RobotCameraArgs) -> int:
         placed = _with_further(placed, further.camera)
     fixed = (choice.seen, *((further.seen,) if further else ()))
     for name in names:
-        placed = _with_further(placed, on_links[name] if name in on_links else choose_mount(placed, box, fixed, name))
+        camera = on_links.get(name) or choose_mount(placed, box, fixed, name, args.masked)
+        placed = _with_further(placed, camera)
     with Robot.load(placed) as robot:
         fraction = check_view(robot, box)                    # refused before the record is touched
         mounted = [observability(robot, box, np.random.default_rng(0), modality=camera_modality(n)) for n in names]

@@ -81,6 +81,15 @@ def camera_moves(model: mujoco.MjModel, camera: int) -> bool:
                 or model.cam_mode[camera] != mujoco.mjtCamLight.mjCAMLIGHT_FIXED)
 
 
+def subtree(model: mujoco.MjModel, body: int) -> np.ndarray:
+    """(nbody,) bool: `body` and every body below it (MuJoCo numbers a parent before its children)."""
+    inside = np.zeros(model.nbody, dtype=bool)
+    inside[body] = True
+    for b in range(body + 1, model.nbody):
+        inside[b] = inside[model.body_parentid[b]]
+    return inside
+
+
 def fixed_camera(model: mujoco.MjModel, data: mujoco.MjData, camera: int, image_size: tuple[int, int]) -> FixedCamera:
     """The model's camera `camera` (id) as a FixedCamera. Cameras are fixed in the world: its pose is computed once,
     at qpos0 (mj_camlight sets cam_xpos/xmat after mj_kinematics), with `data` (whose state it changes)."""

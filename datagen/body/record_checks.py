@@ -24,6 +24,8 @@ NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}")   # a file name e
 BENCHMARK_SECTIONS = ("reaching",)
 PLACED_KEYS = ("name", "pos", "xyaxes", "fovy")   # a placed camera's pose (in the world; a further camera may add
                                                   # `body`: then pos and xyaxes are in that body's frame)
+MOUNTED_KEYS = ("body", "masked")            # a further camera riding on a link: the link; whether it sees only
+                                             # the link and the bodies beyond (render_scope)
 
 
 def record_problems(r) -> list[str]:
@@ -115,15 +117,22 @@ def _camera_problems(camera: dict, mounted: bool = False) -> list[str]:
     if "pos" not in camera:
         extra = sorted(set(camera) - {"name"})
         return [must_be("record [camera]", "name alone for a camera of the model", extra)] if extra else []
-    extra = sorted(set(camera) - set(PLACED_KEYS) - ({"body"} if mounted else set()))
+    allowed = [*PLACED_KEYS, *(MOUNTED_KEYS if mounted else ())]
+    extra = sorted(set(camera) - set(allowed))
     if extra:
         hint = "A camera riding on a link goes in `cameras` (body = the link)." if "body" in extra else ""
-        return [must_be(f"record camera {camera['name']!r}", f"keys among {list(PLACED_KEYS)}", extra, hint)]
+        return [must_be(f"record camera {camera['name']!r}", f"keys among {allowed}", extra, hint)]
     pos, axes, fovy = camera.get("pos"), camera.get("xyaxes"), camera.get("fovy")
     if not (_vector(pos, 3) and _vector(axes, 6) and isinstance(fovy, (int, float)) and 0 < fovy < 180):
         return [must_be("record [camera]", "pos = [x, y, z] m, xyaxes = [6 numbers], fovy in (0, 180) deg", camera)]
     if "body" in camera and not (isinstance(camera["body"], str) and camera["body"]):
         return [must_be(f"record camera {camera['name']!r} body", "the name of a body of the model", camera["body"])]
+    hint = "masked = true draws only the camera's link and the bodies beyond it."
+    if "masked" in camera and "body" not in camera:
+        return [must_be(f"record camera {camera['name']!r} masked", "on a camera riding on a link (with `body`)",
+                        "a camera fixed in the world", hint)]
+    if "masked" in camera and not isinstance(camera["masked"], bool):
+        return [must_be(f"record camera {camera['name']!r} masked", "true or false", camera["masked"], hint)]
     return []
 
 

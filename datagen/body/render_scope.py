@@ -7,6 +7,10 @@ default shadow map (4096²) and a shadow-casting light, 10-40 ms of a 30-100 ms 
 - Exact (the image does not change): no shadow map and no light casts shadows (the shipped MJCFs already say
   shadowsize="0" and have no lights); a geom of a body welded to the world (the camera is fixed too) whose bounding
   sphere lies outside the camera's view is moved to HIDDEN_GROUP, a group the renderer's default option leaves out.
+- A masked camera riding on a link (the record's `masked = true`) draws only its link and the bodies beyond it:
+  every other geom is hidden (and the renderer leaves out the skybox), as a segmentation of the hand would give,
+  lit by the camera's headlight alone (MASK_LIGHT): its image is then a function of the joints beyond the link only
+  (the world's lights would shade the hand by the joints before it).
 - File robots only (the shipped robots' images stay those of their stores and models, bit for bit):
   - a held geom farther than FAR_M from everything the arm sweeps (its moving geoms over `poses`) and not in front
     of the arm's image is hidden too: background, such as a humanoid's legs (the torso beside the arm stays);
@@ -25,20 +29,22 @@ import copy
 import mujoco
 import numpy as np
 
-from bodyschema.datagen.body.kinematics import camera_moves
+from bodyschema.datagen.body.kinematics import camera_moves, subtree
 
 HIDDEN_GROUP = 5             # mjvOption shows geom groups 0-2 by default
 LOD_PX = 1.0                 # the clustering cell, in pixels at the mesh's nearest depth
 SLICES, STACKS = 12, 6       # facets of capsules, cylinders, spheres (MuJoCo: 28 × 16)
 MIN_DEPTH = 0.05             # m: a mesh nearer the camera than this is clustered as if here
+MASK_LIGHT = (0.3, 0.7)      # a masked camera's headlight: ambient, diffuse (MuJoCo's default: 0.1, 0.4)
 FAR_M = 0.15                 # m: a held geom this far from everything the arm sweeps is background (file robots)
 
 
 def render_model(model: mujoco.MjModel, camera: int, image_size: tuple[int, int], poses: np.ndarray | None,
-                 simplify: bool) -> mujoco.MjModel:
+                 simplify: bool, masked: bool = False) -> mujoco.MjModel:
     """The render copy of `model` for camera `camera`; `poses` (N, nq) rad: where the moving meshes may be (their
     nearest depth sets their detail); `simplify`: the below-a-pixel steps too. A camera that moves with the arm
-    (`camera_moves`) hides nothing (every geom may come into its view) but has its meshes simplified alike."""
+    (`camera_moves`) hides nothing (every geom may come into its view) but has its meshes simplified alike;
+    `masked` (a camera riding on a link): every geom but those of its link and the bodies beyond is hidden."""
     out = copy.copy(model)
     out.vis.quality.shadowsize = 0
     out.light_castshadow[:] = 0
@@ -50,6 +56,11 @@ def render_model(model: mujoco.MjModel, camera: int, image_size: tuple[int, int]
     static = (out.body_weldid[out.geom_bodyid] == 0) & (not moving)
     depth = _depth(out, data, camera)                     # (ngeom,) m along the view, at qpos0
     hidden = static & _outside(out, data, camera, image_size)
+    if masked:
+        hidden |= ~subtree(out, int(out.cam_bodyid[camera]))[out.geom_bodyid]
+        out.light_active[:] = False
+        out.vis.headlight.active = True
+        out.vis.headlight.ambient[:], out.vis.headlight.diffuse[:] = MASK_LIGHT[0], MASK_LIGHT[1]
     out.geom_group[hidden] = HIDDEN_GROUP
     if not simplify:
         return out

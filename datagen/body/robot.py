@@ -263,8 +263,11 @@ class Robot:
     def _ensure_renderer(self, modality: str = IMAGE) -> CameraRenderer:
         if modality not in self._renderers:
             shipped = self.record.model_path.parent == shipped_dir().resolve()
+            masked = {camera_modality(c["name"]) for c in self.record.cameras
+                      if isinstance(c, dict) and c.get("masked")}
             self._renderers[modality] = CameraRenderer(self.model, self.cameras[modality], self.image_size,
-                                                       self.channels, self.workspaces["full"], simplify=not shipped)
+                                                       self.channels, self.workspaces["full"], simplify=not shipped,
+                                                       masked=modality in masked)
         return self._renderers[modality]
 
     def close(self) -> None:

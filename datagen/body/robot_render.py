@@ -21,12 +21,15 @@ class CameraRenderer:
     """One GL renderer looking through a fixed camera of `model`, at images of `image_size` (H, W) px."""
 
     def __init__(self, model: mujoco.MjModel, camera_id: int, image_size: tuple[int, int], channels: int,
-                 full_ranges: np.ndarray, simplify: bool):
-        """full_ranges: (Dq, 2) rad, the joint box the scene's copy is fitted over; simplify: see render_model."""
+                 full_ranges: np.ndarray, simplify: bool, masked: bool = False):
+        """full_ranges: (Dq, 2) rad, the joint box the scene's copy is fitted over; simplify, masked: see
+        render_model (a masked camera's background is black: no skybox either)."""
         h, w = image_size
         poses = np.random.default_rng(0).uniform(full_ranges[:, 0], full_ranges[:, 1], (RENDER_POSES, len(full_ranges)))
-        scene = render_model(model, camera_id, image_size, poses, simplify=simplify)
+        scene = render_model(model, camera_id, image_size, poses, simplify=simplify, masked=masked)
         self.renderer = mujoco.Renderer(scene, height=h, width=w)
+        if masked:
+            self.renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = False
         self.camera = mujoco.MjvCamera()
         self.camera.type = mujoco.mjtCamera.mjCAMERA_FIXED
         self.camera.fixedcamid = camera_id

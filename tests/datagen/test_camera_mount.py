@@ -93,6 +93,28 @@ def test_robot_camera_mount_writes_the_record(tmp_path, capsys):
     assert "mounted camera 'mounted' (image_mounted) on link 'link1'" in out and "(image_mounted2)" in out
 
 
+def test_a_masked_camera_sees_the_joints_beyond_its_link_alone(tmp_path):
+    """`robot camera --mount elbow --masked`: the camera on link1 draws link1 and link2 only, lit by its headlight, so
+    its image does not change with the shoulder (within 1 of 255 levels: the GL pipeline rounds the world's float32
+    transforms differently at each shoulder angle) and does change with the elbow; unmasked, the world's light shades
+    link2 by the shoulder too."""
+    path = planar2_with(tmp_path, size=(32, 32))
+    assert run_camera(RobotCameraArgs(record=path, mount=("elbow",), masked=True)) == 0
+    masked = read_record(path)
+    assert masked.cameras[0]["masked"] is True and masked.cameras[0]["body"] == "link1"
+    elbows = np.random.default_rng(0).uniform(-2.0, 2.0, 8)
+    poses = [np.stack([np.full(8, shoulder), elbows], axis=1) for shoulder in (-1.0, 0.3, 1.2)]
+    with Robot.load(masked) as robot:
+        images = [robot.render(q, modality="image_mounted").astype(int) for q in poses]
+    for other in images[1:]:
+        assert np.abs(other - images[0]).max() <= 1
+    assert np.abs(np.diff(images[0], axis=0)).max() > 50                         # the elbow moves link2 in view
+    unmasked = dataclasses.replace(masked, cameras=({k: v for k, v in masked.cameras[0].items() if k != "masked"},))
+    with Robot.load(unmasked) as robot:
+        lit = [robot.render(q, modality="image_mounted").astype(int) for q in poses]
+    assert np.abs(lit[1] - lit[0]).max() > 1
+
+
 def test_a_joint_on_a_fixed_link_has_no_link_to_mount_on(tmp_path):
     path = planar2_with(tmp_path)
     before = path.read_bytes()
@@ -105,7 +127,11 @@ def test_a_joint_on_a_fixed_link_has_no_link_to_mount_on(tmp_path):
 
 @pytest.mark.parametrize("camera, message", [
     ({**ON_LINK1, "body": 3}, "record camera 'wrist' body must be the name of a body of the model"),
-    ({**ON_LINK1, "lens": "wide"}, r"record camera 'wrist' must be keys among \['name', 'pos', 'xyaxes', 'fovy'\]"),
+    ({**ON_LINK1, "lens": "wide"},
+     r"record camera 'wrist' must be keys among \['name', 'pos', 'xyaxes', 'fovy', 'body', 'masked'\]"),
+    ({**ON_LINK1, "masked": "yes"}, "record camera 'wrist' masked must be true or false. Got 'yes'"),
+    ({**{k: v for k, v in ON_LINK1.items() if k != "body"}, "masked": True},
+     r"record camera 'wrist' masked must be on a camera riding on a link \(with `body`\)"),
 ])
 def test_a_bad_mounted_camera_is_refused_when_read(tmp_path, camera, message):
     values = read_record(planar2_with(tmp_path)).to_toml_dict() | {"cameras": [camera]}
