@@ -83,7 +83,7 @@ def with_mounted(record, size: tuple[int, int]):
     box = np.array(record.workspaces["camera"])
     with Robot.load(record) as robot:
         fixed = observability(robot, box)
-    return dataclasses.replace(record, cameras=(choose_mount(record, box, [fixed]),))
+    return dataclasses.replace(record, cameras=(choose_mount(record, box, [fixed])[0],))
 
 
 if __name__ == "__main__":

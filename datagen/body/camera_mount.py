@@ -52,16 +52,18 @@ def mount_camera(robot, joint: str, box: np.ndarray, name: str = MOUNTED, masked
     return {**camera, "name": name, "body": model.body(link).name, **({"masked": True} if masked else {})}
 
 
-def choose_mount(record, box: np.ndarray, views, name: str = MOUNTED, masked: bool = False) -> dict:
+def choose_mount(record, box: np.ndarray, views, name: str = MOUNTED, masked: bool = False):
     """`--mount auto`: of a camera on the parent link of each joint after the first moving link (`mount_camera`),
-    the one under which the arm's weakest joint is seen best, and its observability. A joint beyond the link counts
-    its share through the mounted camera, which sees the bodies it moves from the same place in every pose; a joint
-    before it counts its best share in `views` (the fixed cameras' Observability): through a mounted camera it moves
-    the whole background, which a decoder did not learn (SO-101's wrist_flex: floor 12° seen so, 0.5° from the link
-    before it). Rolls about the tool's own axis (`JointView.on_axis`) do not count: no camera sees them reliably.
-    Returns the record's `cameras` entry, named `name` (`masked`: see mount_camera)."""
+    the one under which the arm's weakest joint is seen best, with its Observability. `views`: the Observability of
+    the cameras the record has (fixed, and mounted ones placed before). A joint beyond the link counts its best share
+    through the new camera or those views, as perception sums the cameras; a joint before it counts its best share in
+    `views` alone: through a masked camera it is not seen, and through an unmasked one it moves the whole background,
+    which a decoder did not learn (SO-101's wrist_flex: floor 12° seen so, 0.5° from the link before it). So a second
+    `auto` after a first places for the joints the first left weakest. Rolls about the tool's own axis
+    (`JointView.on_axis`) do not count: no camera sees them reliably. Returns the record's `cameras` entry, named
+    `name` (`masked`: see mount_camera), and its Observability."""
     from bodyschema.datagen.body.robot import Robot
-    fixed = [view.joints[i].share_per_deg for i, view in enumerate(best_views(views))]
+    before = [view.joints[i].share_per_deg for i, view in enumerate(best_views(views))]
     scored = []
     with Robot.load(record) as robot:
         names = robot.joint_names
@@ -76,10 +78,11 @@ def choose_mount(record, box: np.ndarray, views, name: str = MOUNTED, masked: bo
         with Robot.load(dataclasses.replace(record, cameras=(*others, camera))) as robot:
             seen = observability(robot, box, np.random.default_rng(0), modality=camera_modality(name))
         beyond = names.index(joint)
-        shares = [seen.joints[i].share_per_deg if i >= beyond else fixed[i]
+        shares = [max(seen.joints[i].share_per_deg, before[i]) if i >= beyond else before[i]
                   for i, j in enumerate(seen.joints) if not j.on_axis]
-        scored.append((min(shares, default=0.0), camera))
-    return max(scored, key=lambda s: s[0])[1]
+        scored.append((min(shares, default=0.0), camera, seen))
+    _, camera, seen = max(scored, key=lambda s: s[0])
+    return camera, seen
 
 
 def _on_moving_link(model: mujoco.MjModel, joint: str) -> bool:

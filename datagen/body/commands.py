@@ -105,11 +105,10 @@ def run_camera(args: RobotCameraArgs) -> int:
 
     import numpy as np
 
-    from bodyschema.base.modalities import camera_modality
     from bodyschema.datagen.body.camera_choice import FURTHER, choose_camera, choose_further_camera
-    from bodyschema.datagen.body.camera_mount import AUTO_MOUNT, choose_mount, mount_camera, mounted_names
+    from bodyschema.datagen.body.camera_mount import AUTO_MOUNT, mount_camera, mounted_names
     from bodyschema.datagen.body.infer import check_view
-    from bodyschema.datagen.body.observability import observability, unseen_warnings
+    from bodyschema.datagen.body.observability import unseen_warnings
     from bodyschema.datagen.body.record import RECORD_SUFFIX, read_record, write_record
     from bodyschema.datagen.body.robot import Robot
 
@@ -134,12 +133,12 @@ def run_camera(args: RobotCameraArgs) -> int:
     if further is not None:
         placed = _with_further(placed, further.camera)
     fixed = (choice.seen, *((further.seen,) if further else ()))
+    mounted = []                                         # each `auto` places for what the cameras before left weakest
     for name in names:
-        camera = on_links.get(name) or choose_mount(placed, box, fixed, name, args.masked)
-        placed = _with_further(placed, camera)
+        placed, seen = _with_mounted(placed, name, on_links.get(name), box, [*fixed, *mounted], args.masked)
+        mounted.append(seen)
     with Robot.load(placed) as robot:
         fraction = check_view(robot, box)                    # refused before the record is touched
-        mounted = [observability(robot, box, np.random.default_rng(0), modality=camera_modality(n)) for n in names]
     lines = args.record.read_text().splitlines()
     header = list(itertools.takewhile(lambda line: line.startswith("#"), lines))   # the leading comment is kept
     write_record(placed, args.record, "\n".join(line.lstrip("#").removeprefix(" ") for line in header))
@@ -169,6 +168,24 @@ def run_camera(args: RobotCameraArgs) -> int:
             logger.warning(warning)
     print(f"record: {args.record}")
     return 0
+
+
+def _with_mounted(record, name: str, camera: dict | None, box, views, masked: bool):
+    """`record` with the mounted camera `name` (`camera`, or `choose_mount`'s over `views` when None), and its
+    Observability."""
+    import numpy as np
+
+    from bodyschema.base.modalities import camera_modality
+    from bodyschema.datagen.body.camera_mount import choose_mount
+    from bodyschema.datagen.body.observability import observability
+    from bodyschema.datagen.body.robot import Robot
+
+    if camera is None:
+        camera, seen = choose_mount(record, box, views, name, masked)
+        return _with_further(record, camera), seen
+    placed = _with_further(record, camera)
+    with Robot.load(placed) as robot:
+        return placed, observability(robot, box, np.random.default_rng(0), modality=camera_modality(name))
 
 
 def _with_further(record, camera: dict):

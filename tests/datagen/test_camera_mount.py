@@ -79,7 +79,8 @@ def test_mount_camera_frames_the_bodies_beyond_the_link(tmp_path):
             assert view.sees(data.site_xpos[model.site(robot.ee_site).id][None])[0], q
         mounted = observability(robot, box, modality="image_mounted")
     assert mounted.joints[1].px_per_deg > fixed.joints[1].px_per_deg
-    assert choose_mount(record, box, [fixed]) == camera                # the only joint on a moving link: the elbow
+    chosen, seen = choose_mount(record, box, [fixed])
+    assert chosen == camera and seen.joints == mounted.joints          # the only joint on a moving link: the elbow
 
 
 def test_robot_camera_mount_writes_the_record(tmp_path, capsys):
@@ -113,6 +114,25 @@ def test_a_masked_camera_sees_the_joints_beyond_its_link_alone(tmp_path):
     with Robot.load(unmasked) as robot:
         lit = [robot.render(q, modality="image_mounted").astype(int) for q in poses]
     assert np.abs(lit[1] - lit[0]).max() > 1
+
+
+def test_a_second_auto_places_for_what_the_first_left_weakest():
+    """On the shipped panda (masked cameras): given the first mounted camera's view, `choose_mount` puts the second on
+    another link, and the weakest joint's best share over the cameras rises."""
+    shipped = read_record(shipped_dir() / "panda.toml")
+    record = dataclasses.replace(shipped, model=str(shipped.model_path), reaching={})
+    box = np.array(record.workspaces["camera"])
+    with Robot.load(record) as robot:
+        fixed = observability(robot, box)
+    first, first_seen = choose_mount(record, box, [fixed], MOUNTED, masked=True)
+    second, second_seen = choose_mount(dataclasses.replace(record, cameras=(first,)), box, [fixed, first_seen],
+                                       "mounted2", masked=True)
+
+    def weakest(views):
+        return min(max(v.joints[i].share_per_deg for v in views) for i, j in enumerate(fixed.joints) if not j.on_axis)
+
+    assert second["body"] != first["body"] and second["masked"]
+    assert weakest([fixed, first_seen, second_seen]) > weakest([fixed, first_seen])
 
 
 def test_a_joint_on_a_fixed_link_has_no_link_to_mount_on(tmp_path):
