@@ -3,7 +3,7 @@
     MUJOCO_GL=egl .venv/bin/python bench/foreign_arms.py [--arms ur5 so_arm ...] [--n 3000] [--epochs 40]
         [--trials 50] [--pixel-size lean|pixel_aif|splat] [--pixel-lr LR] [--pixel-schedule constant|cosine|wsd]
         [--pixel-loss cross_entropy|mse] [--pixel-inputs products|unit|kinematic] [--gpr-n 6000]
-        [--add] [--mount [auto|JOINT ...]] [--masked] [--work bench_out/foreign]
+        [--add] [--mount [auto|JOINT|@K ...]] [--masked] [--work bench_out/foreign]
         [--kinematics-only | --pixel-only] [--quick]
 
 Per arm, in a folder of its own (its own MLflow store): `robot init` (a file: the visuals it can load, nothing
@@ -38,6 +38,7 @@ from pathlib import Path
 from bodyschema.datagen.body.camera_choice import FURTHER
 from bodyschema.datagen.body.camera_mount import mounted_names
 from bodyschema.datagen.body.record import read_record, shipped_dir, write_record
+from bodyschema.datagen.body.robot import Robot
 
 ERD = "cmeel.prefix/share/example-robot-data/robots"
 FILES = {   # name → (distribution, file inside it, robot init's --visual)
@@ -83,7 +84,7 @@ def robot_of(name: str, folder: Path, log: Path, minutes: dict[str, float], came
         shipped = read_record(shipped_dir() / f"{name}.toml")
         write_record(dataclasses.replace(shipped, name=f"{name}_mounted", model=str(shipped.model_path),
                                          base=folder), record)
-        _, camera_s = bodyschema(["robot", "camera", str(record), *cameras], log)
+        _, camera_s = bodyschema(["robot", "camera", str(record), *joint_at(cameras, record)], log)
         minutes["camera"] = camera_s / 60
         return str(record)
     dist, relative, visual = FILES[name]
@@ -92,7 +93,7 @@ def robot_of(name: str, folder: Path, log: Path, minutes: dict[str, float], came
         shutil.copy(model, folder / "model.urdf")
         model = folder / "model.urdf"
     _, init_s = bodyschema(["robot", "init", str(model), "--visual", visual, "--out", str(record)], log)
-    _, camera_s = bodyschema(["robot", "camera", str(record), *cameras], log)
+    _, camera_s = bodyschema(["robot", "camera", str(record), *joint_at(cameras, record)], log)
     minutes["init+camera"] = (init_s + camera_s) / 60
     return str(record)
 
@@ -178,9 +179,18 @@ def measure(name: str, work: Path, o: argparse.Namespace) -> dict[str, str]:
 
 
 def camera_flags(o: argparse.Namespace) -> list[str]:
-    """`robot camera`'s flags for the cameras asked beside the fixed view."""
+    """`robot camera`'s flags for the cameras asked beside the fixed view (`@K` in --mount: see joint_at)."""
     return [*(["--add"] if o.add else []), *(["--mount", *o.mount] if o.mount else []),
             *(["--masked"] if o.masked else [])]
+
+
+def joint_at(flags: list[str], record: Path | str) -> list[str]:
+    """`flags` with each `@K` replaced by the robot's K-th joint (1-based): one recipe for every arm, e.g. `--mount @2
+    auto` (a camera on the link after the first joint, then the one `auto` picks)."""
+    if not any(f.startswith("@") for f in flags):
+        return flags
+    with Robot.load(record) as robot:
+        return [robot.joint_names[int(f[1:]) - 1] if f.startswith("@") else f for f in flags]
 
 
 def levels_flags(common: list[str], o: argparse.Namespace) -> list[str]:
@@ -241,9 +251,9 @@ def main() -> None:
                         "nine-arm table: mse)")
     parser.add_argument("--pixel-inputs", default=None, help="train pixel's --inputs (default: products; unit: the "
                         "decoders before 2026-11-30, models/pose_inputs.py)")
-    parser.add_argument("--mount", nargs="*", default=None, metavar="auto|JOINT", help="`robot camera --mount ...` "
-                        "(alone: auto): cameras riding on links, a decoder each, perceived with the first "
-                        "(datagen/body/camera_mount.py)")
+    parser.add_argument("--mount", nargs="*", default=None, metavar="auto|JOINT|@K", help="`robot camera --mount "
+                        "...` (alone: auto; @K: the arm's K-th joint): cameras riding on links, a decoder each, "
+                        "perceived with the first (datagen/body/camera_mount.py)")
     parser.add_argument("--masked", action="store_true", help="`robot camera --masked`: the mounted cameras draw "
                         "only their link and the bodies beyond")
     parser.add_argument("--add", action="store_true", help="`robot camera --add`: a second fixed camera")
