@@ -7,7 +7,9 @@ on the parent link of a joint (`--mount JOINT`, or the one `choose_mount` picks)
 after it move: the ee and the centres of the geoms beyond the link, over POSES poses of the workspace, in the link's
 frame (`infer.place_camera`: along their direction of least spread, every point inside the frame's margin). The
 record names it in `cameras` with `body` (MOUNTED: image_mounted, then image_mounted2, ... for more than one; no
-ee_pixel_mounted: a camera that moves has no fixed projection).
+ee_pixel_mounted: a camera that moves has no fixed projection). `masked` (`--masked`): it draws only its link and
+the bodies beyond (render_scope), so its decoder learns the joints beyond the link without the background the joints
+before it swing; cameras on several links of the arm (a cascade) then each see their joints from nearby.
 """
 
 from __future__ import annotations
