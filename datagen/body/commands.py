@@ -72,7 +72,8 @@ class RobotCameraArgs:
     add: bool = False
     # also place cameras riding on links (`cameras`: image_mounted, image_mounted2, ..., as wrist cameras), each
     # looking at the bodies beyond its link: one per value, "auto" (the link under which the weakest joint is seen
-    # best) or a joint's name (on its parent link); each replaces the record's camera of its name
+    # best, given the cameras before it) or a joint's name (on its parent link); each replaces the record's camera of
+    # its name
     mount: tuple[str, ...] = ()
     # the mounted cameras draw only their link and the bodies beyond it (the rest of the arm and the world left
     # out, as a segmentation of the hand gives): their images change with the joints beyond the link alone

@@ -50,8 +50,9 @@ class RobotRecord:
     joints: tuple[str, ...] = ()                       # the hinges used, in order; () = every joint of the model
     hold: dict[str, float] = field(default_factory=dict)   # other joints' held values (rad | m); else reference
     camera: dict[str, Any] = field(default_factory=dict)   # {name} of the model's | {name="auto", pos, xyaxes, fovy}
-    # further cameras: a name of the model's | {name, pos, xyaxes, fovy[, body]} placed (in the world, or riding on
-    # `body`: pose in its frame); each one more image modality
+    # further cameras: a name of the model's | {name, pos, xyaxes, fovy[, body[, masked]]} placed (in the world, or
+    # riding on `body`: pose in its frame; `masked`: it draws that body and those beyond alone); each one more image
+    # modality
     cameras: tuple = ()
     actuators: dict[str, Any] = field(default_factory=lambda: {"kind": "model"})   # {kind, kp, kv (servos)}
     pd: dict[str, Any] = field(default_factory=dict)   # {kp, kd}: the torque PD baseline's gains per joint
