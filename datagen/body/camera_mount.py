@@ -15,6 +15,7 @@ before it swing; cameras on several links of the arm (a cascade) then each see t
 from __future__ import annotations
 
 import dataclasses
+import re
 
 import mujoco
 import numpy as np
@@ -33,6 +34,11 @@ POSES = 256                      # workspace poses whose ee and geoms the mounte
 def mounted_names(n: int) -> tuple[str, ...]:
     """The names of n cameras `robot camera --mount` places: mounted, mounted2, mounted3, ..."""
     return tuple(MOUNTED if i == 0 else f"{MOUNTED}{i + 1}" for i in range(n))
+
+
+def is_mounted(name: str) -> bool:
+    """Whether a further camera's name is one `robot camera --mount` places (mounted_names)."""
+    return re.fullmatch(rf"{MOUNTED}(\d+)?", name) is not None
 
 
 def mount_camera(robot, joint: str, box: np.ndarray, name: str = MOUNTED, masked: bool = False) -> dict:

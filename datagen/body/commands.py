@@ -72,8 +72,8 @@ class RobotCameraArgs:
     add: bool = False
     # also place cameras riding on links (`cameras`: image_mounted, image_mounted2, ..., as wrist cameras), each
     # looking at the bodies beyond its link: one per value, "auto" (the link under which the weakest joint is seen
-    # best, given the cameras before it) or a joint's name (on its parent link); each replaces the record's camera of
-    # its name
+    # best, given the cameras before it) or a joint's name (on its parent link); they replace the record's mounted
+    # cameras
     mount: tuple[str, ...] = ()
     # the mounted cameras draw only their link and the bodies beyond it (the rest of the arm and the world left
     # out, as a segmentation of the hand gives): their images change with the joints beyond the link alone
@@ -107,7 +107,7 @@ def run_camera(args: RobotCameraArgs) -> int:
     import numpy as np
 
     from bodyschema.datagen.body.camera_choice import FURTHER, choose_camera, choose_further_camera
-    from bodyschema.datagen.body.camera_mount import AUTO_MOUNT, mount_camera, mounted_names
+    from bodyschema.datagen.body.camera_mount import AUTO_MOUNT, is_mounted, mount_camera, mounted_names
     from bodyschema.datagen.body.infer import check_view
     from bodyschema.datagen.body.observability import unseen_warnings
     from bodyschema.datagen.body.record import RECORD_SUFFIX, read_record, write_record
@@ -122,6 +122,9 @@ def run_camera(args: RobotCameraArgs) -> int:
     if not isinstance(args.max_image_size, int) or args.max_image_size < 1:
         raise ValueError(must_be("--max-image-size", "an integer >= 1 (px)", args.max_image_size))
     box = np.array(record.workspaces[args.workspace])
+    if args.mount:                       # --mount sets the mounted cameras: none of an earlier, longer --mount stays
+        record = dataclasses.replace(record, cameras=tuple(c for c, n in zip(record.cameras, record.further_cameras)
+                                                           if not is_mounted(n)))
     names = mounted_names(len(args.mount))
     joints = {name: joint for name, joint in zip(names, args.mount) if joint != AUTO_MOUNT}
     on_links = {}

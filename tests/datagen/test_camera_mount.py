@@ -135,6 +135,16 @@ def test_a_second_auto_places_for_what_the_first_left_weakest():
     assert weakest([fixed, first_seen, second_seen]) > weakest([fixed, first_seen])
 
 
+def test_a_shorter_mount_leaves_no_earlier_mounted_camera(tmp_path):
+    """--mount sets the record's mounted cameras: after a cascade of three, `--mount elbow` leaves one, and a further
+    camera of another name stays."""
+    side = {**ON_LINK1, "name": "side"}
+    cascade = [{**ON_LINK1, "name": n} for n in (MOUNTED, "mounted2", "mounted3")]
+    path = planar2_with(tmp_path, side, *cascade, size=(24, 24))
+    assert run_camera(RobotCameraArgs(record=path, mount=("elbow",))) == 0
+    assert read_record(path).further_cameras == ("side", MOUNTED)
+
+
 def test_a_joint_on_a_fixed_link_has_no_link_to_mount_on(tmp_path):
     path = planar2_with(tmp_path)
     before = path.read_bytes()
