@@ -156,20 +156,11 @@ def run_camera(args: RobotCameraArgs) -> int:
     links = {c["name"]: c["body"] for c in placed.cameras if isinstance(c, dict) and "body" in c}
     for seen in mounted:
         print(f"mounted camera {seen.camera!r} (image_{seen.camera}) on link {links[seen.camera]!r}: {seen.table()}")
-    if mounted:
-        for warning in unseen_warnings([*fixed, *mounted]):
-            logger.warning(warning)
-    elif further is not None:
-        unseen = ", ".join(further.unseen) or "none"
-        print(f"joints seen by neither camera (< the threshold in both): {unseen}")
-        if further.unseen:
-            logger.warning(must_be(f"joints {unseen} of {record.name}", "seen by one of the two cameras",
-                                   "under the threshold in both", "A roll about the tool's own axis is not seen by "
-                                   "any camera; else narrow the workspace (a closer camera: a larger image keeps a "
-                                   "joint's share of it)."))
-    else:
-        for warning in choice.warnings():
-            logger.warning(warning)
+    if further is not None and not mounted:
+        print(f"joints seen by neither camera (< the threshold in both): {', '.join(further.unseen) or 'none'}")
+    views = [*fixed, *mounted]                           # several: a warning per joint no camera sees
+    for warning in unseen_warnings(views) if len(views) > 1 else choice.warnings():
+        logger.warning(warning)
     print(f"record: {args.record}")
     return 0
 
