@@ -59,6 +59,18 @@ def test_datagen_stores_a_mounted_cameras_images_and_no_projection(tmp_path):
     assert validate_store(path) == []
 
 
+def test_a_stores_robot_renders_its_masked_images_again(tmp_path):
+    """The store keeps `masked` with its robot: the robot rebuilt from its attrs (as the levels render targets)
+    draws the stored masked images again (within 1 of 255 levels: another GL context may round differently)."""
+    path = generate(DatagenConfig(robot=str(planar2_with(tmp_path, {**ON_LINK1, "masked": True})), n=8, shard_size=8,
+                                  seed=0, out=tmp_path / "s.zarr"), progress=False)
+    root = zarr.open_group(path, mode="r")
+    with Robot.from_attrs(dict(root.attrs)) as robot:
+        again = robot.render(np.asarray(root["q"][:]), modality="image_wrist").astype(int)
+    assert np.abs(again - np.asarray(root["image_wrist"][:])).max() <= 1
+    assert robot.record.cameras[0]["masked"] is True
+
+
 def test_mount_camera_frames_the_bodies_beyond_the_link(tmp_path):
     """Placed for the elbow, the camera rides on link1, keeps the ee in its image in every sampled pose, and sees the
     elbow change more pixels per degree than the fixed camera does."""
